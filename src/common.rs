@@ -1,0 +1,94 @@
+//! Small types shared by every module: the complex scalar, axis directions.
+
+pub use num_complex::Complex64 as C64;
+
+/// Imaginary unit.
+pub const J: C64 = C64::new(0.0, 1.0);
+
+/// A global Cartesian axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+impl Axis {
+    /// 0 for x, 1 for y, 2 for z.
+    pub fn index(self) -> usize {
+        match self {
+            Axis::X => 0,
+            Axis::Y => 1,
+            Axis::Z => 2,
+        }
+    }
+    pub fn from_index(i: usize) -> Option<Axis> {
+        match i {
+            0 => Some(Axis::X),
+            1 => Some(Axis::Y),
+            2 => Some(Axis::Z),
+            _ => None,
+        }
+    }
+}
+
+/// A signed measurement or excitation direction along a global axis (UFF: +-1..+-3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+pub struct Direction {
+    pub axis: Axis,
+    /// +1 or -1.
+    pub sign: i8,
+}
+
+impl Direction {
+    pub const fn new(axis: Axis, sign: i8) -> Self {
+        Direction { axis, sign }
+    }
+    pub const PX: Direction = Direction::new(Axis::X, 1);
+    pub const PY: Direction = Direction::new(Axis::Y, 1);
+    pub const PZ: Direction = Direction::new(Axis::Z, 1);
+
+    /// UFF direction code: 1,2,3 for +x,+y,+z and -1,-2,-3 for the negative ones.
+    pub fn uff_code(self) -> i32 {
+        (self.axis.index() as i32 + 1) * self.sign as i32
+    }
+    /// From a UFF direction code (+-1..+-3); 4..6 (rotations) and 0 give None.
+    pub fn from_uff_code(code: i32) -> Option<Direction> {
+        let axis = Axis::from_index((code.unsigned_abs() as usize).checked_sub(1)?)?;
+        Some(Direction::new(axis, if code < 0 { -1 } else { 1 }))
+    }
+    /// Parse "+y", "y", "-Z", "Y+".
+    pub fn parse(s: &str) -> Option<Direction> {
+        let t = s.trim().to_ascii_lowercase();
+        let (sign, rest) = if let Some(r) = t.strip_prefix('-') {
+            (-1, r.to_string())
+        } else if let Some(r) = t.strip_prefix('+') {
+            (1, r.to_string())
+        } else if let Some(r) = t.strip_suffix('-') {
+            (-1, r.to_string())
+        } else if let Some(r) = t.strip_suffix('+') {
+            (1, r.to_string())
+        } else {
+            (1, t)
+        };
+        let axis = match rest.as_str() {
+            "x" => Axis::X,
+            "y" => Axis::Y,
+            "z" => Axis::Z,
+            _ => return None,
+        };
+        Some(Direction::new(axis, sign))
+    }
+}
+
+impl std::fmt::Display for Direction {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let s = if self.sign < 0 { '-' } else { '+' };
+        let a = match self.axis {
+            Axis::X => 'x',
+            Axis::Y => 'y',
+            Axis::Z => 'z',
+        };
+        write!(f, "{s}{a}")
+    }
+}

@@ -1,0 +1,15 @@
+//! Finite elements: the structural model that every later stage evaluates.
+//!
+//! Dynamic stiffness (method.md, "Dynamic stiffness"):
+//!
+//! Z(w) = -w^2 M + K_b + j w C_b + j D_b + E*(w) S,   S = dK_adhesive/dE at fixed nu.
+//!
+//! Layers (fenris style): [`element`] reference 20-node hexahedron (shape functions only),
+//! [`geometry`] physical element (geometry map, Jacobian, element matrices),
+//! [`assembly`] global sparse pattern built once, values filled many times,
+//! [`mesh`] structured mesher of beam + adhesive, [`points`] measurement point -> DOF map,
+//! [`matrix_market`] import/export of externally assembled models.
+
+pub mod model;
+
+pub use model::{ObservationPoint, StructuralModel};

@@ -1,0 +1,86 @@
+//! FRF evaluation: one interface for the full model and the reduced-order model.
+//!
+//! Receptance H(w) = Z(w)^-1 read at observation points, accelerance H' = -w^2 H.
+//! Sensitivities (paper eq. 44-47): dH/dp = -H (dZ/dp) H, so with Z depending on the
+//! adhesive through E* = E' + j E'' only, dH_ij/dE' = -H_i^T S H_j and dH_ij/dE'' = j dH_ij/dE'.
+
+use crate::common::C64;
+
+/// What a sweep returns, for n_lines frequency lines, n_out observation points (outputs) and
+/// n_in input (excitation) points. Index of entry (line l, output i, input j):
+/// `(l * n_out + i) * n_in + j`.
+#[derive(Clone, Debug, Default)]
+pub struct Sweep {
+    pub n_lines: usize,
+    pub n_out: usize,
+    pub n_in: usize,
+    /// Receptance H_ij (m/N).
+    pub h: Vec<C64>,
+    /// dH_ij/dE' (m/N/Pa); dH_ij/dE'' = j dH_ij/dE'. Empty unless derivatives were requested.
+    pub dh_de: Vec<C64>,
+    /// b_i^T S H_j: the adhesive sensitivity matrix applied to receptance column j, read at
+    /// output i (m/N * m = m^2/N ... per unit modulus). Used by the RFM fill of unmeasured
+    /// entries. Empty unless derivatives were requested.
+    pub sh: Vec<C64>,
+}
+
+impl Sweep {
+    #[inline]
+    pub fn idx(&self, line: usize, out: usize, inp: usize) -> usize {
+        (line * self.n_out + out) * self.n_in + inp
+    }
+    /// Allocate zeroed storage.
+    pub fn zeros(n_lines: usize, n_out: usize, n_in: usize, with_derivatives: bool) -> Self {
+        let n = n_lines * n_out * n_in;
+        Sweep {
+            n_lines,
+            n_out,
+            n_in,
+            h: vec![C64::new(0.0, 0.0); n],
+            dh_de: if with_derivatives { vec![C64::new(0.0, 0.0); n] } else { Vec::new() },
+            sh: if with_derivatives { vec![C64::new(0.0, 0.0); n] } else { Vec::new() },
+        }
+    }
+}
+
+/// Errors of FRF evaluation.
+#[derive(Debug, thiserror::Error)]
+pub enum FrfError {
+    #[error("the dynamic stiffness is singular at {freq_hz} Hz (E* = {modulus:?} Pa): is the model constrained?")]
+    Singular { freq_hz: f64, modulus: C64 },
+    #[error("{what}: expected length {expected}, got {got}")]
+    Length { what: &'static str, expected: usize, got: usize },
+    #[error("input point index {0} is not an observation point of the model")]
+    BadInput(usize),
+    #[error("{0}")]
+    Other(String),
+}
+
+/// One interface for full and reduced FRF evaluation.
+pub trait FrfEngine: Send + Sync {
+    /// Number of observation points (outputs).
+    fn n_out(&self) -> usize;
+    /// Indices (into the outputs) of the excitation points.
+    fn inputs(&self) -> &[usize];
+    /// Evaluate receptances (and optionally dH/dE' and S H) on the given lines.
+    /// `omega_rad_s` and `modulus_pa` have one entry per line; `out` is resized as needed.
+    fn sweep_into(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError>;
+
+    /// Allocating convenience form of [`FrfEngine::sweep_into`].
+    fn sweep(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+    ) -> Result<Sweep, FrfError> {
+        let mut s = Sweep::default();
+        self.sweep_into(omega_rad_s, modulus_pa, with_derivatives, &mut s)?;
+        Ok(s)
+    }
+}

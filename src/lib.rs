@@ -1,0 +1,40 @@
+//! rfmlab: identification of viscoelastic constitutive models of adhesives in bonded
+//! joints from measured frequency response functions (FRFs).
+//!
+//! Module map (dependencies point one way, top to bottom):
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`common`] | shared small types: complex scalar, directions, units |
+//! | [`fe`] | 20-node hexahedra, structured mesher, sparse assembly of M, K_b, S; Matrix Market import |
+//! | [`material`] | constitutive models E*(w; p) with analytic Jacobians (Models 1-5, fractional Zener, generalized Maxwell) |
+//! | [`frf`] | the FRF engine interface and the full-model sweep with sensitivities (paper eq. 44-47) |
+//! | [`modes`] | complex modes of (K_b + E* S, M), sparse real eigensolver |
+//! | [`rom`] | certified reduced-order model and the pencil sweep |
+//! | [`data`] | measured FRF data model, UFF58 and CSV readers and writers |
+//! | [`experiment`] | virtual experiment: random excitation, H1 and coherence |
+//! | [`modal`] | circle-fit modal analysis |
+//! | [`correlation`] | FRAC, SCC, ACC (paper eq. 38-40) |
+//! | [`rfm`] | response function method updating (paper eq. 9-11, 37) |
+//! | [`iem`] | inverse eigensensitivity method (paper eq. 20) |
+//! | [`study`] | study files: TOML as written -> validated typed study (outside the numerical core) |
+//! | [`output`] | parquet tables, manifest, atomic writes (outside the numerical core) |
+//! | [`plot`] | PNG/SVG figures (outside the numerical core) |
+//!
+//! Numerical modules never import `study`, `output`, `plot` or the CLI.
+
+pub mod common;
+pub mod correlation;
+pub mod data;
+pub mod experiment;
+pub mod fe;
+pub mod frf;
+pub mod iem;
+pub mod material;
+pub mod modal;
+pub mod modes;
+pub mod output;
+pub mod plot;
+pub mod rfm;
+pub mod rom;
+pub mod study;

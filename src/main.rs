@@ -1,0 +1,5 @@
+fn main() {
+    std::process::exit(rfmlab_cli::run());
+}
+#[path = "cli/mod.rs"]
+mod rfmlab_cli;
