@@ -1,4 +1,12 @@
-//! Study files: the TOML as written (serde, unknown keys denied) and the validated, typed study.
+//! Study files: the TOML as written ([`raw`], serde with unknown keys denied), validated into a
+//! typed [`Study`] in SI units. Every error names the file, the key and the fix.
+//!
+//! Relative paths in a study file are relative to the study file's folder.
+
+pub mod raw;
+
+use crate::common::Direction;
+use std::path::{Path, PathBuf};
 
 /// An error in a study file: names the file, the key and the fix.
 #[derive(Debug, thiserror::Error)]
@@ -7,4 +15,210 @@ pub struct StudyError {
     pub file: String,
     pub key: String,
     pub message: String,
+}
+
+/// Adherend damping (optional): C_b = alpha M + beta K_b, D_b = g K_b.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Damping {
+    pub rayleigh_alpha_per_s: f64,
+    pub rayleigh_beta_s: f64,
+    pub structural_loss_factor: f64,
+}
+
+/// Mesh size: uniform element size or explicit divisions.
+#[derive(Clone, Debug, PartialEq)]
+pub enum MeshSize {
+    ElementSize(f64),
+    Divisions {
+        x_adhesive: usize,
+        x_outside: usize,
+        y_beam: usize,
+        y_adhesive: usize,
+        z: usize,
+    },
+}
+
+/// A measurement / excitation point on the beam surface.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Point {
+    pub id: u32,
+    pub position_m: [f64; 3],
+    pub direction: Direction,
+}
+
+/// The bonded joint built by the mesher.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Joint {
+    pub beam_length_m: f64,
+    pub beam_thickness_m: f64,
+    pub beam_width_m: f64,
+    pub beam_e_pa: f64,
+    pub beam_nu: f64,
+    pub beam_rho_kg_m3: f64,
+    pub damping: Damping,
+    pub adhesive_length_m: f64,
+    pub adhesive_thickness_m: f64,
+    pub adhesive_x_start_m: f64,
+    pub adhesive_nu: f64,
+    pub adhesive_rho_kg_m3: f64,
+    pub mesh: MeshSize,
+    /// true: 3x3x3 Gauss; false: 2x2x2 (ANSYS SOLID186 default).
+    pub full_integration: bool,
+    /// true: snap points to the nearest node; false: interpolate with shape functions.
+    pub snap_points: bool,
+}
+
+/// Matrix Market files of an externally assembled model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Import {
+    pub mass: PathBuf,
+    pub stiffness: PathBuf,
+    pub adhesive_sensitivity: PathBuf,
+    pub viscous_damping: Option<PathBuf>,
+    pub structural_damping: Option<PathBuf>,
+    pub dof_map: PathBuf,
+}
+
+/// Where the structural model comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StructureSource {
+    Mesher(Joint),
+    MatrixMarket(Import),
+}
+
+/// The validated structure section.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Structure {
+    pub name: String,
+    pub source: StructureSource,
+    pub points: Vec<Point>,
+    /// Id of the excitation point.
+    pub excitation: u32,
+}
+
+/// One excitation level of the measurements.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Level {
+    pub name: String,
+    pub files: Vec<PathBuf>,
+    pub force_rms_n: Option<f64>,
+}
+
+/// The validated measurements section.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Measurements {
+    pub levels: Vec<Level>,
+    pub band_hz: Option<(f64, f64)>,
+    pub channels: Option<Vec<u32>>,
+}
+
+/// A constitutive model to identify, with initial values in the model's parameter order (SI).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelSpec {
+    pub name: String,
+    pub branches: Option<usize>,
+    pub initial: Vec<f64>,
+    pub param_names: Vec<String>,
+    pub levels: Vec<String>,
+}
+
+/// Which FRF engine the identification uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Engine {
+    Rom,
+    Full,
+}
+
+/// Solver settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Solver {
+    pub engine: Engine,
+    pub max_iterations: usize,
+    pub tolerance: f64,
+    pub svd_rtol: f64,
+    pub rom_tolerance: f64,
+    pub threads: Option<usize>,
+}
+
+impl Default for Solver {
+    fn default() -> Self {
+        Solver {
+            engine: Engine::Rom,
+            max_iterations: 100,
+            tolerance: 1e-8,
+            svd_rtol: 1e-10,
+            rom_tolerance: 1e-6,
+            threads: None,
+        }
+    }
+}
+
+/// A band around a resonance.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Band {
+    pub center_hz: f64,
+    pub width_hz: f64,
+}
+
+/// Analyses to run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Analyses {
+    pub band_constant: Vec<Band>,
+    pub iem: Vec<Band>,
+    pub per_line: bool,
+    pub correlation: bool,
+    pub sensitivity: bool,
+    pub figures: bool,
+}
+
+impl Default for Analyses {
+    fn default() -> Self {
+        Analyses {
+            band_constant: Vec::new(),
+            iem: Vec::new(),
+            per_line: true,
+            correlation: true,
+            sensitivity: true,
+            figures: true,
+        }
+    }
+}
+
+/// A validated study.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Study {
+    /// The study file.
+    pub file: PathBuf,
+    /// SHA-256 of the study file's bytes (hex).
+    pub sha256: String,
+    pub name: String,
+    pub description: String,
+    pub seed: u64,
+    pub output_dir: PathBuf,
+    pub structure: Structure,
+    pub measurements: Option<Measurements>,
+    pub models: Vec<ModelSpec>,
+    pub solver: Solver,
+    pub analyses: Analyses,
+}
+
+mod validate;
+
+pub use validate::{load, parse_str};
+
+impl Study {
+    /// The point with the given id.
+    pub fn point(&self, id: u32) -> Option<&Point> {
+        self.structure.points.iter().find(|p| p.id == id)
+    }
+}
+
+/// Resolve `p` relative to the folder of `file`.
+pub(crate) fn resolve(file: &Path, p: &str) -> PathBuf {
+    let pb = PathBuf::from(p);
+    if pb.is_absolute() {
+        pb
+    } else {
+        file.parent().unwrap_or(Path::new(".")).join(pb)
+    }
 }

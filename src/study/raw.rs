@@ -1,0 +1,190 @@
+//! The study file as written: serde structs with unknown keys denied. Nothing here is
+//! validated beyond TOML types; [`super::validate`] turns it into a [`super::Study`].
+
+use serde::Deserialize;
+use std::collections::BTreeMap;
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawStudy {
+    #[serde(default)]
+    pub study: RawMeta,
+    pub structure: RawStructure,
+    pub measurements: Option<RawMeasurements>,
+    #[serde(default)]
+    pub models: Vec<RawModel>,
+    pub solver: Option<RawSolver>,
+    pub analyses: Option<RawAnalyses>,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawMeta {
+    pub name: Option<String>,
+    pub description: Option<String>,
+    pub seed: Option<u64>,
+    /// Output folder (default `results/<name>`), relative to the current directory.
+    pub output_dir: Option<String>,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawStructure {
+    pub name: Option<String>,
+    /// Build the model with the mesher (default) or import Matrix Market files.
+    pub source: Option<String>,
+    pub beam: Option<RawBeam>,
+    pub adhesive: Option<RawAdhesive>,
+    pub mesh: Option<RawMesh>,
+    #[serde(default)]
+    pub points: Vec<RawPoint>,
+    /// Id of the excitation point (one of `points`).
+    pub excitation: Option<u32>,
+    /// Imported model (source = "matrix_market").
+    pub import: Option<RawImport>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawBeam {
+    pub length: f64,
+    pub thickness: f64,
+    pub width: f64,
+    pub material: RawMaterial,
+    pub damping: Option<RawDamping>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawMaterial {
+    #[serde(rename = "E")]
+    pub e: f64,
+    pub nu: f64,
+    pub rho: f64,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawDamping {
+    pub rayleigh_alpha: Option<f64>,
+    pub rayleigh_beta: Option<f64>,
+    pub structural: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawAdhesive {
+    pub length: f64,
+    pub thickness: f64,
+    pub x_start: Option<f64>,
+    pub nu: f64,
+    pub rho: f64,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawMesh {
+    pub element_size: Option<f64>,
+    pub divisions: Option<RawDivisions>,
+    /// "full" (3x3x3 Gauss) or "reduced" (2x2x2, ANSYS SOLID186 default).
+    pub integration: Option<String>,
+    /// "interpolate" (default) or "snap".
+    pub point_mapping: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawDivisions {
+    pub x_adhesive: usize,
+    pub x_outside: usize,
+    pub y_beam: usize,
+    pub y_adhesive: usize,
+    pub z: usize,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawPoint {
+    pub id: u32,
+    pub position: Vec<f64>,
+    pub direction: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawImport {
+    pub mass: String,
+    pub stiffness: String,
+    pub adhesive_sensitivity: String,
+    pub viscous_damping: Option<String>,
+    pub structural_damping: Option<String>,
+    pub dof_map: String,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawMeasurements {
+    pub levels: Vec<RawLevel>,
+    /// Band used for identification (Hz), default: the whole grid.
+    pub band_hz: Option<Vec<f64>>,
+    /// Response point ids to use (default: all measured at the study's points).
+    pub channels: Option<Vec<u32>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawLevel {
+    pub name: String,
+    pub files: Vec<String>,
+    pub force_rms_n: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawModel {
+    /// "model1".."model5", "fractional_zener", "generalized_maxwell".
+    pub name: String,
+    /// Number of branches (generalized Maxwell only).
+    pub branches: Option<usize>,
+    /// Initial values by parameter name (SI units), optionally per level:
+    /// `initial = { E0 = 6e6, ... }`.
+    pub initial: BTreeMap<String, f64>,
+    /// Levels to identify this model at (default: all).
+    pub levels: Option<Vec<String>>,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawSolver {
+    /// "rom" (default) or "full".
+    pub engine: Option<String>,
+    pub max_iterations: Option<usize>,
+    pub tolerance: Option<f64>,
+    pub svd_rtol: Option<f64>,
+    pub rom_tolerance: Option<f64>,
+    pub threads: Option<usize>,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawAnalyses {
+    /// Constant modulus (Model 1) over bands around resonances (case study 1).
+    #[serde(default)]
+    pub band_constant: Vec<RawBand>,
+    /// Circle fit + IEM around resonances.
+    #[serde(default)]
+    pub iem: Vec<RawBand>,
+    /// Per-line nonparametric RFM estimate of E*(w).
+    pub per_line: Option<bool>,
+    /// FRAC/SCC/ACC and sensitivities.
+    pub correlation: Option<bool>,
+    pub sensitivity: Option<bool>,
+    pub figures: Option<bool>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawBand {
+    pub center_hz: f64,
+    pub width_hz: Option<f64>,
+}

@@ -1,0 +1,494 @@
+//! Raw study -> validated [`Study`]: every check names the file, the key and the fix.
+
+use super::raw::*;
+use super::*;
+use sha2::{Digest, Sha256};
+
+struct Ctx<'a> {
+    file: &'a Path,
+}
+
+impl Ctx<'_> {
+    fn err(&self, key: impl Into<String>, message: impl Into<String>) -> StudyError {
+        StudyError {
+            file: self.file.display().to_string(),
+            key: key.into(),
+            message: message.into(),
+        }
+    }
+    fn positive(&self, key: &str, v: f64, unit: &str) -> Result<f64, StudyError> {
+        if v.is_finite() && v > 0.0 {
+            Ok(v)
+        } else {
+            Err(self.err(
+                key,
+                format!("must be a positive number in {unit}, got {v}: give the value in SI units ({unit})"),
+            ))
+        }
+    }
+    fn non_negative(&self, key: &str, v: f64, unit: &str) -> Result<f64, StudyError> {
+        if v.is_finite() && v >= 0.0 {
+            Ok(v)
+        } else {
+            Err(self.err(key, format!("must be zero or positive ({unit}), got {v}")))
+        }
+    }
+    fn poisson(&self, key: &str, v: f64) -> Result<f64, StudyError> {
+        if v.is_finite() && v > -1.0 && v < 0.5 {
+            Ok(v)
+        } else {
+            Err(self.err(
+                key,
+                format!("Poisson's ratio must lie in (-1, 0.5), got {v} (0.5 is incompressible and not supported by displacement elements)"),
+            ))
+        }
+    }
+}
+
+/// Read, parse and validate a study file.
+pub fn load(path: &Path) -> Result<Study, StudyError> {
+    let bytes = std::fs::read(path).map_err(|e| StudyError {
+        file: path.display().to_string(),
+        key: "(file)".into(),
+        message: format!("cannot read the study file: {e}; check the path"),
+    })?;
+    let text = String::from_utf8(bytes).map_err(|_| StudyError {
+        file: path.display().to_string(),
+        key: "(file)".into(),
+        message: "the study file is not valid UTF-8 text; save it as UTF-8".into(),
+    })?;
+    parse_str(&text, path)
+}
+
+/// Parse and validate study text; `path` names the file in errors and anchors relative paths.
+pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
+    let raw: RawStudy = toml::from_str(text).map_err(|e| toml_error(path, text, &e))?;
+    let ctx = Ctx { file: path };
+    let name = raw
+        .study
+        .name
+        .clone()
+        .or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()))
+        .unwrap_or_else(|| "study".into());
+    if name.is_empty() || name.contains(['/', '\\']) {
+        return Err(ctx.err("study.name", "must be a non-empty name without path separators (it names the results folder)"));
+    }
+    let structure = structure(&ctx, &raw.structure)?;
+    let measurements = match &raw.measurements {
+        Some(m) => Some(measurements(&ctx, m, &structure)?),
+        None => None,
+    };
+    let solver = solver(&ctx, raw.solver.as_ref())?;
+    let analyses = analyses(&ctx, raw.analyses.as_ref())?;
+    let level_names: Vec<String> = measurements
+        .as_ref()
+        .map(|m| m.levels.iter().map(|l| l.name.clone()).collect())
+        .unwrap_or_default();
+    let mut models = Vec::new();
+    for (i, m) in raw.models.iter().enumerate() {
+        models.push(model(&ctx, i, m, &level_names)?);
+    }
+    let sha256 = {
+        let mut h = Sha256::new();
+        h.update(text.as_bytes());
+        h.finalize().iter().map(|b| format!("{b:02x}")).collect::<String>()
+    };
+    let output_dir = match &raw.study.output_dir {
+        Some(d) => PathBuf::from(d),
+        None => PathBuf::from("results").join(&name),
+    };
+    Ok(Study {
+        file: path.to_path_buf(),
+        sha256,
+        name,
+        description: raw.study.description.clone().unwrap_or_default(),
+        seed: raw.study.seed.unwrap_or(0),
+        output_dir,
+        structure,
+        measurements,
+        models,
+        solver,
+        analyses,
+    })
+}
+
+/// Turn a TOML / serde error into a StudyError with the line and the offending key.
+fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyError {
+    let line = e
+        .span()
+        .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
+    let msg = e.message().trim().to_string();
+    let key = if let Some(rest) = msg.strip_prefix("unknown field `") {
+        rest.split('`').next().unwrap_or("?").to_string()
+    } else if let Some(rest) = msg.strip_prefix("missing field `") {
+        rest.split('`').next().unwrap_or("?").to_string()
+    } else {
+        "(syntax)".into()
+    };
+    let fix = if msg.starts_with("unknown field") {
+        " — remove or rename the key (see studies/paper_geometry.toml for every key)"
+    } else if msg.starts_with("missing field") {
+        " — add the key"
+    } else {
+        ""
+    };
+    StudyError {
+        file: match line {
+            Some(l) => format!("{}:{l}", path.display()),
+            None => path.display().to_string(),
+        },
+        key,
+        message: format!("{msg}{fix}"),
+    }
+}
+
+fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyError> {
+    let source_name = s.source.as_deref().unwrap_or("mesher");
+    let source = match source_name {
+        "mesher" => {
+            let beam = s.beam.as_ref().ok_or_else(|| {
+                ctx.err("structure.beam", "missing: give length, thickness, width (m) and [structure.beam.material]")
+            })?;
+            let ad = s.adhesive.as_ref().ok_or_else(|| {
+                ctx.err("structure.adhesive", "missing: give length, thickness, x_start (m), nu and rho")
+            })?;
+            let j = joint(ctx, beam, ad, s.mesh.as_ref())?;
+            StructureSource::Mesher(j)
+        }
+        "matrix_market" => {
+            let im = s.import.as_ref().ok_or_else(|| {
+                ctx.err("structure.import", "source = \"matrix_market\" needs [structure.import] with mass, stiffness, adhesive_sensitivity and dof_map files")
+            })?;
+            let f = |key: &str, p: &str| -> Result<PathBuf, StudyError> {
+                let r = resolve(ctx.file, p);
+                if r.is_file() {
+                    Ok(r)
+                } else {
+                    Err(ctx.err(format!("structure.import.{key}"), format!("file {} not found: check the path (relative to the study file)", r.display())))
+                }
+            };
+            StructureSource::MatrixMarket(Import {
+                mass: f("mass", &im.mass)?,
+                stiffness: f("stiffness", &im.stiffness)?,
+                adhesive_sensitivity: f("adhesive_sensitivity", &im.adhesive_sensitivity)?,
+                viscous_damping: im.viscous_damping.as_deref().map(|p| f("viscous_damping", p)).transpose()?,
+                structural_damping: im.structural_damping.as_deref().map(|p| f("structural_damping", p)).transpose()?,
+                dof_map: f("dof_map", &im.dof_map)?,
+            })
+        }
+        other => {
+            return Err(ctx.err(
+                "structure.source",
+                format!("unknown source \"{other}\": use \"mesher\" (default) or \"matrix_market\""),
+            ))
+        }
+    };
+    let mut points = Vec::new();
+    for (i, p) in s.points.iter().enumerate() {
+        let key = format!("structure.points[{i}]");
+        if p.position.len() != 3 || p.position.iter().any(|v| !v.is_finite()) {
+            return Err(ctx.err(format!("{key}.position"), "must be [x, y, z] in metres (three finite numbers)"));
+        }
+        let direction = Direction::parse(&p.direction).ok_or_else(|| {
+            ctx.err(format!("{key}.direction"), format!("\"{}\" is not a direction: use \"+x\", \"+y\", \"+z\", \"-x\", \"-y\" or \"-z\"", p.direction))
+        })?;
+        if points.iter().any(|q: &Point| q.id == p.id) {
+            return Err(ctx.err(format!("{key}.id"), format!("point id {} is used twice: ids must be unique", p.id)));
+        }
+        points.push(Point {
+            id: p.id,
+            position_m: [p.position[0], p.position[1], p.position[2]],
+            direction,
+        });
+    }
+    if points.is_empty() {
+        return Err(ctx.err("structure.points", "no measurement points: add [[structure.points]] entries with id, position (m) and direction"));
+    }
+    if let StructureSource::Mesher(j) = &source {
+        for (i, p) in points.iter().enumerate() {
+            check_point_on_beam(ctx, i, p, j)?;
+        }
+    }
+    let excitation = s.excitation.ok_or_else(|| ctx.err("structure.excitation", "missing: give the id of the point where the force is applied"))?;
+    if !points.iter().any(|p| p.id == excitation) {
+        return Err(ctx.err(
+            "structure.excitation",
+            format!("point {excitation} is not among structure.points (ids: {:?}): add it or fix the id", points.iter().map(|p| p.id).collect::<Vec<_>>()),
+        ));
+    }
+    Ok(Structure {
+        name: s.name.clone().unwrap_or_else(|| "bonded joint".into()),
+        source,
+        points,
+        excitation,
+    })
+}
+
+fn check_point_on_beam(ctx: &Ctx, i: usize, p: &Point, j: &Joint) -> Result<(), StudyError> {
+    let [x, y, z] = p.position_m;
+    let tol = 1e-6;
+    let inside = x >= -tol
+        && x <= j.beam_length_m + tol
+        && y >= -tol
+        && y <= j.beam_thickness_m + tol
+        && z >= -tol
+        && z <= j.beam_width_m + tol;
+    let on_face = (x.abs() < tol || (x - j.beam_length_m).abs() < tol)
+        || (y.abs() < tol || (y - j.beam_thickness_m).abs() < tol)
+        || (z.abs() < tol || (z - j.beam_width_m).abs() < tol);
+    if !(inside && on_face) {
+        return Err(ctx.err(
+            format!("structure.points[{i}].position"),
+            format!(
+                "point {} at ({x}, {y}, {z}) m is not on the beam surface (beam: x in [0, {}], y in [0, {}], z in [0, {}] m): put it on a face, e.g. the upper face y = {}",
+                p.id, j.beam_length_m, j.beam_thickness_m, j.beam_width_m, j.beam_thickness_m
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn joint(ctx: &Ctx, b: &RawBeam, a: &RawAdhesive, mesh: Option<&RawMesh>) -> Result<Joint, StudyError> {
+    let bl = ctx.positive("structure.beam.length", b.length, "m")?;
+    let bt = ctx.positive("structure.beam.thickness", b.thickness, "m")?;
+    let bw = ctx.positive("structure.beam.width", b.width, "m")?;
+    let be = ctx.positive("structure.beam.material.E", b.material.e, "Pa")?;
+    let bnu = ctx.poisson("structure.beam.material.nu", b.material.nu)?;
+    let brho = ctx.positive("structure.beam.material.rho", b.material.rho, "kg/m^3")?;
+    let d = b.damping.as_ref();
+    let damping = Damping {
+        rayleigh_alpha_per_s: ctx.non_negative("structure.beam.damping.rayleigh_alpha", d.and_then(|d| d.rayleigh_alpha).unwrap_or(0.0), "1/s")?,
+        rayleigh_beta_s: ctx.non_negative("structure.beam.damping.rayleigh_beta", d.and_then(|d| d.rayleigh_beta).unwrap_or(0.0), "s")?,
+        structural_loss_factor: ctx.non_negative("structure.beam.damping.structural", d.and_then(|d| d.structural).unwrap_or(0.0), "-")?,
+    };
+    let al = ctx.positive("structure.adhesive.length", a.length, "m")?;
+    let at = ctx.positive("structure.adhesive.thickness", a.thickness, "m")?;
+    let ax = ctx.non_negative("structure.adhesive.x_start", a.x_start.unwrap_or(0.0), "m")?;
+    if ax + al > bl * (1.0 + 1e-12) {
+        return Err(ctx.err(
+            "structure.adhesive.length",
+            format!("the adhesive (x from {ax} to {} m) is longer than the beam ({bl} m): shorten it or move structure.adhesive.x_start", ax + al),
+        ));
+    }
+    let anu = ctx.poisson("structure.adhesive.nu", a.nu)?;
+    let arho = ctx.positive("structure.adhesive.rho", a.rho, "kg/m^3")?;
+    let m = mesh.ok_or_else(|| ctx.err("structure.mesh", "missing: give element_size (m) or divisions"))?;
+    let size = match (&m.element_size, &m.divisions) {
+        (Some(_), Some(_)) => return Err(ctx.err("structure.mesh", "give either element_size or divisions, not both")),
+        (None, None) => return Err(ctx.err("structure.mesh", "give element_size (m), e.g. 0.005, or divisions")),
+        (Some(h), None) => {
+            let h = ctx.positive("structure.mesh.element_size", *h, "m")?;
+            if h > bl.max(bt).max(bw) {
+                return Err(ctx.err("structure.mesh.element_size", format!("{h} m is larger than the beam itself: use a size of a few millimetres, e.g. 0.005")));
+            }
+            MeshSize::ElementSize(h)
+        }
+        (None, Some(dv)) => {
+            for (k, v) in [("x_adhesive", dv.x_adhesive), ("y_beam", dv.y_beam), ("y_adhesive", dv.y_adhesive), ("z", dv.z)] {
+                if v == 0 {
+                    return Err(ctx.err(format!("structure.mesh.divisions.{k}"), "must be at least 1"));
+                }
+            }
+            if dv.x_outside == 0 && al < bl * (1.0 - 1e-12) {
+                return Err(ctx.err("structure.mesh.divisions.x_outside", "must be at least 1: part of the beam lies outside the adhesive"));
+            }
+            MeshSize::Divisions {
+                x_adhesive: dv.x_adhesive,
+                x_outside: dv.x_outside,
+                y_beam: dv.y_beam,
+                y_adhesive: dv.y_adhesive,
+                z: dv.z,
+            }
+        }
+    };
+    let full_integration = match m.integration.as_deref().unwrap_or("full") {
+        "full" => true,
+        "reduced" => false,
+        o => return Err(ctx.err("structure.mesh.integration", format!("\"{o}\": use \"full\" (3x3x3 Gauss) or \"reduced\" (2x2x2)"))),
+    };
+    let snap_points = match m.point_mapping.as_deref().unwrap_or("interpolate") {
+        "interpolate" => false,
+        "snap" => true,
+        o => return Err(ctx.err("structure.mesh.point_mapping", format!("\"{o}\": use \"interpolate\" or \"snap\""))),
+    };
+    Ok(Joint {
+        beam_length_m: bl,
+        beam_thickness_m: bt,
+        beam_width_m: bw,
+        beam_e_pa: be,
+        beam_nu: bnu,
+        beam_rho_kg_m3: brho,
+        damping,
+        adhesive_length_m: al,
+        adhesive_thickness_m: at,
+        adhesive_x_start_m: ax,
+        adhesive_nu: anu,
+        adhesive_rho_kg_m3: arho,
+        mesh: size,
+        full_integration,
+        snap_points,
+    })
+}
+
+fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measurements, StudyError> {
+    if m.levels.is_empty() {
+        return Err(ctx.err("measurements.levels", "no levels: add [[measurements.levels]] with name and files"));
+    }
+    let mut levels: Vec<Level> = Vec::new();
+    for (i, l) in m.levels.iter().enumerate() {
+        let key = format!("measurements.levels[{i}]");
+        if l.name.is_empty() || levels.iter().any(|o| o.name == l.name) {
+            return Err(ctx.err(format!("{key}.name"), format!("level name \"{}\" is empty or used twice", l.name)));
+        }
+        if l.files.is_empty() {
+            return Err(ctx.err(format!("{key}.files"), "no files: list the UFF58 or CSV files of this level"));
+        }
+        let mut files = Vec::new();
+        for (k, f) in l.files.iter().enumerate() {
+            let r = resolve(ctx.file, f);
+            if !r.is_file() {
+                return Err(ctx.err(
+                    format!("{key}.files[{k}]"),
+                    format!("data file {} not found: check the path (relative to the study file), or create it with `rfmlab simulate`", r.display()),
+                ));
+            }
+            files.push(r);
+        }
+        if let Some(fr) = l.force_rms_n {
+            ctx.positive(&format!("{key}.force_rms_n"), fr, "N")?;
+        }
+        levels.push(Level {
+            name: l.name.clone(),
+            files,
+            force_rms_n: l.force_rms_n,
+        });
+    }
+    let band_hz = match &m.band_hz {
+        None => None,
+        Some(b) if b.len() == 2 && b[0].is_finite() && b[1].is_finite() && b[0] >= 0.0 && b[1] > b[0] => Some((b[0], b[1])),
+        Some(b) => return Err(ctx.err("measurements.band_hz", format!("{b:?} is not a band: give [f_low, f_high] in Hz with 0 <= f_low < f_high"))),
+    };
+    if let Some(ch) = &m.channels {
+        for (k, id) in ch.iter().enumerate() {
+            if !s.points.iter().any(|p| p.id == *id) {
+                return Err(ctx.err(format!("measurements.channels[{k}]"), format!("point {id} is not among structure.points")));
+            }
+        }
+    }
+    Ok(Measurements {
+        levels,
+        band_hz,
+        channels: m.channels.clone(),
+    })
+}
+
+fn solver(ctx: &Ctx, s: Option<&RawSolver>) -> Result<Solver, StudyError> {
+    let mut out = Solver::default();
+    let Some(s) = s else { return Ok(out) };
+    if let Some(e) = &s.engine {
+        out.engine = match e.as_str() {
+            "rom" => Engine::Rom,
+            "full" => Engine::Full,
+            o => return Err(ctx.err("solver.engine", format!("\"{o}\": use \"rom\" (certified reduced model, default) or \"full\""))),
+        };
+    }
+    if let Some(n) = s.max_iterations {
+        if n == 0 {
+            return Err(ctx.err("solver.max_iterations", "must be at least 1"));
+        }
+        out.max_iterations = n;
+    }
+    if let Some(t) = s.tolerance {
+        out.tolerance = ctx.positive("solver.tolerance", t, "-")?;
+    }
+    if let Some(t) = s.svd_rtol {
+        out.svd_rtol = ctx.positive("solver.svd_rtol", t, "-")?;
+    }
+    if let Some(t) = s.rom_tolerance {
+        out.rom_tolerance = ctx.positive("solver.rom_tolerance", t, "-")?;
+    }
+    if let Some(t) = s.threads {
+        if t == 0 {
+            return Err(ctx.err("solver.threads", "must be at least 1 (or leave it out to use all cores)"));
+        }
+        out.threads = Some(t);
+    }
+    Ok(out)
+}
+
+fn analyses(ctx: &Ctx, a: Option<&RawAnalyses>) -> Result<Analyses, StudyError> {
+    let mut out = Analyses::default();
+    let Some(a) = a else { return Ok(out) };
+    let band = |key: String, b: &RawBand| -> Result<Band, StudyError> {
+        let c = ctx.positive(&format!("{key}.center_hz"), b.center_hz, "Hz")?;
+        let w = ctx.positive(&format!("{key}.width_hz"), b.width_hz.unwrap_or(10.0), "Hz")?;
+        Ok(Band { center_hz: c, width_hz: w })
+    };
+    for (i, b) in a.band_constant.iter().enumerate() {
+        out.band_constant.push(band(format!("analyses.band_constant[{i}]"), b)?);
+    }
+    for (i, b) in a.iem.iter().enumerate() {
+        out.iem.push(band(format!("analyses.iem[{i}]"), b)?);
+    }
+    if let Some(v) = a.per_line {
+        out.per_line = v;
+    }
+    if let Some(v) = a.correlation {
+        out.correlation = v;
+    }
+    if let Some(v) = a.sensitivity {
+        out.sensitivity = v;
+    }
+    if let Some(v) = a.figures {
+        out.figures = v;
+    }
+    Ok(out)
+}
+
+fn model(ctx: &Ctx, i: usize, m: &RawModel, levels: &[String]) -> Result<ModelSpec, StudyError> {
+    let key = format!("models[{i}]");
+    let law = crate::material::model_from_name(&m.name, m.branches)
+        .map_err(|e| ctx.err(format!("{key}.name"), e.to_string()))?;
+    let names = law.param_names();
+    let bounds = law.bounds();
+    let mut initial = Vec::with_capacity(names.len());
+    for (k, n) in names.iter().enumerate() {
+        let v = *m.initial.get(n).ok_or_else(|| {
+            ctx.err(
+                format!("{key}.initial.{n}"),
+                format!("missing initial value of {n} ({}) for {}: add `{n} = <value>` to initial", law.param_units()[k], m.name),
+            )
+        })?;
+        let (lo, hi) = bounds[k];
+        if !(v.is_finite() && v > lo && v < hi) {
+            return Err(ctx.err(
+                format!("{key}.initial.{n}"),
+                format!("{v} is outside the admissible range ({lo}, {hi}) {}: give a value inside it (SI units)", law.param_units()[k]),
+            ));
+        }
+        initial.push(v);
+    }
+    for k in m.initial.keys() {
+        if !names.contains(k) {
+            return Err(ctx.err(format!("{key}.initial.{k}"), format!("{} has no parameter {k}; its parameters are {names:?}", m.name)));
+        }
+    }
+    let lv = match &m.levels {
+        None => levels.to_vec(),
+        Some(l) => {
+            for (k, n) in l.iter().enumerate() {
+                if !levels.contains(n) {
+                    return Err(ctx.err(format!("{key}.levels[{k}]"), format!("level \"{n}\" is not among measurements.levels {levels:?}")));
+                }
+            }
+            l.clone()
+        }
+    };
+    Ok(ModelSpec {
+        name: m.name.clone(),
+        branches: m.branches,
+        initial,
+        param_names: names,
+        levels: lv,
+    })
+}
