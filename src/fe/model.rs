@@ -55,3 +55,39 @@ impl StructuralModel {
             .position(|p| p.id == id && p.direction == direction)
     }
 }
+
+impl StructuralModel {
+    /// A copy with lumped point masses added at observation points: M' = M + sum m_k w_k w_k^T,
+    /// with w_k the point's DOF weights (the mass acts in the point's measured direction only;
+    /// cross-axis mass and rotary inertia of the sensor are neglected). `masses` holds
+    /// (point index, kg) pairs.
+    pub fn with_point_masses(&self, masses: &[(usize, f64)]) -> Result<StructuralModel, String> {
+        use faer::sparse::Triplet;
+        let n = self.n_dof();
+        let mut trip: Vec<Triplet<usize, usize, f64>> = Vec::new();
+        let sym = self.m.symbolic();
+        let (cp, ri) = (sym.col_ptr(), sym.row_idx());
+        let vals = self.m.val();
+        for j in 0..n {
+            for p in cp[j]..cp[j + 1] {
+                trip.push(Triplet::new(ri[p], j, vals[p]));
+            }
+        }
+        for &(k, mass) in masses {
+            let pt = self
+                .points
+                .get(k)
+                .ok_or_else(|| format!("point index {k} is out of range ({} points)", self.points.len()))?;
+            for &(a, wa) in &pt.dofs {
+                for &(b, wb) in &pt.dofs {
+                    trip.push(Triplet::new(a, b, mass * wa * wb));
+                }
+            }
+        }
+        let m = SpMat::try_new_from_triplets(n, n, &trip).map_err(|e| format!("cannot add point masses: {e:?}"))?;
+        let mut out = self.clone();
+        out.m = m;
+        out.description = format!("{} + point masses {:?}", self.description, masses);
+        Ok(out)
+    }
+}

@@ -222,3 +222,6 @@ pub(crate) fn resolve(file: &Path, p: &str) -> PathBuf {
         file.parent().unwrap_or(Path::new(".")).join(pb)
     }
 }
+
+pub mod build;
+pub mod experiment;

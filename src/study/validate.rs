@@ -4,19 +4,19 @@ use super::raw::*;
 use super::*;
 use sha2::{Digest, Sha256};
 
-struct Ctx<'a> {
-    file: &'a Path,
+pub(super) struct Ctx<'a> {
+    pub(super) file: &'a Path,
 }
 
 impl Ctx<'_> {
-    fn err(&self, key: impl Into<String>, message: impl Into<String>) -> StudyError {
+    pub(super) fn err(&self, key: impl Into<String>, message: impl Into<String>) -> StudyError {
         StudyError {
             file: self.file.display().to_string(),
             key: key.into(),
             message: message.into(),
         }
     }
-    fn positive(&self, key: &str, v: f64, unit: &str) -> Result<f64, StudyError> {
+    pub(super) fn positive(&self, key: &str, v: f64, unit: &str) -> Result<f64, StudyError> {
         if v.is_finite() && v > 0.0 {
             Ok(v)
         } else {
@@ -26,7 +26,7 @@ impl Ctx<'_> {
             ))
         }
     }
-    fn non_negative(&self, key: &str, v: f64, unit: &str) -> Result<f64, StudyError> {
+    pub(super) fn non_negative(&self, key: &str, v: f64, unit: &str) -> Result<f64, StudyError> {
         if v.is_finite() && v >= 0.0 {
             Ok(v)
         } else {
@@ -113,7 +113,7 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
 }
 
 /// Turn a TOML / serde error into a StudyError with the line and the offending key.
-fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyError {
+pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyError {
     let line = e
         .span()
         .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
@@ -142,7 +142,7 @@ fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyError {
     }
 }
 
-fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyError> {
+pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyError> {
     let source_name = s.source.as_deref().unwrap_or("mesher");
     let source = match source_name {
         "mesher" => {

@@ -1,0 +1,44 @@
+//! The FE structure as the rig sees it: a [`Plant`] from any [`FrfEngine`] and a
+//! constitutive law, so `rfmlab simulate` can drive the virtual experiment with the full model
+//! or the certified ROM.
+
+use super::{ExperimentError, Plant};
+use crate::common::C64;
+use crate::frf::FrfEngine;
+use crate::material::ConstitutiveModel;
+
+/// Accelerance of every engine output for a unit force at one engine input, with the adhesive
+/// modulus E*(w) of a constitutive law.
+pub struct EnginePlant<'a> {
+    pub engine: &'a dyn FrfEngine,
+    pub law: &'a dyn ConstitutiveModel,
+    pub params: Vec<f64>,
+    /// Column of the engine's inputs that is the drive point.
+    pub input_col: usize,
+    /// Output index of the drive point.
+    pub drive_output: usize,
+}
+
+impl Plant for EnginePlant<'_> {
+    fn n_channels(&self) -> usize {
+        self.engine.n_out()
+    }
+    fn drive_channel(&self) -> usize {
+        self.drive_output
+    }
+    fn accelerance(&self, freq_hz: &[f64]) -> Result<Vec<Vec<C64>>, ExperimentError> {
+        let omega: Vec<f64> = freq_hz.iter().map(|f| 2.0 * std::f64::consts::PI * f).collect();
+        let modulus: Vec<C64> = omega.iter().map(|&w| self.law.modulus(&self.params, w)).collect();
+        let s = self
+            .engine
+            .sweep(&omega, &modulus, false)
+            .map_err(|e| ExperimentError::Plant(e.to_string()))?;
+        let mut out = vec![vec![C64::new(0.0, 0.0); freq_hz.len()]; s.n_out];
+        for (l, &w) in omega.iter().enumerate() {
+            for (i, row) in out.iter_mut().enumerate() {
+                row[l] = -w * w * s.h[s.idx(l, i, self.input_col)];
+            }
+        }
+        Ok(out)
+    }
+}

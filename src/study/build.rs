@@ -1,0 +1,117 @@
+//! Study -> structural model: the mesher's [`JointSpec`] from the validated structure section,
+//! or the imported Matrix Market model.
+
+use super::{MeshSize, Structure, StructureSource, StudyError};
+use crate::fe::joint::{
+    build_joint_model, AdherendDamping, Divisions, IsoMaterial, JointGeometry, JointSpec, MeshInfo,
+    MeshParams, PointSpec,
+};
+use crate::fe::points::PointMapping;
+use crate::fe::StructuralModel;
+
+/// The mesher's input for a validated structure section (None for imported models).
+pub fn joint_spec(s: &Structure) -> Option<JointSpec> {
+    let StructureSource::Mesher(j) = &s.source else {
+        return None;
+    };
+    Some(JointSpec {
+        geometry: JointGeometry {
+            beam_length_m: j.beam_length_m,
+            beam_thickness_m: j.beam_thickness_m,
+            beam_width_m: j.beam_width_m,
+            adhesive_length_m: j.adhesive_length_m,
+            adhesive_thickness_m: j.adhesive_thickness_m,
+            adhesive_x_start_m: j.adhesive_x_start_m,
+        },
+        beam: IsoMaterial {
+            e_pa: j.beam_e_pa,
+            nu: j.beam_nu,
+            rho_kg_m3: j.beam_rho_kg_m3,
+        },
+        adhesive_nu: j.adhesive_nu,
+        adhesive_rho_kg_m3: j.adhesive_rho_kg_m3,
+        damping: AdherendDamping {
+            rayleigh_alpha_per_s: j.damping.rayleigh_alpha_per_s,
+            rayleigh_beta_s: j.damping.rayleigh_beta_s,
+            structural_loss_factor: j.damping.structural_loss_factor,
+        },
+        mesh: MeshParams {
+            size: match j.mesh {
+                MeshSize::ElementSize(h) => crate::fe::joint::MeshSize::ElementSize(h),
+                MeshSize::Divisions {
+                    x_adhesive,
+                    x_outside,
+                    y_beam,
+                    y_adhesive,
+                    z,
+                } => crate::fe::joint::MeshSize::Divisions(Divisions {
+                    x_adhesive,
+                    x_outside,
+                    y_beam,
+                    y_adhesive,
+                    z,
+                }),
+            },
+            integration: if j.full_integration {
+                crate::fe::element::Integration::Full
+            } else {
+                crate::fe::element::Integration::Reduced
+            },
+            point_mapping: if j.snap_points {
+                PointMapping::Snap
+            } else {
+                PointMapping::Interpolate
+            },
+        },
+        points: s
+            .points
+            .iter()
+            .map(|p| PointSpec {
+                id: p.id,
+                position_m: p.position_m,
+                direction: p.direction,
+            })
+            .collect(),
+    })
+}
+
+/// A built model and, for meshed models, its size and timing.
+pub struct BuiltModel {
+    pub model: StructuralModel,
+    pub mesh: Option<MeshInfo>,
+    /// Index (into `model.points`) of the excitation point.
+    pub excitation: usize,
+}
+
+/// Build the structural model of a study's structure section. `file` names the study in errors.
+pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> {
+    let (model, mesh) = match &s.source {
+        StructureSource::Mesher(_) => {
+            let spec = joint_spec(s).expect("mesher source");
+            let (m, info) = build_joint_model(&spec).map_err(|e| StudyError {
+                file: file.to_string(),
+                key: e.key().to_string(),
+                message: e.to_string(),
+            })?;
+            (m, Some(info))
+        }
+        StructureSource::MatrixMarket(im) => {
+            let m = crate::fe::matrix_market::import_study_model(im, &s.points).map_err(|e| StudyError {
+                file: file.to_string(),
+                key: "structure.import".into(),
+                message: e.to_string(),
+            })?;
+            (m, None)
+        }
+    };
+    let excitation = model
+        .points
+        .iter()
+        .position(|p| p.id == s.excitation)
+        .ok_or_else(|| StudyError {
+            file: file.to_string(),
+            key: "structure.excitation".into(),
+            message: format!("point {} is not in the model's observation points", s.excitation),
+        })?;
+    Ok(BuiltModel { model, mesh, excitation })
+}
