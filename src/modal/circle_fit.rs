@@ -224,7 +224,7 @@ pub fn circle_fit(
     } else {
         rates[kmax]
     };
-    if !(rate_max > 0.0) {
+    if rate_max.is_nan() || rate_max <= 0.0 {
         return Err(degenerate("the points do not sweep around the centre"));
     }
     s_r = s_r.clamp(s[0], s[n - 1]);
@@ -324,7 +324,7 @@ fn parabola_vertex(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> Option<(f64, 
     let d_ab = (b.1 - a.1) / (b.0 - a.0);
     let d_bc = (c.1 - b.1) / (c.0 - b.0);
     let d2 = (d_bc - d_ab) / (c.0 - a.0);
-    if !(d2 < 0.0) {
+    if d2.is_nan() || d2 >= 0.0 {
         return None;
     }
     let xv = 0.5 * (a.0 + b.0 - d_ab / d2);
@@ -344,10 +344,11 @@ fn solve3(mut m: [[f64; 3]; 3], mut b: [f64; 3]) -> Option<[f64; 3]> {
         }
         m.swap(col, piv);
         b.swap(col, piv);
+        let pivot_row = m[col];
         for row in col + 1..3 {
-            let f = m[row][col] / m[col][col];
-            for k in col..3 {
-                m[row][k] -= f * m[col][k];
+            let f = m[row][col] / pivot_row[col];
+            for (mk, pk) in m[row].iter_mut().zip(&pivot_row).skip(col) {
+                *mk -= f * pk;
             }
             b[row] -= f * b[col];
         }
@@ -387,7 +388,7 @@ fn kasa_fit(z: &[C64]) -> Option<(C64, f64)> {
     }
     let [d, e, f] = solve3(m, b)?;
     let r2 = 0.25 * (d * d + e * e) - f;
-    if !(r2 > 0.0) {
+    if r2.is_nan() || r2 <= 0.0 {
         return None;
     }
     Some((
