@@ -264,3 +264,18 @@ fn registry_names_and_errors() {
     assert!(check_params(&m, &[6e6, f64::NAN, 3e6, 3e3]).is_err());
     assert!(check_params(&FractionalZener, &[1e6, 1e6, 1e-3, 1.0]).is_err());
 }
+
+#[test]
+fn short_vectors_give_nan_not_panic() {
+    for m in all_models() {
+        let p = vec![1e6; m.n_params() - 1];
+        assert!(m.modulus(&p, 100.0).re.is_nan(), "{}", m.name());
+        let mut out = vec![C64::new(0.0, 0.0); m.n_params()];
+        m.jacobian(&p, 100.0, &mut out);
+        assert!(out.iter().all(|v| v.re.is_nan()), "{}", m.name());
+        let full = vec![1e6; m.n_params()];
+        let mut short_out = vec![C64::new(0.0, 0.0); 1];
+        m.jacobian(&full, 100.0, &mut short_out);
+        assert!(short_out[0].re.is_nan());
+    }
+}

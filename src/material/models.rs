@@ -10,6 +10,20 @@ use crate::common::{C64, J};
 
 const POS: (f64, f64) = (0.0, f64::INFINITY);
 
+const NAN: C64 = C64::new(f64::NAN, f64::NAN);
+
+/// True (and `out` filled with NaN) when `p` or `out` is shorter than `n`: the models never
+/// panic on a short vector, they return NaN (callers validate with `check_params`).
+fn short(p: &[f64], n: usize, out: Option<&mut [C64]>) -> bool {
+    match out {
+        Some(o) if p.len() < n || o.len() < n => {
+            o.iter_mut().for_each(|v| *v = NAN);
+            true
+        }
+        _ => p.len() < n,
+    }
+}
+
 fn strings(v: &[&str]) -> Vec<String> {
     v.iter().map(|s| s.to_string()).collect()
 }
@@ -61,9 +75,15 @@ impl ConstitutiveModel for Model1 {
         vec![POS; 2]
     }
     fn modulus(&self, p: &[f64], _omega_rad_s: f64) -> C64 {
+        if short(p, 2, None) {
+            return NAN;
+        }
         C64::new(p[0], p[1])
     }
-    fn jacobian(&self, _p: &[f64], _omega_rad_s: f64, out: &mut [C64]) {
+    fn jacobian(&self, p: &[f64], _omega_rad_s: f64, out: &mut [C64]) {
+        if short(p, 2, Some(out)) {
+            return;
+        }
         out[0] = C64::new(1.0, 0.0);
         out[1] = J;
     }
@@ -94,9 +114,15 @@ impl ConstitutiveModel for Model2 {
         vec![POS; 2]
     }
     fn modulus(&self, p: &[f64], omega_rad_s: f64) -> C64 {
+        if short(p, 2, None) {
+            return NAN;
+        }
         C64::new(p[0], omega_rad_s * p[1])
     }
-    fn jacobian(&self, _p: &[f64], omega_rad_s: f64, out: &mut [C64]) {
+    fn jacobian(&self, p: &[f64], omega_rad_s: f64, out: &mut [C64]) {
+        if short(p, 2, Some(out)) {
+            return;
+        }
         out[0] = C64::new(1.0, 0.0);
         out[1] = C64::new(0.0, omega_rad_s);
     }
@@ -127,9 +153,15 @@ impl ConstitutiveModel for Model3 {
         vec![POS; 3]
     }
     fn modulus(&self, p: &[f64], omega_rad_s: f64) -> C64 {
+        if short(p, 3, None) {
+            return NAN;
+        }
         p[0] + maxwell_branch(p[1], p[2], omega_rad_s)
     }
     fn jacobian(&self, p: &[f64], omega_rad_s: f64, out: &mut [C64]) {
+        if short(p, 3, Some(out)) {
+            return;
+        }
         let (d_e1, d_eta1) = maxwell_branch_jacobian(p[1], p[2], omega_rad_s);
         out[0] = C64::new(1.0, 0.0);
         out[1] = d_e1;
@@ -163,9 +195,15 @@ impl ConstitutiveModel for Model4 {
         vec![POS; 4]
     }
     fn modulus(&self, p: &[f64], omega_rad_s: f64) -> C64 {
+        if short(p, 4, None) {
+            return NAN;
+        }
         C64::new(p[0], p[1]) + maxwell_branch(p[2], p[3], omega_rad_s)
     }
     fn jacobian(&self, p: &[f64], omega_rad_s: f64, out: &mut [C64]) {
+        if short(p, 4, Some(out)) {
+            return;
+        }
         let (d_e1, d_eta1) = maxwell_branch_jacobian(p[2], p[3], omega_rad_s);
         out[0] = C64::new(1.0, 0.0);
         out[1] = J;
@@ -200,9 +238,15 @@ impl ConstitutiveModel for Model5 {
         vec![POS; 4]
     }
     fn modulus(&self, p: &[f64], omega_rad_s: f64) -> C64 {
+        if short(p, 4, None) {
+            return NAN;
+        }
         C64::new(p[0], omega_rad_s * p[1]) + maxwell_branch(p[2], p[3], omega_rad_s)
     }
     fn jacobian(&self, p: &[f64], omega_rad_s: f64, out: &mut [C64]) {
+        if short(p, 4, Some(out)) {
+            return;
+        }
         let (d_e1, d_eta1) = maxwell_branch_jacobian(p[2], p[3], omega_rad_s);
         out[0] = C64::new(1.0, 0.0);
         out[1] = C64::new(0.0, omega_rad_s);
@@ -259,12 +303,18 @@ impl ConstitutiveModel for FractionalZener {
         vec![POS, POS, POS, (0.0, 1.0)]
     }
     fn modulus(&self, p: &[f64], omega_rad_s: f64) -> C64 {
+        if short(p, 4, None) {
+            return NAN;
+        }
         match Self::z(p[2], p[3], omega_rad_s) {
             None => C64::new(p[0], 0.0),
             Some((z, _)) => p[0] + p[1] * z / (1.0 + z),
         }
     }
     fn jacobian(&self, p: &[f64], omega_rad_s: f64, out: &mut [C64]) {
+        if short(p, 4, Some(out)) {
+            return;
+        }
         out[0] = C64::new(1.0, 0.0);
         match Self::z(p[2], p[3], omega_rad_s) {
             None => {
@@ -335,6 +385,9 @@ impl ConstitutiveModel for GeneralizedMaxwell {
         vec![POS; 1 + 2 * self.n_branches]
     }
     fn modulus(&self, p: &[f64], omega_rad_s: f64) -> C64 {
+        if short(p, 1 + 2 * self.n_branches, None) {
+            return NAN;
+        }
         let mut e = C64::new(p[0], 0.0);
         for k in 0..self.n_branches {
             e += maxwell_branch(p[1 + 2 * k], p[2 + 2 * k], omega_rad_s);
@@ -342,6 +395,9 @@ impl ConstitutiveModel for GeneralizedMaxwell {
         e
     }
     fn jacobian(&self, p: &[f64], omega_rad_s: f64, out: &mut [C64]) {
+        if short(p, 1 + 2 * self.n_branches, Some(out)) {
+            return;
+        }
         out[0] = C64::new(1.0, 0.0);
         for k in 0..self.n_branches {
             let (d_e, d_eta) = maxwell_branch_jacobian(p[1 + 2 * k], p[2 + 2 * k], omega_rad_s);
