@@ -88,6 +88,19 @@ fn few_points_either_side_of_the_peak() {
     };
     let r = circle_fit(&f, &h, Quantity::Receptance, (10.0, 40.0), &p).unwrap();
     assert_eq!(r.n_points, 5);
+    println!(
+        "5 points: f {} eta {} +- {}",
+        r.freq_hz, r.loss_factor, r.loss_factor_std
+    );
+    // The same with a peak guess instead of the largest |H|.
+    let p = CircleFitParams {
+        points_each_side: 2,
+        peak_guess_hz: Some(21.7),
+        ..CircleFitParams::default()
+    };
+    let r2 = circle_fit(&f, &h, Quantity::Receptance, (10.0, 40.0), &p).unwrap();
+    assert_eq!(r2.n_points, 5);
+    assert!(rel(r2.freq_hz, r.freq_hz) < 1e-12);
     assert!(rel(r.freq_hz, 22.26) < 1e-3, "f {}", r.freq_hz);
     assert!(rel(r.loss_factor, 0.2) < 0.02, "eta {}", r.loss_factor);
 }

@@ -42,6 +42,9 @@ pub struct CircleFitParams {
     /// about +-5 Hz at 1 Hz resolution; a band spanning the half-power points (about
     /// eta f_r wide) or more gives the best loss factor.
     pub points_each_side: usize,
+    /// With `points_each_side > 0`: centre the points on the line nearest this frequency
+    /// (Hz) instead of the largest |H| in the band (default None).
+    pub peak_guess_hz: Option<f64>,
     /// Refine the algebraic circle by a geometric least-squares fit (default true).
     pub geometric_refinement: bool,
     /// Pairs for the loss factor use points whose angle from the resonance point is at
@@ -57,6 +60,7 @@ impl Default for CircleFitParams {
     fn default() -> Self {
         CircleFitParams {
             points_each_side: 0,
+            peak_guess_hz: None,
             geometric_refinement: true,
             min_pair_angle_deg: 10.0,
             max_pair_angle_deg: 160.0,
@@ -151,9 +155,17 @@ pub fn circle_fit(
         z.push(r);
     }
     if params.points_each_side > 0 && !z.is_empty() {
-        let peak = (0..z.len())
-            .max_by(|&a, &b| z[a].norm().total_cmp(&z[b].norm()))
-            .unwrap_or(0);
+        let peak = match params.peak_guess_hz {
+            Some(fg) => {
+                let sg = (TWO_PI * fg).powi(2);
+                (0..s.len())
+                    .min_by(|&a, &b| (s[a] - sg).abs().total_cmp(&(s[b] - sg).abs()))
+                    .unwrap_or(0)
+            }
+            None => (0..z.len())
+                .max_by(|&a, &b| z[a].norm().total_cmp(&z[b].norm()))
+                .unwrap_or(0),
+        };
         let first = peak.saturating_sub(params.points_each_side);
         let last = (peak + params.points_each_side).min(z.len() - 1);
         s = s[first..=last].to_vec();
