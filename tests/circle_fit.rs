@@ -239,3 +239,28 @@ fn bad_input_gives_typed_errors() {
     let line: Vec<C64> = f.iter().map(|&x| C64::new(x, 2.0 * x)).collect();
     assert!(circle_fit(&f, &line, Quantity::Receptance, (15.0, 30.0), &p).is_err());
 }
+
+#[test]
+fn conjugate_convention_is_handled() {
+    // e^{-j w t} data: H = conj(A) / (w_r^2 - w^2 - j eta w_r^2) sweeps anticlockwise.
+    let f = lines();
+    let a = C64::new(1.5, -0.4);
+    let h: Vec<C64> = receptance(&f, &[(22.26, 0.2, a)])
+        .iter()
+        .map(|v| v.conj())
+        .collect();
+    let r = circle_fit(
+        &f,
+        &h,
+        Quantity::Receptance,
+        (15.0, 30.0),
+        &CircleFitParams::default(),
+    )
+    .unwrap();
+    assert!(rel(r.freq_hz, 22.26) < 1e-9 && rel(r.loss_factor, 0.2) < 1e-9);
+    assert!(
+        (r.modal_constant - a.conj()).norm() < 1e-9 * a.norm(),
+        "{}",
+        r.modal_constant
+    );
+}
