@@ -26,3 +26,17 @@ pub trait ConstitutiveModel: Send + Sync + std::fmt::Debug {
     /// dE*/dp_k for k = 0..n_params, written into `out` (len n_params).
     fn jacobian(&self, p: &[f64], omega_rad_s: f64, out: &mut [C64]);
 }
+
+mod error;
+mod models;
+mod registry;
+
+pub use error::MaterialError;
+pub use models::{
+    maxwell_branch, maxwell_branch_jacobian, FractionalZener, GeneralizedMaxwell, Model1, Model2,
+    Model3, Model4, Model5,
+};
+pub use registry::{
+    check_params, level2_model4_standin, model_from_name, paper_table4, try_paper_table4,
+    MODEL_NAMES,
+};
