@@ -10,7 +10,7 @@
 //!   key `rfmlab.units` holds a JSON object `{"column": "unit", ...}` (`""` for labels and
 //!   counters, `"1"` for dimensionless ratios), key `rfmlab.table` the table name and key
 //!   `rfmlab.columns` the column kinds (used to restore [`ColumnData::OptF64`] exactly).
-//!   Python: `pyarrow.parquet.read_schema(path).metadata[b"rfmlab.units"]` or
+//!   Python: `pyarrow.parquet.ParquetFile(path).metadata.metadata[b"rfmlab.units"]` or
 //!   `polars.read_parquet_metadata(path)["rfmlab.units"]`.
 //! - A complex quantity `x` is stored as two f64 columns `x_re` and `x_im` (same unit);
 //!   see [`Table::push_c64`] and [`Table::c64_column`].
