@@ -29,15 +29,28 @@ fn full_table() -> Table {
             .to_vec(),
     )
     .unwrap()
-    .push_bool("converged", vec![true, false, true, true, false, false, true])
+    .push_bool(
+        "converged",
+        vec![true, false, true, true, false, false, true],
+    )
     .unwrap()
     .push_opt_f64(
         "frac",
         "1",
-        vec![Some(0.99), None, Some(0.5), None, Some(-0.0), Some(1.0), None],
+        vec![
+            Some(0.99),
+            None,
+            Some(0.5),
+            None,
+            Some(-0.0),
+            Some(1.0),
+            None,
+        ],
     )
     .unwrap();
-    let h: Vec<C64> = (0..7).map(|k| C64::new(k as f64 * 0.25, -1.0 / (k as f64 + 1.0))).collect();
+    let h: Vec<C64> = (0..7)
+        .map(|k| C64::new(k as f64 * 0.25, -1.0 / (k as f64 + 1.0)))
+        .collect();
     t.push_c64("h", "(m/s^2)/N", &h).unwrap();
     t
 }
@@ -62,7 +75,8 @@ fn table_with_every_column_type_reads_back_equal() {
     assert_eq!(h[2], C64::new(0.5, -1.0 / 3.0));
     // An OptF64 column without any missing value keeps its kind.
     let mut t2 = Table::new("opt");
-    t2.push_opt_f64("x", "Pa", vec![Some(1.0), Some(2.0)]).unwrap();
+    t2.push_opt_f64("x", "Pa", vec![Some(1.0), Some(2.0)])
+        .unwrap();
     let p2 = dir.path().join("opt.parquet");
     t2.write_parquet(&p2).unwrap();
     assert_eq!(Table::read_parquet(&p2).unwrap(), t2);
@@ -74,7 +88,8 @@ fn nan_values_survive_bit_for_bit() {
     let path = dir.path().join("nan.parquet");
     let nan = f64::from_bits(0x7ff8_0000_0000_0001);
     let mut t = Table::new("nan");
-    t.push_f64("x", "1", vec![1.0, nan, f64::NEG_INFINITY]).unwrap();
+    t.push_f64("x", "1", vec![1.0, nan, f64::NEG_INFINITY])
+        .unwrap();
     t.write_parquet(&path).unwrap();
     let back = Table::read_parquet(&path).unwrap();
     let x = back.column("x").unwrap().as_f64().unwrap();
@@ -101,7 +116,10 @@ fn bad_columns_are_rejected_and_leave_the_table_unchanged() {
     let before = t.clone();
     let e = t.push_f64("x", "", vec![1.0]).unwrap_err();
     assert!(matches!(e, OutputError::BadColumn { .. }));
-    assert!(e.to_string().contains("1 rows but column 'freq_hz' has 2"), "{e}");
+    assert!(
+        e.to_string().contains("1 rows but column 'freq_hz' has 2"),
+        "{e}"
+    );
     assert!(t.push_f64("freq_hz", "Hz", vec![1.0, 2.0]).is_err());
     assert!(t.push_f64("FreqHz", "Hz", vec![1.0, 2.0]).is_err());
     assert!(t.push_f64("1x", "", vec![1.0, 2.0]).is_err());
@@ -233,7 +251,8 @@ fn results_dir_writes_files_and_lists_them_in_the_manifest() {
     let mut rep = Report::new();
     rep.heading(1, "Case 1").paragraph("Done.");
     rd.write_report(&rep).unwrap();
-    rd.write_json("extra.json", &serde_json::json!({"a": 1})).unwrap();
+    rd.write_json("extra.json", &serde_json::json!({"a": 1}))
+        .unwrap();
     assert!(rd.write_bytes("a/b", b"x").is_err());
     let study = dir.path().join("s.toml");
     std::fs::write(&study, "x = 1").unwrap();
@@ -335,15 +354,46 @@ fn python_polars_and_pandas_read_the_tables() {
     let names: Vec<&str> = cols.iter().map(|c| c["name"].as_str().unwrap()).collect();
     assert_eq!(
         names,
-        ["freq_hz", "iteration", "line", "model", "converged", "frac", "h_re", "h_im"]
+        [
+            "freq_hz",
+            "iteration",
+            "line",
+            "model",
+            "converged",
+            "frac",
+            "h_re",
+            "h_im"
+        ]
     );
-    let dtypes: Vec<&str> = cols.iter().map(|c| c["polars_dtype"].as_str().unwrap()).collect();
+    let dtypes: Vec<&str> = cols
+        .iter()
+        .map(|c| c["polars_dtype"].as_str().unwrap())
+        .collect();
     assert_eq!(
         dtypes,
         ["Float64", "Int64", "UInt32", "String", "Boolean", "Float64", "Float64", "Float64"]
     );
     assert_eq!(cols[0]["unit"], "Hz");
     assert_eq!(cols[6]["unit"], "(m/s^2)/N");
+    // The documented ways to get the units from Python work.
+    let out = Command::new(&py)
+        .args([
+            "-c",
+            "import json, sys, polars as pl, pyarrow.parquet as pq\n\
+             a = json.loads(pl.read_parquet_metadata(sys.argv[1])['rfmlab.units'])\n\
+             b = json.loads(pq.ParquetFile(sys.argv[1]).metadata.metadata[b'rfmlab.units'])\n\
+             assert a == b, (a, b)\n\
+             print(a['freq_hz'], a['frac'])",
+        ])
+        .arg(rd.file_path("all_types.parquet"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(String::from_utf8_lossy(&out.stdout).trim(), "Hz 1");
 
     // A file without units metadata is reported as a failure.
     let mut df_bad = dir.path().join("study");
@@ -357,7 +407,11 @@ fn python_polars_and_pandas_read_the_tables() {
         .status()
         .unwrap();
     assert!(status.success());
-    let out = Command::new(&py).arg(&script).arg(rd.path()).output().unwrap();
+    let out = Command::new(&py)
+        .arg(&script)
+        .arg(rd.path())
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stdout).contains("no 'rfmlab.units' metadata"));
     // And rfmlab reads the foreign file (no units, name from the file stem).

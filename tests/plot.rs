@@ -9,7 +9,9 @@ use rfmlab::plot::{
 };
 
 fn out_dir(name: &str) -> PathBuf {
-    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("plot_tests").join(name);
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join("plot_tests")
+        .join(name);
     std::fs::create_dir_all(&d).unwrap();
     d
 }
@@ -75,25 +77,45 @@ fn frf_figure_writes_png_and_svg() {
     let title = "FRF H22 level 1";
     let files = frf_figure(dir.join("frf_h22"), title, &freq, &curves).unwrap();
     assert_eq!(files.png, dir.join("frf_h22.png"));
-    check_files(&files, title, (1000, 800), &["measured", "updated (Model 4)"]);
+    check_files(
+        &files,
+        title,
+        (1000, 800),
+        &["measured", "updated (Model 4)"],
+    );
     // Deterministic: the same figure twice gives the same bytes.
     let again = frf_figure(dir.join("frf_h22_again"), title, &freq, &curves).unwrap();
-    assert_eq!(std::fs::read(&files.png).unwrap(), std::fs::read(&again.png).unwrap());
-    assert_eq!(std::fs::read(&files.svg).unwrap(), std::fs::read(&again.svg).unwrap());
+    assert_eq!(
+        std::fs::read(&files.png).unwrap(),
+        std::fs::read(&again.png).unwrap()
+    );
+    assert_eq!(
+        std::fs::read(&files.svg).unwrap(),
+        std::fs::read(&again.svg).unwrap()
+    );
 }
 
 #[test]
 fn line_figure_linear_and_log() {
     let dir = out_dir("line");
     let f: Vec<f64> = (1..=400).map(f64::from).collect();
-    let scc: Vec<f64> = f.iter().map(|x| 1.0 - 0.3 * (x / 60.0).sin().powi(2)).collect();
-    let acc: Vec<f64> = f.iter().map(|x| 0.95 - 0.2 * (x / 90.0).cos().powi(2)).collect();
+    let scc: Vec<f64> = f
+        .iter()
+        .map(|x| 1.0 - 0.3 * (x / 60.0).sin().powi(2))
+        .collect();
+    let acc: Vec<f64> = f
+        .iter()
+        .map(|x| 0.95 - 0.2 * (x / 90.0).cos().powi(2))
+        .collect();
     let files = line_figure(
         dir.join("scc_acc"),
         "SCC and ACC",
         "Frequency (Hz)",
         "Correlation (-)",
-        &[Curve::line("SCC", f.clone(), scc), Curve::line("ACC", f, acc)],
+        &[
+            Curve::line("SCC", f.clone(), scc),
+            Curve::line("ACC", f, acc),
+        ],
         false,
     )
     .unwrap();
@@ -115,7 +137,12 @@ fn line_figure_linear_and_log() {
         true,
     )
     .unwrap();
-    check_files(&files, "Convergence history", (1000, 560), &["Model 4", "Model 1"]);
+    check_files(
+        &files,
+        "Convergence history",
+        (1000, 560),
+        &["Model 4", "Model 1"],
+    );
 }
 
 #[test]
@@ -135,15 +162,32 @@ fn modulus_figure_shows_estimates_and_models() {
         .map(|(k, &f)| model(f) * (1.0 + 0.04 * (((k * 31) % 9) as f64 - 4.0) / 4.0))
         .collect();
     let storage = [
-        Curve::points("per-line RFM", lines.clone(), est.iter().map(|z| z.re).collect()),
-        Curve::line("Model 4", fine.clone(), fine.iter().map(|&f| model(f).re).collect()),
+        Curve::points(
+            "per-line RFM",
+            lines.clone(),
+            est.iter().map(|z| z.re).collect(),
+        ),
+        Curve::line(
+            "Model 4",
+            fine.clone(),
+            fine.iter().map(|&f| model(f).re).collect(),
+        ),
     ];
     let loss = [
         Curve::points("per-line RFM", lines, est.iter().map(|z| z.im).collect()),
-        Curve::line("Model 4", fine.clone(), fine.iter().map(|&f| model(f).im).collect()),
+        Curve::line(
+            "Model 4",
+            fine.clone(),
+            fine.iter().map(|&f| model(f).im).collect(),
+        ),
     ];
     let files = modulus_figure(dir.join("modulus_level1"), "E* level 1", &storage, &loss).unwrap();
-    check_files(&files, "E* level 1", (1000, 800), &["per-line RFM", "Model 4", "(MPa)"]);
+    check_files(
+        &files,
+        "E* level 1",
+        (1000, 800),
+        &["per-line RFM", "Model 4", "(MPa)"],
+    );
 }
 
 #[test]
@@ -152,11 +196,25 @@ fn bad_inputs_are_errors_not_panics() {
     let stem = dir.join("bad");
     let e = line_figure(&stem, "t", "x", "y", &[], false).unwrap_err();
     assert!(matches!(e, PlotError::NoCurves { .. }), "{e}");
-    let e = line_figure(&stem, "t", "x", "y", &[Curve::line("c", vec![], vec![])], false)
-        .unwrap_err();
+    let e = line_figure(
+        &stem,
+        "t",
+        "x",
+        "y",
+        &[Curve::line("c", vec![], vec![])],
+        false,
+    )
+    .unwrap_err();
     assert!(matches!(e, PlotError::EmptyCurve { .. }), "{e}");
-    let e = line_figure(&stem, "t", "x", "y", &[Curve::line("c", vec![1.0], vec![])], false)
-        .unwrap_err();
+    let e = line_figure(
+        &stem,
+        "t",
+        "x",
+        "y",
+        &[Curve::line("c", vec![1.0], vec![])],
+        false,
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("1 x values but 0 y values"), "{e}");
     let nan = Curve::line("c", vec![1.0, 2.0], vec![f64::NAN, f64::INFINITY]);
     let e = line_figure(&stem, "t", "x", "y", &[nan], false).unwrap_err();
@@ -164,19 +222,45 @@ fn bad_inputs_are_errors_not_panics() {
     let neg = Curve::line("c", vec![1.0, 2.0], vec![-1.0, 0.0]);
     let e = line_figure(&stem, "t", "x", "y", &[neg], true).unwrap_err();
     assert!(e.to_string().contains("not positive on a log axis"), "{e}");
-    let e = frf_figure(&stem, "t", &[1.0, 2.0], &[FrfCurve::new("h", vec![], CurveStyle::Line)])
-        .unwrap_err();
+    let e = frf_figure(
+        &stem,
+        "t",
+        &[1.0, 2.0],
+        &[FrfCurve::new("h", vec![], CurveStyle::Line)],
+    )
+    .unwrap_err();
     assert!(matches!(e, PlotError::LengthMismatch { .. }), "{e}");
     let e = modulus_figure(&stem, "t", &[], &[]).unwrap_err();
     assert!(matches!(e, PlotError::NoCurves { .. }), "{e}");
     let ok = Curve::line("c", vec![1.0, 2.0], vec![1.0, 2.0]);
-    let e = line_figure(dir.join("missing/fig"), "t", "x", "y", &[ok.clone()], false)
-        .unwrap_err();
+    let e = line_figure(
+        dir.join("missing/fig"),
+        "t",
+        "x",
+        "y",
+        std::slice::from_ref(&ok),
+        false,
+    )
+    .unwrap_err();
     assert!(e.to_string().contains("folder does not exist"), "{e}");
     assert!(!stem.with_extension("png").exists());
     // A single point and a constant curve still plot (degenerate ranges are widened).
-    line_figure(dir.join("single"), "single", "x", "y", &[Curve::points("p", vec![3.0], vec![5.0])], true)
-        .unwrap();
-    line_figure(dir.join("flat"), "flat", "x", "y", &[Curve::line("c", vec![1.0, 2.0], vec![0.0, 0.0])], false)
-        .unwrap();
+    line_figure(
+        dir.join("single"),
+        "single",
+        "x",
+        "y",
+        &[Curve::points("p", vec![3.0], vec![5.0])],
+        true,
+    )
+    .unwrap();
+    line_figure(
+        dir.join("flat"),
+        "flat",
+        "x",
+        "y",
+        &[Curve::line("c", vec![1.0, 2.0], vec![0.0, 0.0])],
+        false,
+    )
+    .unwrap();
 }

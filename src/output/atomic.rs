@@ -16,7 +16,9 @@ static COUNTER: AtomicU64 = AtomicU64::new(0);
 pub(crate) fn temp_sibling(path: &Path) -> Result<PathBuf, OutputError> {
     let file_name = path
         .file_name()
-        .ok_or_else(|| OutputError::NotAFile { path: path.to_path_buf() })?
+        .ok_or_else(|| OutputError::NotAFile {
+            path: path.to_path_buf(),
+        })?
         .to_string_lossy();
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
     let ext = path
@@ -30,7 +32,9 @@ pub(crate) fn temp_sibling(path: &Path) -> Result<PathBuf, OutputError> {
 /// Checks that the folder of `path` exists.
 pub(crate) fn check_parent(path: &Path) -> Result<(), OutputError> {
     if path.file_name().is_none() {
-        return Err(OutputError::NotAFile { path: path.to_path_buf() });
+        return Err(OutputError::NotAFile {
+            path: path.to_path_buf(),
+        });
     }
     match path.parent() {
         Some(p) if !p.as_os_str().is_empty() && !p.is_dir() => Err(OutputError::MissingParent {

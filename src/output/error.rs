@@ -59,7 +59,11 @@ pub enum OutputError {
 }
 
 impl OutputError {
-    pub(crate) fn io(path: impl Into<PathBuf>, action: &'static str, source: std::io::Error) -> Self {
+    pub(crate) fn io(
+        path: impl Into<PathBuf>,
+        action: &'static str,
+        source: std::io::Error,
+    ) -> Self {
         OutputError::Io {
             path: path.into(),
             action,

@@ -130,7 +130,9 @@ pub fn sha256_file(path: impl AsRef<Path>) -> Result<String, OutputError> {
     let mut h = Sha256::new();
     let mut buf = vec![0u8; 1 << 16];
     loop {
-        let n = f.read(&mut buf).map_err(|e| OutputError::io(path, "read", e))?;
+        let n = f
+            .read(&mut buf)
+            .map_err(|e| OutputError::io(path, "read", e))?;
         if n == 0 {
             break;
         }

@@ -25,10 +25,12 @@ mod report;
 mod results_dir;
 mod table;
 
-pub use atomic::{write_atomic, write_atomic_bytes};
 pub(crate) use atomic::{check_parent, commit, temp_sibling};
+pub use atomic::{write_atomic, write_atomic_bytes};
 pub use error::OutputError;
-pub use manifest::{git_revision, sha256_file, sha256_hex, utc_now_rfc3339, FileEntry, Manifest, StepTiming};
+pub use manifest::{
+    git_revision, sha256_file, sha256_hex, utc_now_rfc3339, FileEntry, Manifest, StepTiming,
+};
 pub use report::Report;
 pub use results_dir::ResultsDir;
 pub use table::{ColumnData, Table};

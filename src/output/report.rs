@@ -23,8 +23,11 @@ impl Report {
     /// A heading of `level` 1..=6 (clamped).
     pub fn heading(&mut self, level: usize, text: &str) -> &mut Self {
         let level = level.clamp(1, 6);
-        self.blocks
-            .push(format!("{} {}", "#".repeat(level), text.replace(['\r', '\n'], " ")));
+        self.blocks.push(format!(
+            "{} {}",
+            "#".repeat(level),
+            text.replace(['\r', '\n'], " ")
+        ));
         self
     }
     /// A paragraph of markdown text (written as given).
@@ -34,7 +37,11 @@ impl Report {
     }
     /// A table; rows shorter than the header are padded with empty cells, longer ones keep
     /// their extra cells (markdown renderers drop them), `|` in cells is escaped.
-    pub fn table<S: AsRef<str>, T: AsRef<str>>(&mut self, headers: &[S], rows: &[Vec<T>]) -> &mut Self {
+    pub fn table<S: AsRef<str>, T: AsRef<str>>(
+        &mut self,
+        headers: &[S],
+        rows: &[Vec<T>],
+    ) -> &mut Self {
         let n = headers.len().max(1);
         let mut s = String::new();
         let head: Vec<String> = headers.iter().map(|h| cell(h.as_ref())).collect();
@@ -52,7 +59,11 @@ impl Report {
     }
     /// An image link; `path` should be relative to the report's folder (spaces are encoded).
     pub fn image(&mut self, path: impl AsRef<Path>, alt: &str) -> &mut Self {
-        let p = path.as_ref().to_string_lossy().replace('\\', "/").replace(' ', "%20");
+        let p = path
+            .as_ref()
+            .to_string_lossy()
+            .replace('\\', "/")
+            .replace(' ', "%20");
         self.blocks
             .push(format!("![{}]({p})", alt.replace([']', '\n'], " ")));
         self

@@ -138,7 +138,10 @@ impl Table {
     }
     /// The unit of column `name`.
     pub fn unit(&self, name: &str) -> Option<&str> {
-        self.units.iter().find(|(n, _)| n == name).map(|(_, u)| u.as_str())
+        self.units
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, u)| u.as_str())
     }
     /// The complex column stored as `<name>_re` and `<name>_im`.
     pub fn c64_column(&self, name: &str) -> Option<Vec<C64>> {

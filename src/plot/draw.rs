@@ -59,10 +59,114 @@ struct Prepared {
 
 struct Panel {
     y_label: String,
-    log_y: bool,
     y_range: (f64, f64),
+    log_y: bool,
     curves: Vec<Prepared>,
     legend: bool,
+    legend_pos: LegendCorner,
+}
+
+/// Legend placements tried, in order of preference.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LegendCorner {
+    UpperRight,
+    UpperLeft,
+    LowerRight,
+    LowerLeft,
+    UpperMiddle,
+    LowerMiddle,
+}
+
+impl LegendCorner {
+    const ALL: [LegendCorner; 6] = [
+        LegendCorner::UpperRight,
+        LegendCorner::UpperLeft,
+        LegendCorner::LowerRight,
+        LegendCorner::LowerLeft,
+        LegendCorner::UpperMiddle,
+        LegendCorner::LowerMiddle,
+    ];
+    /// The box (x0, x1, y0, y1) in plot coordinates normalised to [0, 1] the legend covers
+    /// (roughly: 35 % of the width, 12 % of the height per line of legend text, at most 60 %).
+    fn region(self, n_entries: usize) -> (f64, f64, f64, f64) {
+        let h = (0.12 * n_entries as f64 + 0.04).min(0.6);
+        let (x0, x1) = match self {
+            LegendCorner::UpperRight | LegendCorner::LowerRight => (0.65, 1.0),
+            LegendCorner::UpperLeft | LegendCorner::LowerLeft => (0.0, 0.35),
+            _ => (0.325, 0.675),
+        };
+        let (y0, y1) = match self {
+            LegendCorner::UpperRight | LegendCorner::UpperLeft | LegendCorner::UpperMiddle => {
+                (1.0 - h, 1.0)
+            }
+            _ => (0.0, h),
+        };
+        (x0, x1, y0, y1)
+    }
+    fn to_plotters(self) -> SeriesLabelPosition {
+        match self {
+            LegendCorner::UpperRight => SeriesLabelPosition::UpperRight,
+            LegendCorner::UpperLeft => SeriesLabelPosition::UpperLeft,
+            LegendCorner::LowerRight => SeriesLabelPosition::LowerRight,
+            LegendCorner::LowerLeft => SeriesLabelPosition::LowerLeft,
+            LegendCorner::UpperMiddle => SeriesLabelPosition::UpperMiddle,
+            LegendCorner::LowerMiddle => SeriesLabelPosition::LowerMiddle,
+        }
+    }
+}
+
+/// Picks the legend placement covering the least data: points count once, lines are sampled
+/// densely along each segment (in normalised, log-aware coordinates).
+fn place_legend(
+    curves: &[Prepared],
+    x_range: (f64, f64),
+    y_range: (f64, f64),
+    log_x: bool,
+    log_y: bool,
+) -> LegendCorner {
+    let norm = |v: f64, (lo, hi): (f64, f64), log: bool| {
+        if log {
+            (v.ln() - lo.ln()) / (hi.ln() - lo.ln())
+        } else {
+            (v - lo) / (hi - lo)
+        }
+    };
+    let mut samples: Vec<(f64, f64)> = Vec::new();
+    for c in curves {
+        for seg in &c.segments {
+            let pts: Vec<(f64, f64)> = seg
+                .iter()
+                .map(|&(x, y)| (norm(x, x_range, log_x), norm(y, y_range, log_y)))
+                .collect();
+            if c.style == CurveStyle::Points || pts.len() == 1 {
+                samples.extend(&pts);
+                continue;
+            }
+            for w in pts.windows(2) {
+                let (a, b) = (w[0], w[1]);
+                let d = ((b.0 - a.0).powi(2) + (b.1 - a.1).powi(2)).sqrt();
+                let n = ((d * 100.0).ceil() as usize).clamp(1, 100);
+                for k in 0..n {
+                    let t = k as f64 / n as f64;
+                    samples.push((a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1)));
+                }
+            }
+            samples.extend(pts.last());
+        }
+    }
+    let n_entries = curves.len();
+    let mut best = (usize::MAX, LegendCorner::UpperRight);
+    for corner in LegendCorner::ALL {
+        let (x0, x1, y0, y1) = corner.region(n_entries);
+        let hits = samples
+            .iter()
+            .filter(|&&(x, y)| x >= x0 && x <= x1 && y >= y0 && y <= y1)
+            .count();
+        if hits < best.0 {
+            best = (hits, corner);
+        }
+    }
+    best.1
 }
 
 /// Splits a curve into runs of drawable points.
@@ -131,12 +235,10 @@ fn fmt_tick(v: &f64) -> String {
     }
 }
 
-fn prepare(
-    specs: &[PanelSpec],
-    log_x: bool,
-) -> Result<(Vec<Panel>, (f64, f64)), PlotError> {
+fn prepare(specs: &[PanelSpec], log_x: bool) -> Result<(Vec<Panel>, (f64, f64)), PlotError> {
     let mut panels = Vec::with_capacity(specs.len());
     let mut xs: Vec<f64> = Vec::new();
+    let mut any_points = false;
     for spec in specs {
         let mut curves = Vec::with_capacity(spec.curves.len());
         for (i, c) in spec.curves.iter().enumerate() {
@@ -175,23 +277,32 @@ fn prepare(
             None => padded_range(pts().map(|p| p.1), spec.log_y).ok_or_else(no_data)?,
         };
         xs.extend(pts().map(|p| p.0));
+        any_points |= curves.iter().any(|c| c.style == CurveStyle::Points);
         panels.push(Panel {
             y_label: spec.y_label.clone(),
-            log_y: spec.log_y,
             y_range,
+            log_y: spec.log_y,
             curves,
             legend: spec.legend,
+            legend_pos: LegendCorner::UpperRight,
         });
     }
     let x_range = match padded_range(xs.iter().copied(), log_x) {
-        // Frequency axes start and end at the data, without padding, unless degenerate.
+        // Lines start and end at the axis limits; markers get a small margin so that the
+        // first and last ones are not cut in half.
         Some(padded) => {
             let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
             let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            if hi > lo {
-                (lo, hi)
-            } else {
+            if hi <= lo {
                 padded
+            } else if !any_points {
+                (lo, hi)
+            } else if log_x {
+                let r = (hi / lo).powf(0.015);
+                (lo / r, hi * r)
+            } else {
+                let d = 0.015 * (hi - lo);
+                (lo - d, hi + d)
             }
         }
         None => {
@@ -201,6 +312,9 @@ fn prepare(
             })
         }
     };
+    for p in &mut panels {
+        p.legend_pos = place_legend(&p.curves, x_range, p.y_range, log_x, p.log_y);
+    }
     Ok((panels, x_range))
 }
 
@@ -347,7 +461,10 @@ impl Job<'_> {
             let color = c.color;
             match c.style {
                 CurveStyle::Points => {
-                    let r = (fs / 5.0).round().max(2.0) as i32;
+                    // Smaller markers for dense data so that the line shape stays visible.
+                    let n: usize = c.segments.iter().map(Vec::len).sum();
+                    let base = if n > 150 { fs / 7.5 } else { fs / 5.0 };
+                    let r = base.round().max(1.0) as i32;
                     chart
                         .draw_series(
                             c.segments
@@ -381,7 +498,7 @@ impl Job<'_> {
                 .label_font(("sans-serif", fs))
                 .background_style(WHITE.mix(0.85))
                 .border_style(BLACK.mix(0.5))
-                .position(SeriesLabelPosition::UpperRight)
+                .position(p.legend_pos.to_plotters())
                 .draw()
                 .map_err(err)?;
         }
@@ -402,7 +519,10 @@ mod tests {
         );
         assert_eq!(segments(&c, false, false, false).len(), 2);
         let s = segments(&c, false, true, false);
-        assert_eq!(s, vec![vec![(1.0, 1.0)], vec![(3.0, 2.0)], vec![(5.0, 3.0)]]);
+        assert_eq!(
+            s,
+            vec![vec![(1.0, 1.0)], vec![(3.0, 2.0)], vec![(5.0, 3.0)]]
+        );
     }
 
     #[test]

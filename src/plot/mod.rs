@@ -210,7 +210,13 @@ pub fn frf_figure_with(
             legend: false,
         },
     ];
-    draw::figure(path_stem.as_ref(), title, &params.freq_label, &panels, params)
+    draw::figure(
+        path_stem.as_ref(),
+        title,
+        &params.freq_label,
+        &panels,
+        params,
+    )
 }
 
 /// A single-panel figure of labelled curves (SCC and ACC against frequency, convergence
@@ -313,5 +319,11 @@ pub fn modulus_figure_with(
             legend: true,
         },
     ];
-    draw::figure(path_stem.as_ref(), title, &params.freq_label, &panels, params)
+    draw::figure(
+        path_stem.as_ref(),
+        title,
+        &params.freq_label,
+        &panels,
+        params,
+    )
 }
