@@ -1,0 +1,73 @@
+//! The error type of the output module.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong while writing or reading result files.
+#[derive(Debug, thiserror::Error)]
+pub enum OutputError {
+    /// A file-system operation failed.
+    #[error("cannot {action} '{}': {source}", path.display())]
+    Io {
+        path: PathBuf,
+        /// What was being done ("create temporary file for", "write", "rename", ...).
+        action: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The folder a file should go into does not exist.
+    #[error("cannot write '{}': its folder does not exist (create it first, e.g. with ResultsDir::create)", path.display())]
+    MissingParent { path: PathBuf },
+    /// A path has no file name component.
+    #[error("'{}' is not a file path (it has no file name)", path.display())]
+    NotAFile { path: PathBuf },
+    /// Polars failed to build, write or read a table.
+    #[error("parquet error for table '{table}' ({}): {source}", path.display())]
+    Polars {
+        table: String,
+        path: PathBuf,
+        #[source]
+        source: polars::error::PolarsError,
+    },
+    /// A table column was rejected when it was added.
+    #[error("table '{table}', column '{column}': {reason}")]
+    BadColumn {
+        table: String,
+        column: String,
+        reason: String,
+    },
+    /// A parquet file holds a column this reader does not support.
+    #[error("'{}': column '{column}' has type {dtype}, which rfmlab tables do not use (supported: f64, i64, u32, string, bool)", path.display())]
+    UnsupportedColumn {
+        path: PathBuf,
+        column: String,
+        dtype: String,
+    },
+    /// JSON serialisation or parsing failed.
+    #[error("JSON error for '{}': {source}", path.display())]
+    Json {
+        path: PathBuf,
+        #[source]
+        source: serde_json::Error,
+    },
+    /// A name (study, file) cannot be used as a single path component.
+    #[error("invalid {what} name '{name}': {reason}")]
+    BadName {
+        what: &'static str,
+        name: String,
+        reason: &'static str,
+    },
+}
+
+impl OutputError {
+    pub(crate) fn io(
+        path: impl Into<PathBuf>,
+        action: &'static str,
+        source: std::io::Error,
+    ) -> Self {
+        OutputError::Io {
+            path: path.into(),
+            action,
+            source,
+        }
+    }
+}
