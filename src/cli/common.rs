@@ -1,4 +1,8 @@
-//! Shared CLI plumbing: global flags, exit codes, progress bars.
+//! Shared CLI plumbing: global flags, exit codes, progress bars, argument parsing helpers.
+
+use anyhow::Context;
+use rfmlab::common::C64;
+use std::path::Path;
 
 /// Flags that apply to every command.
 #[derive(Clone, Debug)]
@@ -32,7 +36,7 @@ pub fn progress(g: &Global, len: u64, msg: &str) -> indicatif::ProgressBar {
     }
     let pb = indicatif::ProgressBar::new(len);
     pb.set_style(
-        indicatif::ProgressStyle::with_template("{msg:>24} [{bar:40}] {pos}/{len} {elapsed_precise}")
+        indicatif::ProgressStyle::with_template("{msg:>28} [{bar:40}] {pos}/{len} {elapsed_precise}")
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
@@ -50,3 +54,53 @@ pub fn spinner(g: &Global, msg: &str) -> indicatif::ProgressBar {
     pb.enable_steady_tick(std::time::Duration::from_millis(120));
     pb
 }
+
+/// Parse "E',E''" (Pa) into a complex modulus.
+pub fn parse_modulus(s: &str) -> Result<C64, InputError> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let bad = || {
+        InputError(format!(
+            "--modulus {s:?}: give the storage and loss moduli in Pa separated by a comma, e.g. --modulus 6.974e6,1.4827e6"
+        ))
+    };
+    if parts.len() != 2 {
+        return Err(bad());
+    }
+    let re: f64 = parts[0].parse().map_err(|_| bad())?;
+    let im: f64 = parts[1].parse().map_err(|_| bad())?;
+    if !(re.is_finite() && re > 0.0 && im.is_finite() && im >= 0.0) {
+        return Err(InputError(format!("--modulus {s:?}: E' must be positive and E'' zero or positive (Pa)")));
+    }
+    Ok(C64::new(re, im))
+}
+
+/// Parse "a,b" into a pair of positive increasing numbers.
+pub fn parse_pair(flag: &str, s: &str) -> Result<(f64, f64), InputError> {
+    let v: Vec<f64> = s.split(',').filter_map(|t| t.trim().parse().ok()).collect();
+    if v.len() != 2 || !(v[0] >= 0.0 && v[1] > v[0]) {
+        return Err(InputError(format!("{flag} {s:?}: give two numbers low,high with 0 <= low < high")));
+    }
+    Ok((v[0], v[1]))
+}
+
+/// Load and validate a study file (errors are input errors: exit code 2).
+pub fn load_study(path: &Path) -> anyhow::Result<rfmlab::study::Study> {
+    Ok(rfmlab::study::load(path)?)
+}
+
+/// Build the model of a study with a spinner.
+pub fn build_model(g: &Global, study: &rfmlab::study::Study) -> anyhow::Result<rfmlab::study::build::BuiltModel> {
+    let sp = spinner(g, "assembling the FE model");
+    let b = rfmlab::study::build::build_model(&study.structure, &study.file.display().to_string())?;
+    sp.finish_and_clear();
+    Ok(b)
+}
+
+/// Print a value as pretty JSON.
+pub fn print_json(v: &serde_json::Value) -> anyhow::Result<()> {
+    println!("{}", serde_json::to_string_pretty(v).context("JSON output")?);
+    Ok(())
+}
+
+/// The default modulus for structure-only commands: the paper's IEM value for Level 1, mode 1.
+pub const DEFAULT_MODULUS: C64 = C64::new(6.974e6, 1.4827e6);

@@ -1,8 +1,93 @@
-use super::common::Global;
+//! `rfmlab convergence STUDY.toml [--sizes 0.01,0.005,0.0025] [--json]`: the paper's Table 1.
+
+use super::common::{load_study, parse_modulus, print_json, progress, Global, InputError, DEFAULT_MODULUS};
+use rfmlab::modes::{complex_modes, ModesParams};
+use rfmlab::study::{MeshSize, StructureSource};
+use serde_json::json;
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-pub struct ConvergenceArgs {}
+pub struct ConvergenceArgs {
+    /// Study file (its [structure] section is used; the mesh size is replaced).
+    pub study: PathBuf,
+    /// Element sizes in metres, comma separated.
+    #[arg(long, default_value = "0.01,0.005,0.0025")]
+    pub sizes: String,
+    /// Adhesive modulus E',E'' in Pa (default 6.974e6,1.4827e6).
+    #[arg(long)]
+    pub modulus: Option<String>,
+    /// Number of complex modes to compute per mesh (the first two y-dominant ones are reported).
+    #[arg(long, default_value_t = 8)]
+    pub count: usize,
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_a: &ConvergenceArgs, _g: &Global) -> anyhow::Result<()> {
-    anyhow::bail!("not implemented yet")
+pub fn run(a: &ConvergenceArgs, g: &Global) -> anyhow::Result<()> {
+    let e = match &a.modulus {
+        Some(s) => parse_modulus(s)?,
+        None => DEFAULT_MODULUS,
+    };
+    let sizes: Vec<f64> = a
+        .sizes
+        .split(',')
+        .map(|s| s.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| InputError(format!("--sizes {:?}: give element sizes in metres, e.g. 0.01,0.005,0.0025", a.sizes)))?;
+    if sizes.is_empty() || sizes.iter().any(|h| !(*h > 0.0)) {
+        return Err(InputError(format!("--sizes {:?}: sizes must be positive (m)", a.sizes)).into());
+    }
+    let study = load_study(&a.study)?;
+    let pb = progress(g, sizes.len() as u64, "mesh convergence");
+    let mut rows = Vec::new();
+    for &h in &sizes {
+        let mut s = study.structure.clone();
+        match &mut s.source {
+            StructureSource::Mesher(j) => j.mesh = MeshSize::ElementSize(h),
+            StructureSource::MatrixMarket(_) => {
+                return Err(InputError("convergence needs a meshed structure (structure.source = \"mesher\")".into()).into())
+            }
+        }
+        let t = std::time::Instant::now();
+        let b = rfmlab::study::build::build_model(&s, &study.file.display().to_string())?;
+        let t_asm = t.elapsed().as_secs_f64();
+        let modes = complex_modes(&b.model, e, a.count, b.dof_axes.as_deref(), &ModesParams::default())?;
+        let secs = t.elapsed().as_secs_f64();
+        let y: Vec<_> = modes.iter().filter(|m| m.y_dominant == Some(true)).take(2).collect();
+        let info = b.mesh.as_ref();
+        rows.push(json!({
+            "element_size_m": h,
+            "elements": info.map(|i| i.n_elements),
+            "dofs": b.model.n_dof(),
+            "y_mode1_freq_hz": y.first().map(|m| m.freq_hz),
+            "y_mode1_loss_factor": y.first().map(|m| m.loss_factor),
+            "y_mode2_freq_hz": y.get(1).map(|m| m.freq_hz),
+            "y_mode2_loss_factor": y.get(1).map(|m| m.loss_factor),
+            "assembly_seconds": t_asm,
+            "seconds": secs,
+        }));
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    if a.json {
+        return print_json(&json!({"modulus_pa": [e.re, e.im], "meshes": rows}));
+    }
+    println!("Mesh convergence at E* = {:.4} + {:.4} j MPa (first two y-dominant modes)", e.re / 1e6, e.im / 1e6);
+    println!("{:>8} {:>9} {:>8} {:>11} {:>8} {:>11} {:>8} {:>8}", "size_mm", "elements", "dofs", "f1_hz", "eta1", "f2_hz", "eta2", "time_s");
+    for r in &rows {
+        let f = |k: &str| r[k].as_f64().map(|v| format!("{v:.3}")).unwrap_or("-".into());
+        let f5 = |k: &str| r[k].as_f64().map(|v| format!("{v:.4}")).unwrap_or("-".into());
+        println!(
+            "{:>8.2} {:>9} {:>8} {:>11} {:>8} {:>11} {:>8} {:>8.1}",
+            r["element_size_m"].as_f64().unwrap_or(0.0) * 1e3,
+            r["elements"].as_u64().map(|v| v.to_string()).unwrap_or("-".into()),
+            r["dofs"],
+            f("y_mode1_freq_hz"),
+            f5("y_mode1_loss_factor"),
+            f("y_mode2_freq_hz"),
+            f5("y_mode2_loss_factor"),
+            r["seconds"].as_f64().unwrap_or(0.0)
+        );
+    }
+    Ok(())
 }

@@ -81,6 +81,9 @@ pub struct BuiltModel {
     pub mesh: Option<MeshInfo>,
     /// Index (into `model.points`) of the excitation point.
     pub excitation: usize,
+    /// Axis (0 x, 1 y, 2 z) of each free DOF, for meshed models (the mesher numbers free
+    /// DOFs node-major, three per free node).
+    pub dof_axes: Option<Vec<u8>>,
 }
 
 /// Build the structural model of a study's structure section. `file` names the study in errors.
@@ -96,7 +99,15 @@ pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> 
             (m, Some(info))
         }
         StructureSource::MatrixMarket(im) => {
-            let m = crate::fe::matrix_market::import_study_model(im, &s.points).map_err(|e| StudyError {
+            let paths = crate::fe::matrix_market::MmPaths {
+                m: im.mass.clone(),
+                k_b: im.stiffness.clone(),
+                s: im.adhesive_sensitivity.clone(),
+                c_b: im.viscous_damping.clone(),
+                d_b: im.structural_damping.clone(),
+                dof_map: Some(im.dof_map.clone()),
+            };
+            let m = crate::fe::matrix_market::import_model(&paths).map_err(|e| StudyError {
                 file: file.to_string(),
                 key: "structure.import".into(),
                 message: e.to_string(),
@@ -113,5 +124,15 @@ pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> 
             key: "structure.excitation".into(),
             message: format!("point {} is not in the model's observation points", s.excitation),
         })?;
-    Ok(BuiltModel { model, mesh, excitation })
+    for p in &s.points {
+        if !model.points.iter().any(|q| q.id == p.id && q.direction == p.direction) {
+            return Err(StudyError {
+                file: file.to_string(),
+                key: "structure.points".into(),
+                message: format!("point {} ({}) is not in the imported DOF map: add it to the dof_map file", p.id, p.direction),
+            });
+        }
+    }
+    let dof_axes = mesh.as_ref().map(|_| (0..model.n_dof()).map(|k| (k % 3) as u8).collect());
+    Ok(BuiltModel { model, mesh, excitation, dof_axes })
 }
