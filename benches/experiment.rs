@@ -10,7 +10,12 @@ struct ModalPlant;
 
 const F: [f64; 3] = [22.0, 394.0, 900.0];
 const ETA: [f64; 3] = [0.2, 0.07, 0.05];
-const PHI: [[f64; 3]; 4] = [[1.0, 0.8, 0.5], [1.3, -0.6, 0.7], [0.7, 1.1, -0.4], [0.4, 0.9, 0.9]];
+const PHI: [[f64; 3]; 4] = [
+    [1.0, 0.8, 0.5],
+    [1.3, -0.6, 0.7],
+    [0.7, 1.1, -0.4],
+    [0.4, 0.9, 0.9],
+];
 
 impl Plant for ModalPlant {
     fn n_channels(&self) -> usize {
@@ -42,9 +47,18 @@ impl Plant for ModalPlant {
 fn bench(c: &mut Criterion) {
     let mut g = c.benchmark_group("simulate_level_4ch_200avg_500lines");
     g.sample_size(10);
-    for (name, mode) in [("time_domain", Mode::TimeDomain), ("frequency_domain", Mode::FrequencyDomain)] {
-        let chain = ChainParams { mode, response_noise: vec![NoiseLevel::FractionOfSignalRms(0.02)], ..ChainParams::default() };
-        g.bench_function(name, |b| b.iter(|| simulate_level(&ModalPlant, &chain).unwrap()));
+    for (name, mode) in [
+        ("time_domain", Mode::TimeDomain),
+        ("frequency_domain", Mode::FrequencyDomain),
+    ] {
+        let chain = ChainParams {
+            mode,
+            response_noise: vec![NoiseLevel::FractionOfSignalRms(0.02)],
+            ..ChainParams::default()
+        };
+        g.bench_function(name, |b| {
+            b.iter(|| simulate_level(&ModalPlant, &chain).unwrap())
+        });
     }
     g.finish();
 }

@@ -21,7 +21,11 @@ pub struct WelchSums {
 
 impl WelchSums {
     pub fn new(n_lines: usize) -> Self {
-        WelchSums { g_ff: vec![0.0; n_lines], g_fa: vec![C64::new(0.0, 0.0); n_lines], g_aa: vec![0.0; n_lines] }
+        WelchSums {
+            g_ff: vec![0.0; n_lines],
+            g_fa: vec![C64::new(0.0, 0.0); n_lines],
+            g_aa: vec![0.0; n_lines],
+        }
     }
 
     /// Add one block's force and response DFT values at line `l`.
@@ -34,7 +38,18 @@ impl WelchSums {
 
     /// `(H1, gamma^2)` per line. A line with no force power gives H1 = 0, coherence 0.
     pub fn finish(&self) -> (Vec<C64>, Vec<f64>) {
-        let h1 = self.g_ff.iter().zip(&self.g_fa).map(|(ff, fa)| if *ff > 0.0 { fa / ff } else { C64::new(0.0, 0.0) }).collect();
+        let h1 = self
+            .g_ff
+            .iter()
+            .zip(&self.g_fa)
+            .map(|(ff, fa)| {
+                if *ff > 0.0 {
+                    fa / ff
+                } else {
+                    C64::new(0.0, 0.0)
+                }
+            })
+            .collect();
         let coh = (0..self.g_ff.len())
             .map(|l| {
                 let d = self.g_ff[l] * self.g_aa[l];
@@ -63,7 +78,13 @@ pub fn random_error_h1(coherence: f64, n_d: f64) -> f64 {
 pub fn effective_averages(window: Window, n_block: usize, hop: usize, n: usize) -> f64 {
     let rho = window.overlap_correlation(n_block, hop);
     let nf = n as f64;
-    let s: f64 = rho.iter().enumerate().skip(1).filter(|(m, _)| *m < n).map(|(m, r)| (1.0 - m as f64 / nf) * r * r).sum();
+    let s: f64 = rho
+        .iter()
+        .enumerate()
+        .skip(1)
+        .filter(|(m, _)| *m < n)
+        .map(|(m, r)| (1.0 - m as f64 / nf) * r * r)
+        .sum();
     nf / (1.0 + 2.0 * s)
 }
 
@@ -91,7 +112,11 @@ impl BandModel {
     /// Evaluate the plant on `n + 1` uniform points `lo + j (hi - lo)/n` with trapezoid
     /// weights, and scale the flat shaker-force PSD so that the transmitted force has the
     /// expected RMS `chain.force_rms_n`: `2 sum_j S_F(f_j) w_j = F_rms^2`.
-    pub fn build(plant: &dyn Plant, chain: &ChainParams, n: usize) -> Result<Self, ExperimentError> {
+    pub fn build(
+        plant: &dyn Plant,
+        chain: &ChainParams,
+        n: usize,
+    ) -> Result<Self, ExperimentError> {
         let (lo, hi) = chain.band_hz;
         let step = (hi - lo) / n as f64;
         let freq_hz: Vec<f64> = (0..=n).map(|j| lo + j as f64 * step).collect();
@@ -99,37 +124,67 @@ impl BandModel {
         let d = plant.drive_channel();
         let transfer: Vec<C64> = match chain.shaker {
             None => vec![C64::new(1.0, 0.0); freq_hz.len()],
-            Some(s) => freq_hz.iter().zip(&plain[d]).map(|(f, a)| s.transfer(*f, *a)).collect(),
+            Some(s) => freq_hz
+                .iter()
+                .zip(&plain[d])
+                .map(|(f, a)| s.transfer(*f, *a))
+                .collect(),
         };
-        if transfer.iter().any(|t| !(t.re.is_finite() && t.im.is_finite())) {
+        if transfer
+            .iter()
+            .any(|t| !(t.re.is_finite() && t.im.is_finite()))
+        {
             return Err(ExperimentError::Plant("the shaker-structure transfer is singular or not finite: check armature mass and stinger stiffness".into()));
         }
         let mut force_power: Vec<f64> = transfer.iter().map(|t| t.norm_sqr() * step).collect();
         force_power[0] *= 0.5;
         force_power[n] *= 0.5;
         let total: f64 = 2.0 * force_power.iter().sum::<f64>();
-        if !(total > 0.0) {
-            return Err(ExperimentError::Plant("no force reaches the structure in the band".into()));
+        if total.is_nan() || total <= 0.0 {
+            return Err(ExperimentError::Plant(
+                "no force reaches the structure in the band".into(),
+            ));
         }
         let scale = chain.force_rms_n.powi(2) / total;
         force_power.iter_mut().for_each(|p| *p *= scale);
         let resp = (0..plain.len())
             .map(|i| {
                 let (g, tau) = (chain.gain(i), chain.delay_s(i));
-                freq_hz.iter().zip(&plain[i]).map(|(f, h)| g * C64::from_polar(1.0, -2.0 * PI * f * tau) * h).collect()
+                freq_hz
+                    .iter()
+                    .zip(&plain[i])
+                    .map(|(f, h)| g * C64::from_polar(1.0, -2.0 * PI * f * tau) * h)
+                    .collect()
             })
             .collect();
-        Ok(BandModel { freq_hz, force_power, transfer, plain, resp, f0: lo, step })
+        Ok(BandModel {
+            freq_hz,
+            force_power,
+            transfer,
+            plain,
+            resp,
+            f0: lo,
+            step,
+        })
     }
 
     /// Expected mean square of channel `i`'s measured (calibrated) response: `2 sum_j |r_ij|^2 E|c_j|^2`.
     pub fn response_mean_square(&self, i: usize) -> f64 {
-        2.0 * self.resp[i].iter().zip(&self.force_power).map(|(r, p)| r.norm_sqr() * p).sum::<f64>()
+        2.0 * self.resp[i]
+            .iter()
+            .zip(&self.force_power)
+            .map(|(r, p)| r.norm_sqr() * p)
+            .sum::<f64>()
     }
 
     /// Mean square of the shaker's own force (N^2) for this transmitted-force level.
     pub fn shaker_force_mean_square(&self) -> f64 {
-        2.0 * self.force_power.iter().zip(&self.transfer).map(|(p, t)| p / t.norm_sqr()).sum::<f64>()
+        2.0 * self
+            .force_power
+            .iter()
+            .zip(&self.transfer)
+            .map(|(p, t)| p / t.norm_sqr())
+            .sum::<f64>()
     }
 
     /// Expected block spectral matrix at line `f_k` of the vector `(F, A_0, .., A_{m-1})`
@@ -138,7 +193,14 @@ impl BandModel {
     /// `E[v_a conj(v_b)] = sum_j E|c_j|^2 r_aj conj(r_bj) |W((f_k - f_j) T)|^2` over the points
     /// within `half_width_hz` of `f_k`, plus their mirror images at `-f_j` (where
     /// `r(-f) = conj(r(f))`): the negative-frequency half of a real signal leaks too.
-    pub fn expected(&self, f_k: f64, window: Window, n_block: usize, block_s: f64, half_width_hz: f64) -> (Vec<Vec<C64>>, Vec<C64>) {
+    pub fn expected(
+        &self,
+        f_k: f64,
+        window: Window,
+        n_block: usize,
+        block_s: f64,
+        half_width_hz: f64,
+    ) -> (Vec<Vec<C64>>, Vec<C64>) {
         let m = self.resp.len();
         let mut cov = vec![vec![C64::new(0.0, 0.0); m + 1]; m + 1];
         let mut kern_num = vec![C64::new(0.0, 0.0); m];
@@ -149,12 +211,22 @@ impl BandModel {
             if k2 == 0.0 {
                 return;
             }
-            let r = |i: usize| if mirror { self.resp[i][j].conj() } else { self.resp[i][j] };
+            let r = |i: usize| {
+                if mirror {
+                    self.resp[i][j].conj()
+                } else {
+                    self.resp[i][j]
+                }
+            };
             cov[0][0] += k2;
             for a in 0..m {
                 let ra = r(a);
                 cov[a + 1][0] += ra * k2;
-                let h = if mirror { self.plain[a][j].conj() } else { self.plain[a][j] };
+                let h = if mirror {
+                    self.plain[a][j].conj()
+                } else {
+                    self.plain[a][j]
+                };
                 kern_num[a] += h * k2;
                 for b in 0..=a {
                     cov[a + 1][b + 1] += ra * r(b).conj() * k2;
@@ -174,29 +246,52 @@ impl BandModel {
                 add(j, (f_k + self.freq_hz[j]) * block_s, true);
             }
         }
+        // Hermitian fill of the upper triangle (index pairs (a, b) and (b, a)).
+        #[allow(clippy::needless_range_loop)]
         for a in 0..=m {
             for b in a + 1..=m {
                 cov[a][b] = cov[b][a].conj();
             }
         }
         let p = cov[0][0].re;
-        let kernel = kern_num.iter().map(|k| if p > 0.0 { k / p } else { C64::new(0.0, 0.0) }).collect();
+        let kernel = kern_num
+            .iter()
+            .map(|k| if p > 0.0 { k / p } else { C64::new(0.0, 0.0) })
+            .collect();
         (cov, kernel)
     }
 }
 
 /// Call the plant and check the shape and finiteness of what it returns.
-pub(crate) fn plant_eval(plant: &dyn Plant, freq_hz: &[f64]) -> Result<Vec<Vec<C64>>, ExperimentError> {
+pub(crate) fn plant_eval(
+    plant: &dyn Plant,
+    freq_hz: &[f64],
+) -> Result<Vec<Vec<C64>>, ExperimentError> {
     let m = plant.n_channels();
     if m == 0 || plant.drive_channel() >= m {
-        return Err(ExperimentError::Plant(format!("plant has {m} channels and drive channel {}: need a drive channel among the channels", plant.drive_channel())));
+        return Err(ExperimentError::Plant(format!(
+            "plant has {m} channels and drive channel {}: need a drive channel among the channels",
+            plant.drive_channel()
+        )));
     }
     let h = plant.accelerance(freq_hz)?;
     if h.len() != m || h.iter().any(|c| c.len() != freq_hz.len()) {
-        return Err(ExperimentError::Plant(format!("plant returned {} channels of lengths {:?} for {m} channels x {} lines", h.len(), h.iter().map(Vec::len).collect::<Vec<_>>(), freq_hz.len())));
+        return Err(ExperimentError::Plant(format!(
+            "plant returned {} channels of lengths {:?} for {m} channels x {} lines",
+            h.len(),
+            h.iter().map(Vec::len).collect::<Vec<_>>(),
+            freq_hz.len()
+        )));
     }
-    if let Some((i, l)) = h.iter().enumerate().find_map(|(i, c)| c.iter().position(|v| !(v.re.is_finite() && v.im.is_finite())).map(|l| (i, l))) {
-        return Err(ExperimentError::Plant(format!("plant accelerance is not finite at channel {i}, {} Hz", freq_hz[l])));
+    if let Some((i, l)) = h.iter().enumerate().find_map(|(i, c)| {
+        c.iter()
+            .position(|v| !(v.re.is_finite() && v.im.is_finite()))
+            .map(|l| (i, l))
+    }) {
+        return Err(ExperimentError::Plant(format!(
+            "plant accelerance is not finite at channel {i}, {} Hz",
+            freq_hz[l]
+        )));
     }
     Ok(h)
 }

@@ -37,7 +37,11 @@ use rayon::prelude::*;
 /// e.g. noise-free channels).
 pub(crate) fn cholesky_psd(a: &[Vec<C64>]) -> Vec<Vec<C64>> {
     let n = a.len();
-    let tol = 1e-14 * a.iter().enumerate().map(|(i, r)| r[i].re).fold(0.0, f64::max);
+    let tol = 1e-14
+        * a.iter()
+            .enumerate()
+            .map(|(i, r)| r[i].re)
+            .fold(0.0, f64::max);
     let mut l = vec![vec![C64::new(0.0, 0.0); n]; n];
     for j in 0..n {
         let d = a[j][j].re - (0..j).map(|k| l[j][k].norm_sqr()).sum::<f64>();
@@ -79,7 +83,12 @@ pub(crate) fn banded_toeplitz_cholesky(rho: &[f64], n: usize) -> Vec<Vec<f64>> {
 
 /// Simulate the chain's block spectra at every line; returns the Welch sums per channel.
 /// `noise_power` = (force, per response channel) block noise power `sigma^2 sum w^2`.
-pub(crate) fn simulate(band: &BandModel, chain: &ChainParams, layout: &Layout, noise_power: (f64, &[f64])) -> Vec<WelchSums> {
+pub(crate) fn simulate(
+    band: &BandModel,
+    chain: &ChainParams,
+    layout: &Layout,
+    noise_power: (f64, &[f64]),
+) -> Vec<WelchSums> {
     let m = band.resp.len();
     let rho = chain.window.overlap_correlation(layout.n_block, layout.hop);
     let lr = banded_toeplitz_cholesky(&rho, chain.n_averages);
@@ -90,7 +99,13 @@ pub(crate) fn simulate(band: &BandModel, chain: &ChainParams, layout: &Layout, n
         .par_iter()
         .enumerate()
         .map(|(li, &k)| {
-            let (mut cov, _) = band.expected(k as f64 * df, chain.window, layout.n_block, chain.block_s, chain.kernel.half_width_hz);
+            let (mut cov, _) = band.expected(
+                k as f64 * df,
+                chain.window,
+                layout.n_block,
+                chain.block_s,
+                chain.kernel.half_width_hz,
+            );
             cov[0][0] += noise_power.0;
             for i in 0..m {
                 cov[i + 1][i + 1] += noise_power.1[i];
@@ -102,7 +117,7 @@ pub(crate) fn simulate(band: &BandModel, chain: &ChainParams, layout: &Layout, n
             let mut e = vec![C64::new(0.0, 0.0); m + 1];
             let mut v = vec![C64::new(0.0, 0.0); m + 1];
             let (mut g_ff, mut g_fa, mut g_aa) = (0.0, vec![C64::new(0.0, 0.0); m], vec![0.0; m]);
-            for b in 0..chain.n_averages {
+            for lr_b in lr.iter().take(chain.n_averages) {
                 e.iter_mut().for_each(|x| *x = complex_normal(&mut rng));
                 hist.rotate_left(1);
                 let u = &mut hist[q];
@@ -110,7 +125,7 @@ pub(crate) fn simulate(band: &BandModel, chain: &ChainParams, layout: &Layout, n
                     *ua = (0..=a).map(|c| ls[a][c] * e[c]).sum();
                 }
                 for (a, va) in v.iter_mut().enumerate() {
-                    *va = (0..=q).map(|s| lr[b][s] * hist[s][a]).sum();
+                    *va = (0..=q).map(|s| lr_b[s] * hist[s][a]).sum();
                 }
                 g_ff += v[0].norm_sqr();
                 for i in 0..m {
@@ -144,11 +159,21 @@ mod tests {
         let n = 7;
         let l = banded_toeplitz_cholesky(&rho, n);
         let q = 2;
-        let get = |b: usize, c: usize| if c <= b && b - c <= q { l[b][q - (b - c)] } else { 0.0 };
+        let get = |b: usize, c: usize| {
+            if c <= b && b - c <= q {
+                l[b][q - (b - c)]
+            } else {
+                0.0
+            }
+        };
         for b in 0..n {
             for c in 0..n {
                 let s: f64 = (0..n).map(|k| get(b, k) * get(c, k)).sum();
-                let want = if b.abs_diff(c) <= q { rho[b.abs_diff(c)] } else { 0.0 };
+                let want = if b.abs_diff(c) <= q {
+                    rho[b.abs_diff(c)]
+                } else {
+                    0.0
+                };
                 assert!((s - want).abs() < 1e-12, "({b},{c}) {s} vs {want}");
             }
         }

@@ -32,7 +32,11 @@ pub enum ExperimentError {
     #[error("invalid measurement-chain setting `{field}`: {message}")]
     InvalidParams { field: String, message: String },
     #[error("line {line_hz} Hz is not a multiple of the line spacing {df_hz} Hz inside the band {band_hz:?} Hz: choose lines k / block_s within the band")]
-    LineNotOnGrid { line_hz: f64, df_hz: f64, band_hz: (f64, f64) },
+    LineNotOnGrid {
+        line_hz: f64,
+        df_hz: f64,
+        band_hz: (f64, f64),
+    },
     #[error("plant: {0}")]
     Plant(String),
     #[error("{given} channel labels given for {expected} simulated channels: give one label per plant channel")]
@@ -120,9 +124,16 @@ pub struct ChannelLabel {
 
 impl SimulatedLevel {
     /// The level as measured data (accelerance with coherence, labelled channels).
-    pub fn to_frf_level(&self, name: &str, labels: &[ChannelLabel]) -> Result<FrfLevel, ExperimentError> {
+    pub fn to_frf_level(
+        &self,
+        name: &str,
+        labels: &[ChannelLabel],
+    ) -> Result<FrfLevel, ExperimentError> {
         if labels.len() != self.channels.len() {
-            return Err(ExperimentError::Labels { given: labels.len(), expected: self.channels.len() });
+            return Err(ExperimentError::Labels {
+                given: labels.len(),
+                expected: self.channels.len(),
+            });
         }
         Ok(FrfLevel {
             name: name.to_string(),
@@ -189,7 +200,10 @@ fn noise_rms(level: NoiseLevel, signal_rms: f64) -> f64 {
 
 /// The expected-value model on the fine grid of `chain.kernel` (both modes use it for the
 /// truth; the frequency-domain mode also draws from it).
-pub(crate) fn band_model_fine(plant: &dyn Plant, chain: &ChainParams) -> Result<BandModel, ExperimentError> {
+pub(crate) fn band_model_fine(
+    plant: &dyn Plant,
+    chain: &ChainParams,
+) -> Result<BandModel, ExperimentError> {
     let (lo, hi) = chain.band_hz;
     let n = ((hi - lo) / chain.kernel.grid_step_hz).ceil().max(1.0) as usize;
     BandModel::build(plant, chain, n)
@@ -199,22 +213,34 @@ pub(crate) fn band_model_fine(plant: &dyn Plant, chain: &ChainParams) -> Result<
 ///
 /// Returns H1 and coherence per channel on `chain.lines_hz` plus the truth record.
 /// Deterministic for a given `chain.seed`, independent of the number of threads.
-pub fn simulate_level(plant: &dyn Plant, chain: &ChainParams) -> Result<SimulatedLevel, ExperimentError> {
+pub fn simulate_level(
+    plant: &dyn Plant,
+    chain: &ChainParams,
+) -> Result<SimulatedLevel, ExperimentError> {
     let m = plant.n_channels();
     let layout = chain.layout(m)?;
     let band = band_model_fine(plant, chain)?;
     let m = band.resp.len();
     let p_w = chain.window.power_sum(layout.n_block);
-    let response_rms: Vec<f64> = (0..m).map(|i| band.response_mean_square(i).sqrt()).collect();
+    let response_rms: Vec<f64> = (0..m)
+        .map(|i| band.response_mean_square(i).sqrt())
+        .collect();
     let force_noise = noise_rms(chain.force_noise, chain.force_rms_n);
-    let resp_noise: Vec<f64> = (0..m).map(|i| noise_rms(chain.response_noise_of(i), response_rms[i])).collect();
+    let resp_noise: Vec<f64> = (0..m)
+        .map(|i| noise_rms(chain.response_noise_of(i), response_rms[i]))
+        .collect();
     let n_eff = effective_averages(chain.window, layout.n_block, layout.hop, chain.n_averages);
     let df = 1.0 / chain.block_s;
 
     // Truth on the lines.
     let exact = plant_eval(plant, &chain.lines_hz)?;
     let force_transfer: Vec<C64> = match chain.shaker {
-        Some(s) => chain.lines_hz.iter().zip(&exact[plant.drive_channel()]).map(|(f, a)| s.transfer(*f, *a)).collect(),
+        Some(s) => chain
+            .lines_hz
+            .iter()
+            .zip(&exact[plant.drive_channel()])
+            .map(|(f, a)| s.transfer(*f, *a))
+            .collect(),
         None => vec![C64::new(1.0, 0.0); chain.lines_hz.len()],
     };
     let mut channels: Vec<ChannelTruth> = (0..m)
@@ -228,15 +254,33 @@ pub fn simulate_level(plant: &dyn Plant, chain: &ChainParams) -> Result<Simulate
         })
         .collect();
     for (li, &k) in layout.line_bins.iter().enumerate() {
-        let (cov, kernel) = band.expected(k as f64 * df, chain.window, layout.n_block, chain.block_s, chain.kernel.half_width_hz);
+        let (cov, kernel) = band.expected(
+            k as f64 * df,
+            chain.window,
+            layout.n_block,
+            chain.block_s,
+            chain.kernel.half_width_hz,
+        );
         let g_ff = cov[0][0].re + force_noise.powi(2) * p_w;
         for (i, c) in channels.iter_mut().enumerate() {
             let g_aa = cov[i + 1][i + 1].re + resp_noise[i].powi(2) * p_w;
             let g_fa = cov[i + 1][0];
             let h = c.exact[li];
-            let coh = if g_ff * g_aa > 0.0 { (g_fa.norm_sqr() / (g_ff * g_aa)).min(1.0) } else { 0.0 };
-            c.expected_h1.push(if g_ff > 0.0 { g_fa / g_ff } else { C64::new(0.0, 0.0) });
-            c.leakage_bias.push(if h.norm() > 0.0 { (kernel[i] - h).norm() / h.norm() } else { f64::INFINITY });
+            let coh = if g_ff * g_aa > 0.0 {
+                (g_fa.norm_sqr() / (g_ff * g_aa)).min(1.0)
+            } else {
+                0.0
+            };
+            c.expected_h1.push(if g_ff > 0.0 {
+                g_fa / g_ff
+            } else {
+                C64::new(0.0, 0.0)
+            });
+            c.leakage_bias.push(if h.norm() > 0.0 {
+                (kernel[i] - h).norm() / h.norm()
+            } else {
+                f64::INFINITY
+            });
             c.kernel.push(kernel[i]);
             c.expected_coherence.push(coh);
             c.random_error.push(random_error_h1(coh, n_eff));
@@ -258,7 +302,9 @@ pub fn simulate_level(plant: &dyn Plant, chain: &ChainParams) -> Result<Simulate
     };
 
     let sums = match chain.mode {
-        Mode::TimeDomain => timedomain::simulate(plant, chain, &layout, (force_noise, &resp_noise))?,
+        Mode::TimeDomain => {
+            timedomain::simulate(plant, chain, &layout, (force_noise, &resp_noise))?
+        }
         Mode::FrequencyDomain => {
             let np: Vec<f64> = resp_noise.iter().map(|s| s * s * p_w).collect();
             freqdomain::simulate(&band, chain, &layout, (force_noise.powi(2) * p_w, &np))
@@ -271,5 +317,11 @@ pub fn simulate_level(plant: &dyn Plant, chain: &ChainParams) -> Result<Simulate
             SimulatedChannel { values, coherence }
         })
         .collect();
-    Ok(SimulatedLevel { freq_hz: chain.lines_hz.clone(), channels, force_rms_n: chain.force_rms_n, n_averages: chain.n_averages, truth })
+    Ok(SimulatedLevel {
+        freq_hz: chain.lines_hz.clone(),
+        channels,
+        force_rms_n: chain.force_rms_n,
+        n_averages: chain.n_averages,
+        truth,
+    })
 }

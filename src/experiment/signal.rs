@@ -11,7 +11,9 @@ impl Window {
     /// The `n` window samples `w_0..w_{n-1}` (periodic form, as analysers use with the DFT).
     pub fn samples(self, n: usize) -> Vec<f64> {
         match self {
-            Window::Hann => (0..n).map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / n as f64).cos()).collect(),
+            Window::Hann => (0..n)
+                .map(|i| 0.5 - 0.5 * (2.0 * PI * i as f64 / n as f64).cos())
+                .collect(),
             Window::Rectangular => vec![1.0; n],
         }
     }
@@ -25,7 +27,11 @@ impl Window {
     pub fn dtft(self, n: usize, delta: f64) -> C64 {
         match self {
             Window::Rectangular => dirichlet(n, delta),
-            Window::Hann => 0.5 * dirichlet(n, delta) - 0.25 * dirichlet(n, delta - 1.0) - 0.25 * dirichlet(n, delta + 1.0),
+            Window::Hann => {
+                0.5 * dirichlet(n, delta)
+                    - 0.25 * dirichlet(n, delta - 1.0)
+                    - 0.25 * dirichlet(n, delta + 1.0)
+            }
         }
     }
 
@@ -117,9 +123,16 @@ mod tests {
             let n = 64;
             let w = window.samples(n);
             for &d in &[0.0, 0.3, 1.0, -1.0, 2.5, -7.25, 64.0, 13.0] {
-                let direct: C64 = w.iter().enumerate().map(|(i, wi)| *wi * C64::from_polar(1.0, -2.0 * PI * d * i as f64 / n as f64)).sum();
+                let direct: C64 = w
+                    .iter()
+                    .enumerate()
+                    .map(|(i, wi)| *wi * C64::from_polar(1.0, -2.0 * PI * d * i as f64 / n as f64))
+                    .sum();
                 let closed = window.dtft(n, d);
-                assert!((direct - closed).norm() < 1e-9 * (1.0 + direct.norm()), "{window:?} d={d}: {direct} vs {closed}");
+                assert!(
+                    (direct - closed).norm() < 1e-9 * (1.0 + direct.norm()),
+                    "{window:?} d={d}: {direct} vs {closed}"
+                );
             }
         }
     }
@@ -133,10 +146,16 @@ mod tests {
 
     #[test]
     fn stiff_stinger_massless_armature_is_ideal_source() {
-        let s = Shaker { armature_mass_kg: 0.0, stinger_stiffness_n_m: 1e6 };
+        let s = Shaker {
+            armature_mass_kg: 0.0,
+            stinger_stiffness_n_m: 1e6,
+        };
         assert!((s.transfer(100.0, C64::new(3.0, -2.0)) - 1.0).norm() < 1e-12);
         // Rigid stinger limit: F = f_s / (1 + m_a A_dd).
-        let s = Shaker { armature_mass_kg: 0.02, stinger_stiffness_n_m: 1e14 };
+        let s = Shaker {
+            armature_mass_kg: 0.02,
+            stinger_stiffness_n_m: 1e14,
+        };
         let a = C64::new(5.0, 4.0);
         assert!((s.transfer(50.0, a) - 1.0 / (1.0 + 0.02 * a)).norm() < 1e-8);
     }

@@ -70,7 +70,10 @@ pub struct KernelParams {
 
 impl Default for KernelParams {
     fn default() -> Self {
-        KernelParams { grid_step_hz: 1.0 / 32.0, half_width_hz: 12.0 }
+        KernelParams {
+            grid_step_hz: 1.0 / 32.0,
+            half_width_hz: 12.0,
+        }
     }
 }
 
@@ -149,7 +152,10 @@ pub(crate) struct Layout {
 }
 
 fn bad(field: &str, message: String) -> ExperimentError {
-    ExperimentError::InvalidParams { field: field.to_string(), message }
+    ExperimentError::InvalidParams {
+        field: field.to_string(),
+        message,
+    }
 }
 
 impl ChainParams {
@@ -157,22 +163,46 @@ impl ChainParams {
     pub(crate) fn layout(&self, n_channels: usize) -> Result<Layout, ExperimentError> {
         let pos = |x: f64| x.is_finite() && x > 0.0;
         if !(self.force_rms_n.is_finite() && self.force_rms_n >= 0.0) {
-            return Err(bad("force_rms_n", format!("{} is not a finite non-negative RMS force (N)", self.force_rms_n)));
+            return Err(bad(
+                "force_rms_n",
+                format!(
+                    "{} is not a finite non-negative RMS force (N)",
+                    self.force_rms_n
+                ),
+            ));
         }
         if !pos(self.fs_hz) || !pos(self.block_s) {
-            return Err(bad("fs_hz/block_s", format!("fs_hz = {} and block_s = {} must be positive", self.fs_hz, self.block_s)));
+            return Err(bad(
+                "fs_hz/block_s",
+                format!(
+                    "fs_hz = {} and block_s = {} must be positive",
+                    self.fs_hz, self.block_s
+                ),
+            ));
         }
         let nb = self.fs_hz * self.block_s;
         let n_block = nb.round() as usize;
         if (nb - n_block as f64).abs() > 1e-9 * nb || n_block < 4 {
-            return Err(bad("block_s", format!("fs_hz * block_s = {nb} must be an integer number of samples (>= 4)")));
+            return Err(bad(
+                "block_s",
+                format!("fs_hz * block_s = {nb} must be an integer number of samples (>= 4)"),
+            ));
         }
         if !(0.0..1.0).contains(&self.overlap) {
-            return Err(bad("overlap", format!("{} must be in [0, 1) (0.5 = 50 %)", self.overlap)));
+            return Err(bad(
+                "overlap",
+                format!("{} must be in [0, 1) (0.5 = 50 %)", self.overlap),
+            ));
         }
         let hop = ((1.0 - self.overlap) * n_block as f64).round() as usize;
         if hop == 0 {
-            return Err(bad("overlap", format!("{} leaves no step between blocks of {n_block} samples", self.overlap)));
+            return Err(bad(
+                "overlap",
+                format!(
+                    "{} leaves no step between blocks of {n_block} samples",
+                    self.overlap
+                ),
+            ));
         }
         if self.n_averages == 0 {
             return Err(bad("n_averages", "must be at least 1".into()));
@@ -181,18 +211,33 @@ impl ChainParams {
         if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && hi > lo && hi < 0.5 * self.fs_hz) {
             return Err(bad(
                 "band_hz",
-                format!("({lo}, {hi}) must satisfy 0 < lo < hi < fs/2 = {} Hz", 0.5 * self.fs_hz),
+                format!(
+                    "({lo}, {hi}) must satisfy 0 < lo < hi < fs/2 = {} Hz",
+                    0.5 * self.fs_hz
+                ),
             ));
         }
         let df = 1.0 / self.block_s;
-        if [lo, hi].iter().any(|e| (e / df - (e / df).round()).abs() > 1e-6) {
-            return Err(bad("band_hz", format!("edges ({lo}, {hi}) must be multiples of the line spacing 1/block_s = {df} Hz")));
+        if [lo, hi]
+            .iter()
+            .any(|e| (e / df - (e / df).round()).abs() > 1e-6)
+        {
+            return Err(bad(
+                "band_hz",
+                format!(
+                    "edges ({lo}, {hi}) must be multiples of the line spacing 1/block_s = {df} Hz"
+                ),
+            ));
         }
         let mut line_bins = Vec::with_capacity(self.lines_hz.len());
         for &f in &self.lines_hz {
             let k = (f / df).round();
             if !f.is_finite() || (f / df - k).abs() > 1e-6 || f < lo - 1e-9 || f > hi + 1e-9 {
-                return Err(ExperimentError::LineNotOnGrid { line_hz: f, df_hz: df, band_hz: self.band_hz });
+                return Err(ExperimentError::LineNotOnGrid {
+                    line_hz: f,
+                    df_hz: df,
+                    band_hz: self.band_hz,
+                });
             }
             line_bins.push(k as usize);
         }
@@ -211,30 +256,63 @@ impl ChainParams {
         };
         per_ch(self.response_noise.len(), "response_noise")?;
         if !self.gains.is_empty() && self.gains.len() != n_channels {
-            return Err(bad("gains", format!("has {} entries; give none or one per channel ({n_channels})", self.gains.len())));
+            return Err(bad(
+                "gains",
+                format!(
+                    "has {} entries; give none or one per channel ({n_channels})",
+                    self.gains.len()
+                ),
+            ));
         }
         if !self.delays_s.is_empty() && self.delays_s.len() != n_channels {
-            return Err(bad("delays_s", format!("has {} entries; give none or one per channel ({n_channels})", self.delays_s.len())));
+            return Err(bad(
+                "delays_s",
+                format!(
+                    "has {} entries; give none or one per channel ({n_channels})",
+                    self.delays_s.len()
+                ),
+            ));
         }
-        if self.gains.iter().any(|g| !(g.re.is_finite() && g.im.is_finite())) || self.delays_s.iter().any(|d| !d.is_finite()) {
+        if self
+            .gains
+            .iter()
+            .any(|g| !(g.re.is_finite() && g.im.is_finite()))
+            || self.delays_s.iter().any(|d| !d.is_finite())
+        {
             return Err(bad("gains/delays_s", "contain a non-finite value".into()));
         }
         let noise_ok = |n: &NoiseLevel| match *n {
             NoiseLevel::Rms(x) | NoiseLevel::FractionOfSignalRms(x) => x.is_finite() && x >= 0.0,
         };
         if !noise_ok(&self.force_noise) || !self.response_noise.iter().all(noise_ok) {
-            return Err(bad("noise", "noise levels must be finite and non-negative".into()));
+            return Err(bad(
+                "noise",
+                "noise levels must be finite and non-negative".into(),
+            ));
         }
         if let Some(s) = self.shaker {
-            if !(s.armature_mass_kg.is_finite() && s.armature_mass_kg >= 0.0 && pos(s.stinger_stiffness_n_m)) {
-                return Err(bad("shaker", format!("armature mass {} kg must be >= 0 and stinger stiffness {} N/m > 0", s.armature_mass_kg, s.stinger_stiffness_n_m)));
+            if !(s.armature_mass_kg.is_finite()
+                && s.armature_mass_kg >= 0.0
+                && pos(s.stinger_stiffness_n_m))
+            {
+                return Err(bad(
+                    "shaker",
+                    format!(
+                        "armature mass {} kg must be >= 0 and stinger stiffness {} N/m > 0",
+                        s.armature_mass_kg, s.stinger_stiffness_n_m
+                    ),
+                ));
             }
         }
         let k = self.kernel;
         if !pos(k.grid_step_hz) || !pos(k.half_width_hz) || k.grid_step_hz > 0.25 * df {
             return Err(bad("kernel", format!("grid_step_hz = {} must be positive and <= df/4 = {}; half_width_hz = {} positive", k.grid_step_hz, 0.25 * df, k.half_width_hz)));
         }
-        Ok(Layout { n_block, hop, line_bins })
+        Ok(Layout {
+            n_block,
+            hop,
+            line_bins,
+        })
     }
 
     /// Gain of channel `i` (1 if none given).

@@ -42,7 +42,12 @@ pub(crate) fn record_len(layout: &Layout, n_averages: usize) -> usize {
 
 /// Simulate the chain in the time domain; returns the Welch sums per channel.
 /// `noise_rms` = (force, per response channel) absolute noise RMS.
-pub(crate) fn simulate(plant: &dyn Plant, chain: &ChainParams, layout: &Layout, noise_rms: (f64, &[f64])) -> Result<Vec<WelchSums>, ExperimentError> {
+pub(crate) fn simulate(
+    plant: &dyn Plant,
+    chain: &ChainParams,
+    layout: &Layout,
+    noise_rms: (f64, &[f64]),
+) -> Result<Vec<WelchSums>, ExperimentError> {
     let l = record_len(layout, chain.n_averages);
     let bins_per_df = l / layout.n_block; // record bins per block line spacing
     let (lo, hi) = chain.band_hz;
@@ -55,7 +60,11 @@ pub(crate) fn simulate(plant: &dyn Plant, chain: &ChainParams, layout: &Layout, 
 
     // Force amplitudes (one sequential substream).
     let mut rng = substream(chain.seed, stream::FORCE, 0);
-    let c: Vec<C64> = band.force_power.iter().map(|p| complex_normal(&mut rng) * p.sqrt()).collect();
+    let c: Vec<C64> = band
+        .force_power
+        .iter()
+        .map(|p| complex_normal(&mut rng) * p.sqrt())
+        .collect();
 
     let mut planner = FftPlanner::<f64>::new();
     let ifft = planner.plan_fft_inverse(l);
@@ -63,21 +72,22 @@ pub(crate) fn simulate(plant: &dyn Plant, chain: &ChainParams, layout: &Layout, 
     let window = chain.window.samples(layout.n_block);
 
     // Builds a real record from in-band bin amplitudes (positive frequencies), plus white noise.
-    let record = |amp: &dyn Fn(usize) -> C64, noise: f64, stream_kind: u64, index: u64| -> Vec<f64> {
-        let mut spec = vec![C64::new(0.0, 0.0); l];
-        for j in 0..=(j_hi - j_lo) {
-            let a = amp(j);
-            spec[j_lo + j] = a;
-            spec[l - j_lo - j] = a.conj();
-        }
-        ifft.process(&mut spec);
-        let mut x: Vec<f64> = spec.iter().map(|z| z.re).collect();
-        if noise > 0.0 {
-            let mut rng = substream(chain.seed, stream_kind, index);
-            x.iter_mut().for_each(|v| *v += noise * normal(&mut rng));
-        }
-        x
-    };
+    let record =
+        |amp: &dyn Fn(usize) -> C64, noise: f64, stream_kind: u64, index: u64| -> Vec<f64> {
+            let mut spec = vec![C64::new(0.0, 0.0); l];
+            for j in 0..=(j_hi - j_lo) {
+                let a = amp(j);
+                spec[j_lo + j] = a;
+                spec[l - j_lo - j] = a.conj();
+            }
+            ifft.process(&mut spec);
+            let mut x: Vec<f64> = spec.iter().map(|z| z.re).collect();
+            if noise > 0.0 {
+                let mut rng = substream(chain.seed, stream_kind, index);
+                x.iter_mut().for_each(|v| *v += noise * normal(&mut rng));
+            }
+            x
+        };
     let welch = |x: &[f64]| -> Vec<Vec<C64>> {
         // DFT values at the requested lines for every block.
         let mut buf = vec![C64::new(0.0, 0.0); layout.n_block];
@@ -99,7 +109,12 @@ pub(crate) fn simulate(plant: &dyn Plant, chain: &ChainParams, layout: &Layout, 
     let sums = (0..m)
         .into_par_iter()
         .map(|i| {
-            let a = record(&|j| band.resp[i][j] * c[j], noise_rms.1[i], stream::RESPONSE_NOISE, i as u64);
+            let a = record(
+                &|j| band.resp[i][j] * c[j],
+                noise_rms.1[i],
+                stream::RESPONSE_NOISE,
+                i as u64,
+            );
             let blocks = welch(&a);
             let mut s = WelchSums::new(layout.line_bins.len());
             for (fb, ab) in force_blocks.iter().zip(&blocks) {
