@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 
 pub mod common;
 mod convergence;
+mod engine;
 mod frf;
 mod inspect;
 mod modes;

@@ -1,8 +1,130 @@
-use super::common::Global;
+//! `rfmlab simulate EXPERIMENT.toml`: the virtual experiment. Writes UFF58 (H1 and coherence,
+//! labelled as simulated) and a `<output>.truth.json` sidecar stating the truth.
+
+use super::common::{print_json, progress, spinner, Global};
+use anyhow::Context;
+use rfmlab::data::{FrfSet, Quantity};
+use rfmlab::experiment::plant::EnginePlant;
+use rfmlab::experiment::{simulate_level, ChannelLabel};
+use rfmlab::study::experiment::load_experiment;
+use serde_json::json;
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-pub struct SimulateArgs {}
+pub struct SimulateArgs {
+    /// Experiment file (truth, structure and measurement chain).
+    pub experiment: PathBuf,
+    /// Write here instead of the file's `experiment.output`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print a JSON summary for scripts.
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_a: &SimulateArgs, _g: &Global) -> anyhow::Result<()> {
-    anyhow::bail!("not implemented yet")
+pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
+    let ex = load_experiment(&a.experiment)?;
+    let out = a.out.clone().unwrap_or_else(|| ex.output.clone());
+    let file = ex.file.display().to_string();
+    let sp = spinner(g, "assembling the FE model");
+    let built = rfmlab::study::build::build_model(&ex.structure, &file)?;
+    sp.finish_and_clear();
+    let masses: Vec<(usize, f64)> = ex
+        .sensors
+        .iter()
+        .map(|(id, m)| (built.model.points.iter().position(|p| p.id == *id).unwrap_or(usize::MAX), *m))
+        .collect();
+    let model = if masses.is_empty() {
+        built.model.clone()
+    } else {
+        built.model.with_point_masses(&masses).map_err(anyhow::Error::msg)?
+    };
+    let sp = spinner(g, "preparing the FRF engine");
+    let engine = super::engine::plant_engine(&model, built.excitation, &ex, g)?;
+    sp.finish_and_clear();
+    let exc = &model.points[built.excitation];
+    let labels: Vec<ChannelLabel> = model
+        .points
+        .iter()
+        .map(|p| ChannelLabel {
+            response_id: p.id,
+            response_dir: p.direction,
+            reference_id: exc.id,
+            reference_dir: exc.direction,
+        })
+        .collect();
+    let pb = progress(g, ex.levels.len() as u64, "simulating levels");
+    let mut set = FrfSet::default();
+    let mut truths = Vec::new();
+    for (k, lv) in ex.levels.iter().enumerate() {
+        let law = rfmlab::material::model_from_name(&lv.law, lv.branches)?;
+        let plant = EnginePlant {
+            engine: engine.as_ref(),
+            law: law.as_ref(),
+            params: lv.params.clone(),
+            input_col: 0,
+            drive_output: built.excitation,
+        };
+        let mut chain = ex.chain.clone();
+        chain.force_rms_n = lv.force_rms_n;
+        chain.seed = ex.seed.wrapping_add(1000 * k as u64);
+        chain.gains = ex.gains.clone();
+        chain.delays_s = ex.delays_s.clone();
+        let t = std::time::Instant::now();
+        let sim = simulate_level(&plant, &chain).with_context(|| format!("level {}", lv.name))?;
+        let level = sim.to_frf_level(&lv.name, &labels)?;
+        debug_assert_eq!(level.quantity, Quantity::Accelerance);
+        let mut tj = sim.truth.to_json();
+        if let Some(o) = tj.as_object_mut() {
+            o.insert("level".into(), json!(lv.name));
+            o.insert("law".into(), json!(lv.law));
+            o.insert("params".into(), json!(lv.param_names.iter().zip(&lv.params).map(|(n, v)| (n.clone(), *v)).collect::<serde_json::Map<String, serde_json::Value>>().into_iter().map(|(k, v)| (k, v)).collect::<serde_json::Map<_, _>>()));
+            o.insert("seconds".into(), json!(t.elapsed().as_secs_f64()));
+        }
+        truths.push(tj);
+        set.levels.push(level);
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    if let Some(dir) = out.parent() {
+        if !dir.as_os_str().is_empty() {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+    }
+    // One file per level keeps levels separate for studies: <stem>_<level>.uff.
+    let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "simulated".into());
+    let ext = out.extension().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "uff".into());
+    let dir = out.parent().map(|p| p.to_path_buf()).unwrap_or_default();
+    let mut written = Vec::new();
+    for lv in &set.levels {
+        let p = dir.join(format!("{stem}_{}.{ext}", lv.name));
+        let one = FrfSet { levels: vec![lv.clone()] };
+        rfmlab::data::uff_frf::frf_set_to_uff(&one, &p, ex.binary)?;
+        written.push(p);
+    }
+    let sidecar = dir.join(format!("{stem}.truth.json"));
+    let doc = json!({
+        "simulated": true,
+        "note": "SIMULATED DATA written by rfmlab simulate: not a measurement",
+        "experiment_file": file,
+        "experiment": ex.name,
+        "description": ex.description,
+        "mode": if ex.frequency_domain { "frequency" } else { "time" },
+        "seed": ex.seed,
+        "sensor_masses": ex.sensors.iter().map(|(id, m)| json!({"point": id, "mass_kg": m})).collect::<Vec<_>>(),
+        "files": written.iter().map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned())).collect::<Vec<_>>(),
+        "levels": truths,
+    });
+    let bytes = serde_json::to_vec_pretty(&doc)?;
+    rfmlab::output::write_atomic_bytes(&sidecar, &bytes)?;
+    if a.json {
+        return print_json(&json!({"files": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(), "truth": sidecar.display().to_string()}));
+    }
+    if !g.quiet {
+        for p in &written {
+            println!("wrote {}", p.display());
+        }
+        println!("wrote {}", sidecar.display());
+    }
+    Ok(())
 }

@@ -14,6 +14,7 @@
 //!
 //! Entry point: [`simulate_level`].
 
+pub mod plant;
 pub mod estimator;
 pub mod freqdomain;
 pub mod signal;
