@@ -78,7 +78,8 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         if let Some(o) = tj.as_object_mut() {
             o.insert("level".into(), json!(lv.name));
             o.insert("law".into(), json!(lv.law));
-            o.insert("params".into(), json!(lv.param_names.iter().zip(&lv.params).map(|(n, v)| (n.clone(), *v)).collect::<serde_json::Map<String, serde_json::Value>>().into_iter().map(|(k, v)| (k, v)).collect::<serde_json::Map<_, _>>()));
+            let params: serde_json::Map<String, serde_json::Value> = lv.param_names.iter().zip(&lv.params).map(|(n, v)| (n.clone(), json!(v))).collect();
+            o.insert("params".into(), serde_json::Value::Object(params));
             o.insert("seconds".into(), json!(t.elapsed().as_secs_f64()));
         }
         truths.push(tj);
