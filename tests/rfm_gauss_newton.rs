@@ -13,7 +13,6 @@
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use rfmlab::common::{C64, J};
-use rfmlab::frf::FrfEngine;
 use rfmlab::material::ConstitutiveModel;
 use rfmlab::rfm::{rfm_global, Denominator, DenseEngine, MeasuredColumn, RfmParams, StopReason};
 use std::f64::consts::PI;
@@ -220,7 +219,7 @@ fn rfm_fixed_point_is_the_weighted_gauss_newton_solution() {
         let eq_analytical = max_rel(&analytical.params, &p_gn);
         let eq_paper = max_rel(&paper.params, &p_gn);
         println!(
-            "noise {sigma}: GN {p_gn:.6e?} ({it_gn} it, rel grad {grad:.1e}); |GN - truth| {off_truth:.2e}; \
+            "noise {sigma}: GN {p_gn:?} ({it_gn} it, rel grad {grad:.1e}); |GN - truth| {off_truth:.2e}; \
              |RFM(analytical) - GN| {eq_analytical:.2e} ({} it); |RFM(paper) - GN| {eq_paper:.2e} ({} it)",
             analytical.iterations, paper.iterations
         );

@@ -144,6 +144,9 @@ pub struct RfmParams {
     /// Largest log-parameter change per update (the step is scaled down to it). Default 1.0
     /// (a factor e).
     pub max_log_step: f64,
+    /// Per-line estimates: largest modulus change per update relative to |E*|, |dE*| <=
+    /// max_rel_modulus_step |E*| (a damped Newton step where the FRF is insensitive). Default 0.5.
+    pub max_rel_modulus_step: f64,
     /// Step halvings tried when an update leaves the admissible range or makes Z singular
     /// before the run is declared diverged. Default 20.
     pub max_step_halvings: usize,
@@ -162,6 +165,7 @@ impl Default for RfmParams {
             rcond: 1e-10,
             weak_ratio: 1e-3,
             max_log_step: 1.0,
+            max_rel_modulus_step: 0.5,
             max_step_halvings: 20,
             divergence_factor: 1e6,
             denominator: Denominator::MeasuredColumn,

@@ -68,10 +68,14 @@ fn iterate(
             let Some(bs) = bs else {
                 continue; // engine failed at this line: stop it, unconverged
             };
-            let de = match select {
+            let mut de = match select {
                 Some(k) => bs[k],
                 None => bs.iter().sum::<C64>() / n_k as f64,
             };
+            let limit = params.max_rel_modulus_step * e[l].norm();
+            if de.norm() > limit {
+                de *= limit / de.norm();
+            }
             let new = e[l] + de;
             iterations[l] += 1;
             if !(new.re.is_finite() && new.im.is_finite()) || new.re <= 0.0 {
