@@ -129,10 +129,10 @@ fn phi_s_phi_is_the_eigenvalue_derivative() {
 fn iem_recovers_the_truth_modulus_from_an_exact_eigenvalue() {
     let truth = C64::new(6.974e6, 1.4827e6);
     let exact = modes(truth).unwrap();
-    for r in 0..3 {
+    for (r, ex) in exact.iter().take(3).enumerate() {
         let target = ExperimentalMode {
-            freq_hz: exact[r].freq_hz(),
-            loss_factor: exact[r].loss_factor(),
+            freq_hz: ex.freq_hz(),
+            loss_factor: ex.loss_factor(),
         };
         let res = iem_mode(
             &modes,

@@ -308,7 +308,7 @@ fn per_line_estimates_recover_a_frequency_dependent_truth() {
     // (b) constant start.
     let est = rfm_per_line(&e, &data, &[C64::new(7.0e6, 1.0e6)], &params).unwrap();
     let (mut n_conv, mut n_truth, mut worst_fit) = (0, 0, 0.0_f64);
-    for k in 0..n_k {
+    for (k, &point) in MEASURED_POINTS.iter().enumerate() {
         let moduli: Vec<C64> = est.iter().map(|x| x.modulus_per_frf[k]).collect();
         let sw = e.sweep(&omega, &moduli, false).unwrap();
         for (l, x) in est.iter().enumerate() {
@@ -320,7 +320,7 @@ fn per_line_estimates_recover_a_frequency_dependent_truth() {
                 n_truth += 1;
             }
             let w = omega[l];
-            let a = -w * w * sw.h[sw.idx(l, MEASURED_POINTS[k], 1)];
+            let a = -w * w * sw.h[sw.idx(l, point, 1)];
             worst_fit = worst_fit.max(rel(a, data.at(l, k)));
         }
     }

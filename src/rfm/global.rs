@@ -204,13 +204,18 @@ fn admissible(p: &[f64], bounds: &[(f64, f64)]) -> bool {
         .all(|(&v, &(lo, hi))| v.is_finite() && v > lo && v < hi)
 }
 
-/// Truncated SVD solution of U dq = D. Returns (dq, singular values, rank, right singular
-/// vectors as columns of V).
-fn svd_solve(
-    u: &Mat<f64>,
-    d: &[f64],
-    rcond: f64,
-) -> Result<(Vec<f64>, Vec<f64>, usize, Mat<f64>), RfmError> {
+/// Truncated SVD solution of U dq = D.
+struct SvdSolution {
+    dq: Vec<f64>,
+    /// Singular values, nonincreasing.
+    s: Vec<f64>,
+    rank: usize,
+    /// Right singular vectors as columns.
+    v: Mat<f64>,
+}
+
+/// Minimum-norm solution of U dq = D over the singular values above `rcond * s_max`.
+fn svd_solve(u: &Mat<f64>, d: &[f64], rcond: f64) -> Result<SvdSolution, RfmError> {
     let svd = u.thin_svd().map_err(|e| RfmError::Svd(format!("{e:?}")))?;
     let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
     let uu = svd.U();
@@ -226,7 +231,7 @@ fn svd_solve(
             *x += v[(k, c)] * coef;
         }
     }
-    Ok((dq, s, rank, v))
+    Ok(SvdSolution { dq, s, rank, v })
 }
 
 /// Global RFM updating of a constitutive model over the data's lines (paper eq. 37), see the
@@ -314,7 +319,7 @@ pub fn rfm_global(
             stop = StopReason::Diverged;
             break;
         }
-        let (dq, s, rank, v) = svd_solve(&u, &d, params.rcond)?;
+        let SvdSolution { dq, s, rank, v } = svd_solve(&u, &d, params.rcond)?;
         last_svd = Some((s, rank, v));
         // Limit the log step, then halve until admissible and non-singular.
         let max_step = dq.iter().fold(0.0_f64, |a, x| a.max(x.abs()));

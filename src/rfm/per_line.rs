@@ -23,6 +23,9 @@ pub struct PerLineEstimate {
     pub iterations_combined: usize,
 }
 
+/// Per line: the modulus, whether it converged, and the iterations used.
+type Track = (Vec<C64>, Vec<bool>, Vec<usize>);
+
 /// Iterate E*(w) <- E*(w) + update at every line; `select` = Some(k) uses B of FRF k, None the
 /// mean over FRFs. Lines iterate independently (one sweep per iteration covers the lines still
 /// active). A line stops unconverged when E* becomes non-finite, E' <= 0, or the engine fails.
@@ -33,7 +36,7 @@ fn iterate(
     e0: &[C64],
     select: Option<usize>,
     params: &RfmParams,
-) -> Result<(Vec<C64>, Vec<bool>, Vec<usize>), RfmError> {
+) -> Result<Track, RfmError> {
     let n_lines = data.n_lines();
     let n_k = data.outputs.len();
     let mut e: Vec<C64> = e0.to_vec();
@@ -50,11 +53,8 @@ fn iterate(
             Ok(sweep) => linearise_mapped(map, data, &sweep, &active, params.denominator),
             Err(err) => Err(RfmError::Frf(err)),
         };
-        let lin = match lin {
-            Ok(lin) => Some(lin),
-            // One bad line must not stop the others: fall back to line-by-line evaluation.
-            Err(_) => None,
-        };
+        // One bad line must not stop the others: on failure, fall back to line-by-line evaluation.
+        let lin = lin.ok();
         let mut still = Vec::with_capacity(active.len());
         for (a, &l) in active.iter().enumerate() {
             let bs: Option<Vec<C64>> = match &lin {
