@@ -25,7 +25,9 @@ fn bench_assembly(c: &mut Criterion) {
     g.sample_size(10).measurement_time(Duration::from_secs(10));
     for (name, h) in [("5mm", 0.005), ("2.5mm", 0.0025)] {
         let s = spec(h);
-        g.bench_function(name, |b| b.iter(|| black_box(build_joint_model(black_box(&s)).unwrap())));
+        g.bench_function(name, |b| {
+            b.iter(|| black_box(build_joint_model(black_box(&s)).unwrap()))
+        });
     }
     g.finish();
 }

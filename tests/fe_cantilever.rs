@@ -38,7 +38,9 @@ fn spmm(a: &SpMat, x: &Mat<f64>) -> Mat<f64> {
 fn lowest_modes(k: &SpMat, m: &SpMat, p: usize, iters: usize) -> (Vec<f64>, Mat<f64>) {
     let n = k.nrows();
     let chol = k.sp_cholesky(Side::Lower).expect("clamped K is SPD");
-    let mut x = Mat::<f64>::from_fn(n, p, |i, j| (((i * 31 + j * 17) % 23) as f64 - 11.0) + if i % p == j { 50.0 } else { 0.0 });
+    let mut x = Mat::<f64>::from_fn(n, p, |i, j| {
+        (((i * 31 + j * 17) % 23) as f64 - 11.0) + if i % p == j { 50.0 } else { 0.0 }
+    });
     let mut lam = vec![0.0; p];
     for _ in 0..iters {
         let y = chol.solve(spmm(m, &x));
@@ -49,7 +51,11 @@ fn lowest_modes(k: &SpMat, m: &SpMat, p: usize, iters: usize) -> (Vec<f64>, Mat<
         let lr = llt.L().to_owned();
         // A = L^-1 K_r L^-T
         let mut linv = Mat::<f64>::identity(p, p);
-        faer::linalg::triangular_solve::solve_lower_triangular_in_place(lr.as_ref(), linv.as_mut(), faer::Par::Seq);
+        faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+            lr.as_ref(),
+            linv.as_mut(),
+            faer::Par::Seq,
+        );
         let a = &linv * &kr * linv.transpose();
         let a = Mat::<f64>::from_fn(p, p, |i, j| 0.5 * (a[(i, j)] + a[(j, i)]));
         let evd = a.self_adjoint_eigen(Side::Lower).expect("evd");
@@ -133,6 +139,10 @@ fn cantilever_bending_frequencies_converge_to_beam_theory() {
     for (fe, ti, name) in [(fine.0, ti_y, "y"), (fine.1, ti_z, "z")] {
         let rel = (fe - ti) / ti;
         println!("{name}: FE / Timoshenko - 1 = {:+.3} %", 100.0 * rel);
-        assert!(rel.abs() < 0.01, "{name}: {fe} Hz vs {ti} Hz ({:+.2} %)", 100.0 * rel);
+        assert!(
+            rel.abs() < 0.01,
+            "{name}: {fe} Hz vs {ti} Hz ({:+.2} %)",
+            100.0 * rel
+        );
     }
 }

@@ -5,7 +5,8 @@ use faer::{Mat, Side};
 use rfmlab::fe::assembly::{Assembler, DofMap};
 use rfmlab::fe::element::{shape_gradients, shape_values, Integration, NODE_XI, N_DOF, N_NODES};
 use rfmlab::fe::geometry::{
-    box_element, element_mass, element_stiffness, element_volume, rule_table, strain_at, Elasticity, ElementCoords,
+    box_element, element_mass, element_stiffness, element_volume, rule_table, strain_at,
+    Elasticity, ElementCoords,
 };
 use rfmlab::fe::mesh::{box_mesh, ClampedFace};
 
@@ -85,7 +86,14 @@ fn eval(a: &[[f64; 3]; 3], c: &[f64; 3], x: &[f64; 3]) -> [f64; 3] {
 }
 
 fn voigt(a: &[[f64; 3]; 3]) -> [f64; 6] {
-    [a[0][0], a[1][1], a[2][2], a[0][1] + a[1][0], a[1][2] + a[2][1], a[2][0] + a[0][2]]
+    [
+        a[0][0],
+        a[1][1],
+        a[2][2],
+        a[0][1] + a[1][0],
+        a[1][2] + a[2][1],
+        a[2][0] + a[0][2],
+    ]
 }
 
 #[test]
@@ -104,7 +112,12 @@ fn patch_test_single_distorted_element_constant_strain() {
             let xi = [rng.next(), rng.next(), rng.next()];
             let eps = strain_at(&c, &u, xi).unwrap();
             for k in 0..6 {
-                assert!((eps[k] - want[k]).abs() < 1e-12, "strain {k}: {} vs {}", eps[k], want[k]);
+                assert!(
+                    (eps[k] - want[k]).abs() < 1e-12,
+                    "strain {k}: {} vs {}",
+                    eps[k],
+                    want[k]
+                );
             }
         }
     }
@@ -118,7 +131,11 @@ fn patch_residual(rule: Integration, seed: u64, amp: f64) -> (f64, f64) {
     let interior: Vec<usize> = (0..mesh.n_nodes())
         .filter(|&n| mesh.nodes[n].iter().all(|&v| v > 1e-9 && v < 2.0 - 1e-9))
         .collect();
-    assert_eq!(interior.len(), 7, "centre node + 6 mid-edge nodes on interior edges");
+    assert_eq!(
+        interior.len(),
+        7,
+        "centre node + 6 mid-edge nodes on interior edges"
+    );
     for x in mesh.nodes.iter_mut() {
         for v in x.iter_mut() {
             *v += amp * rng.next();
@@ -158,7 +175,10 @@ fn spmv(a: &rfmlab::fe::model::SpMat, x: &[f64]) -> Vec<f64> {
 fn patch_test_distorted_patch_zero_interior_force() {
     for seed in [1, 2, 3] {
         let (worst, scale) = patch_residual(Integration::Full, seed, 0.12);
-        assert!(worst <= 1e-12 * scale, "full: interior force {worst:e} vs scale {scale:e}");
+        assert!(
+            worst <= 1e-12 * scale,
+            "full: interior force {worst:e} vs scale {scale:e}"
+        );
     }
 }
 
@@ -166,15 +186,26 @@ fn patch_test_distorted_patch_zero_interior_force() {
 fn patch_test_reduced_integration() {
     // Undistorted (parallelepiped) patch: the reduced rule integrates exactly, patch test holds.
     let (worst, scale) = patch_residual(Integration::Reduced, 5, 0.0);
-    assert!(worst <= 1e-12 * scale, "reduced, regular patch: {worst:e} vs {scale:e}");
-    // Distorted patch: report what is true.
+    assert!(
+        worst <= 1e-12 * scale,
+        "reduced, regular patch: {worst:e} vs {scale:e}"
+    );
+    // Distorted patch: what is true is that the 2 x 2 x 2 rule does not integrate
+    // det J-weighted gradients of a curved/distorted element exactly, so the patch test fails
+    // (interior force about 1.6e-2 of the largest force at 12 % node jitter). Full
+    // integration passes (previous test): prefer it for distorted meshes.
     let mut worst_rel: f64 = 0.0;
     for seed in [1, 2, 3] {
         let (worst, scale) = patch_residual(Integration::Reduced, seed, 0.12);
         worst_rel = worst_rel.max(worst / scale);
     }
-    println!("reduced integration, distorted patch: max interior force / max force = {worst_rel:e}");
-    assert!(worst_rel < 1e-12, "reduced integration, distorted patch: {worst_rel:e}");
+    println!(
+        "reduced integration, distorted patch: max interior force / max force = {worst_rel:e}"
+    );
+    assert!(
+        worst_rel > 1e-6,
+        "reduced integration unexpectedly passes the distorted patch test"
+    );
 }
 
 fn dense(ke: &[f64]) -> Mat<f64> {
@@ -196,7 +227,10 @@ fn zero_energy_modes_of_a_free_element() {
     for seed in [7, 8, 9] {
         let (n0, min_rel, first_nonzero) = zero_modes(Integration::Full, seed, 0.1);
         assert_eq!(n0, 6, "full integration: exactly the 6 rigid-body modes");
-        assert!(min_rel > -1e-12, "K_e is PSD: smallest eigenvalue / largest = {min_rel:e}");
+        assert!(
+            min_rel > -1e-12,
+            "K_e is PSD: smallest eigenvalue / largest = {min_rel:e}"
+        );
         assert!(first_nonzero > 1e-4, "no near-mechanism: {first_nonzero:e}");
     }
     // reduced 2x2x2: 8 points x 6 strains = 48 constraints on 54 deformation modes, so at
@@ -232,9 +266,15 @@ fn spurious_modes_of_reduced_integration_in_a_patch() {
         let max = ev[n - 1];
         counts.push(ev.iter().filter(|&&v| v.abs() < 1e-10 * max).count());
     }
-    println!("zero-energy modes of a free 2x2x2 patch: full {}, reduced {}", counts[0], counts[1]);
+    println!(
+        "zero-energy modes of a free 2x2x2 patch: full {}, reduced {}",
+        counts[0], counts[1]
+    );
     assert_eq!(counts[0], 6);
-    assert_eq!(counts[1], 6, "reduced integration: spurious modes do not survive in a 2x2x2 patch");
+    assert_eq!(
+        counts[1], 6,
+        "reduced integration: spurious modes do not survive in a 2x2x2 patch"
+    );
 }
 
 #[test]
@@ -252,7 +292,11 @@ fn mass_sums_to_rho_v_and_stiffness_is_symmetric() {
                     s += me[(3 * a + i) * N_DOF + 3 * b + i];
                 }
             }
-            assert!((s - rho * v).abs() < 1e-12 * rho * v, "direction {i}: {s} vs {}", rho * v);
+            assert!(
+                (s - rho * v).abs() < 1e-12 * rho * v,
+                "direction {i}: {s} vs {}",
+                rho * v
+            );
         }
         for rule in [Integration::Full, Integration::Reduced] {
             let ke = element_stiffness(&c, MAT, rule).unwrap();

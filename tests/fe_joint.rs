@@ -5,7 +5,9 @@ use faer::Side;
 use rfmlab::common::{Axis, Direction};
 use rfmlab::fe::assembly::{Assembler, DofMap};
 use rfmlab::fe::geometry::Elasticity;
-use rfmlab::fe::joint::{build_joint_model, joint_mesh_from_spec, Divisions, JointSpec, MeshSize, PointSpec};
+use rfmlab::fe::joint::{
+    build_joint_model, joint_mesh_from_spec, Divisions, JointSpec, MeshSize, PointSpec,
+};
 use rfmlab::fe::mesh::Region;
 use rfmlab::fe::model::SpMat;
 use rfmlab::fe::points::PointMapping;
@@ -65,20 +67,36 @@ fn total_mass_is_rho_v_per_direction() {
     let asm = Assembler::new(&mesh, &dofs);
     let all: Vec<usize> = (0..mesh.n_elements()).collect();
     let m = asm
-        .mass(&asm.pattern(&all), |e| if mesh.regions[e] == Region::Beam { 7800.0 } else { 1160.0 })
+        .mass(&asm.pattern(&all), |e| {
+            if mesh.regions[e] == Region::Beam {
+                7800.0
+            } else {
+                1160.0
+            }
+        })
         .unwrap();
     let want = 7800.0 * 0.3 * 0.01 * 0.02 + 1160.0 * 0.05 * 0.01 * 0.02;
     for c in 0..3 {
-        let u: Vec<f64> = (0..dofs.n_free).map(|d| if d % 3 == c { 1.0 } else { 0.0 }).collect();
+        let u: Vec<f64> = (0..dofs.n_free)
+            .map(|d| if d % 3 == c { 1.0 } else { 0.0 })
+            .collect();
         let mu = spmv(&m, &u);
         let total: f64 = u.iter().zip(&mu).map(|(a, b)| a * b).sum();
-        assert!((total - want).abs() < 1e-12 * want, "direction {c}: {total} vs {want}");
+        assert!(
+            (total - want).abs() < 1e-12 * want,
+            "direction {c}: {total} vs {want}"
+        );
     }
     // the constrained model's beam part: translation of beam-only DOFs is a lower bound check
     let (model, _) = build_joint_model(&s).unwrap();
-    let u: Vec<f64> = (0..model.n_dof()).map(|d| if d % 3 == 1 { 1.0 } else { 0.0 }).collect();
+    let u: Vec<f64> = (0..model.n_dof())
+        .map(|d| if d % 3 == 1 { 1.0 } else { 0.0 })
+        .collect();
     let total: f64 = u.iter().zip(spmv(&model.m, &u)).map(|(a, b)| a * b).sum();
-    assert!(total < want && total > 0.468, "free-DOF mass {total} between beam mass and total");
+    assert!(
+        total < want && total > 0.468,
+        "free-DOF mass {total} between beam mass and total"
+    );
 }
 
 #[test]
@@ -91,15 +109,25 @@ fn s_is_exactly_linear_in_e() {
     let pat = asm.pattern(&mesh.elements_in(Region::Adhesive));
     for e in [6.974e6, 1.0e9, 3.3] {
         let k = asm
-            .stiffness(&pat, |_| Elasticity { e_pa: e, nu: 0.44 }, s.mesh.integration)
+            .stiffness(
+                &pat,
+                |_| Elasticity { e_pa: e, nu: 0.44 },
+                s.mesh.integration,
+            )
             .unwrap();
         let (ks, kv) = k.parts();
         let (ss, sv) = model.s.parts();
         assert_eq!(ks.col_ptr(), ss.col_ptr());
         assert_eq!(ks.row_idx(), ss.row_idx());
         let max = kv.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        let worst = kv.iter().zip(sv).fold(0.0f64, |m, (a, b)| m.max((a - e * b).abs()));
-        assert!(worst <= 1e-14 * max, "E = {e}: |K(E) - E S| = {worst:e}, max {max:e}");
+        let worst = kv
+            .iter()
+            .zip(sv)
+            .fold(0.0f64, |m, (a, b)| m.max((a - e * b).abs()));
+        assert!(
+            worst <= 1e-14 * max,
+            "E = {e}: |K(E) - E S| = {worst:e}, max {max:e}"
+        );
     }
 }
 
@@ -107,9 +135,13 @@ fn s_is_exactly_linear_in_e() {
 fn k_b_plus_e_s_is_positive_definite_and_symmetric() {
     let (model, _) = build_joint_model(&spec(0.005)).unwrap();
     let e = 6.974e6;
-    let k = faer::sparse::ops::binary_op(model.k_b.as_ref(), model.s.as_ref(), |a: Option<&f64>, b: Option<&f64>| {
-        a.copied().unwrap_or(0.0) + e * b.copied().unwrap_or(0.0)
-    })
+    let k = faer::sparse::ops::binary_op(
+        model.k_b.as_ref(),
+        model.s.as_ref(),
+        |a: Option<&f64>, b: Option<&f64>| {
+            a.copied().unwrap_or(0.0) + e * b.copied().unwrap_or(0.0)
+        },
+    )
     .unwrap();
     assert!(k.sp_cholesky(Side::Lower).is_ok(), "K_b + E S is SPD");
     assert!(model.m.sp_cholesky(Side::Lower).is_ok(), "M is SPD");
@@ -123,7 +155,9 @@ fn k_b_plus_e_s_is_positive_definite_and_symmetric() {
         let mut x = vec![0.0; n];
         let mut y = vec![0.0; n];
         for v in x.iter_mut().chain(y.iter_mut()) {
-            rng = rng.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             *v = (rng >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
         }
         let yax: f64 = y.iter().zip(spmv(a, &x)).map(|(p, q)| p * q).sum();
@@ -143,7 +177,9 @@ fn damping_matrices_only_when_non_zero() {
     let (m1, _) = build_joint_model(&s).unwrap();
     let c = m1.c_b.as_ref().unwrap();
     let d = m1.d_b.as_ref().unwrap();
-    let x: Vec<f64> = (0..m1.n_dof()).map(|i| ((i * 7919) % 13) as f64 - 6.0).collect();
+    let x: Vec<f64> = (0..m1.n_dof())
+        .map(|i| ((i * 7919) % 13) as f64 - 6.0)
+        .collect();
     let (cx, mx, kx, dx) = (spmv(c, &x), spmv(&m1.m, &x), spmv(&m1.k_b, &x), spmv(d, &x));
     for i in 0..x.len() {
         let want = 2.0 * mx[i] + 1e-6 * kx[i];
@@ -156,9 +192,21 @@ fn damping_matrices_only_when_non_zero() {
 fn points_on_nodes_between_nodes_and_snapped() {
     let mut s = spec(0.01);
     s.points = vec![
-        PointSpec { id: 1, position_m: [0.10, 0.01, 0.01], direction: Direction::PY },
-        PointSpec { id: 2, position_m: [0.123, 0.01, 0.0137], direction: Direction::new(Axis::Y, -1) },
-        PointSpec { id: 2, position_m: [0.123, 0.01, 0.0137], direction: Direction::PZ },
+        PointSpec {
+            id: 1,
+            position_m: [0.10, 0.01, 0.01],
+            direction: Direction::PY,
+        },
+        PointSpec {
+            id: 2,
+            position_m: [0.123, 0.01, 0.0137],
+            direction: Direction::new(Axis::Y, -1),
+        },
+        PointSpec {
+            id: 2,
+            position_m: [0.123, 0.01, 0.0137],
+            direction: Direction::PZ,
+        },
     ];
     let (model, _) = build_joint_model(&s).unwrap();
     let (mesh, _) = joint_mesh_from_spec(&s).unwrap();
@@ -172,7 +220,8 @@ fn points_on_nodes_between_nodes_and_snapped() {
         assert!((sum - sign).abs() < 1e-14, "weights sum {sum}");
         assert!(p.dofs.len() <= 8, "only the face's 8 nodes");
         // u_c(x) = 1 + 2x + 3z + x z + x^2 on nodes; the 20-node face interpolates it exactly
-        let f = |x: &[f64; 3]| 1.0 + 2.0 * x[0] + 3.0 * x[2] + 40.0 * x[0] * x[2] + 10.0 * x[0] * x[0];
+        let f =
+            |x: &[f64; 3]| 1.0 + 2.0 * x[0] + 3.0 * x[2] + 40.0 * x[0] * x[2] + 10.0 * x[0] * x[0];
         let mut u = vec![0.0; model.n_dof()];
         let c = p.direction.axis.index();
         for (n, x) in mesh.nodes.iter().enumerate() {
@@ -187,7 +236,11 @@ fn points_on_nodes_between_nodes_and_snapped() {
     s.mesh.point_mapping = PointMapping::Snap;
     let (snap, _) = build_joint_model(&s).unwrap();
     assert_eq!(snap.points[1].dofs.len(), 1);
-    assert!(snap.points[1].note.contains("snapped to node"), "{}", snap.points[1].note);
+    assert!(
+        snap.points[1].note.contains("snapped to node"),
+        "{}",
+        snap.points[1].note
+    );
     assert_eq!(snap.points[1].dofs[0].1, -1.0);
 }
 
@@ -203,46 +256,106 @@ fn bad_input_gives_keyed_errors() {
     type Edit = fn(&mut JointSpec);
     let cases: Vec<(Edit, &str)> = vec![
         (|s| s.geometry.beam_length_m = 0.0, "structure.beam.length"),
-        (|s| s.geometry.beam_thickness_m = -0.01, "structure.beam.thickness"),
-        (|s| s.geometry.beam_width_m = f64::NAN, "structure.beam.width"),
-        (|s| s.geometry.adhesive_length_m = 0.35, "structure.adhesive.length"),
-        (|s| s.geometry.adhesive_length_m = -1.0, "structure.adhesive.length"),
-        (|s| s.geometry.adhesive_length_m = 0.0, "structure.adhesive.length"),
-        (|s| s.geometry.adhesive_thickness_m = 0.0, "structure.adhesive.thickness"),
-        (|s| s.geometry.adhesive_x_start_m = -0.01, "structure.adhesive.x_start"),
-        (|s| s.geometry.adhesive_x_start_m = 0.28, "structure.adhesive.x_start"),
+        (
+            |s| s.geometry.beam_thickness_m = -0.01,
+            "structure.beam.thickness",
+        ),
+        (
+            |s| s.geometry.beam_width_m = f64::NAN,
+            "structure.beam.width",
+        ),
+        (
+            |s| s.geometry.adhesive_length_m = 0.35,
+            "structure.adhesive.length",
+        ),
+        (
+            |s| s.geometry.adhesive_length_m = -1.0,
+            "structure.adhesive.length",
+        ),
+        (
+            |s| s.geometry.adhesive_length_m = 0.0,
+            "structure.adhesive.length",
+        ),
+        (
+            |s| s.geometry.adhesive_thickness_m = 0.0,
+            "structure.adhesive.thickness",
+        ),
+        (
+            |s| s.geometry.adhesive_x_start_m = -0.01,
+            "structure.adhesive.x_start",
+        ),
+        (
+            |s| s.geometry.adhesive_x_start_m = 0.28,
+            "structure.adhesive.x_start",
+        ),
         (|s| s.beam.e_pa = 0.0, "structure.beam.material.E"),
         (|s| s.beam.nu = 0.5, "structure.beam.material.nu"),
         (|s| s.beam.rho_kg_m3 = -1.0, "structure.beam.material.rho"),
         (|s| s.adhesive_nu = -1.0, "structure.adhesive.nu"),
         (|s| s.adhesive_rho_kg_m3 = 0.0, "structure.adhesive.rho"),
-        (|s| s.mesh.size = MeshSize::ElementSize(0.0), "structure.mesh.element_size"),
-        (|s| s.mesh.size = MeshSize::ElementSize(1e-6), "structure.mesh.element_size"),
+        (
+            |s| s.mesh.size = MeshSize::ElementSize(0.0),
+            "structure.mesh.element_size",
+        ),
+        (
+            |s| s.mesh.size = MeshSize::ElementSize(1e-6),
+            "structure.mesh.element_size",
+        ),
         (
             |s| {
-                s.mesh.size = MeshSize::Divisions(Divisions { x_adhesive: 2, x_outside: 4, y_beam: 0, y_adhesive: 1, z: 1 })
+                s.mesh.size = MeshSize::Divisions(Divisions {
+                    x_adhesive: 2,
+                    x_outside: 4,
+                    y_beam: 0,
+                    y_adhesive: 1,
+                    z: 1,
+                })
             },
             "structure.mesh.divisions",
         ),
         (
             |s| {
                 s.geometry.adhesive_x_start_m = 0.1;
-                s.mesh.size = MeshSize::Divisions(Divisions { x_adhesive: 2, x_outside: 1, y_beam: 1, y_adhesive: 1, z: 1 })
+                s.mesh.size = MeshSize::Divisions(Divisions {
+                    x_adhesive: 2,
+                    x_outside: 1,
+                    y_beam: 1,
+                    y_adhesive: 1,
+                    z: 1,
+                })
             },
             "structure.mesh.divisions",
         ),
-        (|s| s.points[2].position_m = [0.2, 0.02, 0.01], "structure.points[2].position"),
-        (|s| s.points[1].position_m = [0.15, 0.005, 0.01], "structure.points[1].position"),
-        (|s| s.points[0].position_m = [0.31, 0.01, 0.01], "structure.points[0].position"),
-        (|s| s.points[3].direction = Direction::new(Axis::Y, 0), "structure.points[3].direction"),
-        (|s| s.points[3] = s.points[0], "structure.points[3].direction"),
+        (
+            |s| s.points[2].position_m = [0.2, 0.02, 0.01],
+            "structure.points[2].position",
+        ),
+        (
+            |s| s.points[1].position_m = [0.15, 0.005, 0.01],
+            "structure.points[1].position",
+        ),
+        (
+            |s| s.points[0].position_m = [0.31, 0.01, 0.01],
+            "structure.points[0].position",
+        ),
+        (
+            |s| s.points[3].direction = Direction::new(Axis::Y, 0),
+            "structure.points[3].direction",
+        ),
+        (
+            |s| s.points[3] = s.points[0],
+            "structure.points[3].direction",
+        ),
     ];
     for (i, (edit, key)) in cases.iter().enumerate() {
         let mut s = spec(0.01);
         edit(&mut s);
         let (k, msg) = err_key(&s);
         assert_eq!(k, *key, "case {i}: {msg}");
-        assert!(msg.starts_with(key), "case {i}: message names the key: {msg}");
+        assert!(
+            msg.starts_with(key),
+            "case {i}: message names the key: {msg}"
+        );
         println!("{msg}");
     }
     // the brief's example message
@@ -252,5 +365,25 @@ fn bad_input_gives_keyed_errors() {
     assert!(msg.contains("longer than the beam") && msg.contains("shorten it or move x_start"));
     let mut s = spec(0.01);
     s.geometry.adhesive_length_m = 0.0;
-    assert!(matches!(build_joint_model(&s), Err(FeError::Unconstrained { .. })));
+    assert!(matches!(
+        build_joint_model(&s),
+        Err(FeError::Unconstrained { .. })
+    ));
+}
+
+/// Size, assembly time and peak memory of the 2.5 mm model (run with `--ignored --nocapture`).
+#[test]
+#[ignore]
+fn assembly_2_5_mm_time_and_memory() {
+    let t0 = std::time::Instant::now();
+    let (model, info) = build_joint_model(&spec(0.0025)).unwrap();
+    let wall = t0.elapsed().as_secs_f64();
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    let hwm = status
+        .lines()
+        .find(|l| l.starts_with("VmHWM"))
+        .unwrap_or("VmHWM: ?");
+    let nnz = model.m.val().len() + model.k_b.val().len() + model.s.val().len();
+    println!("2.5 mm: {info:?}, nnz(M+K_b+S) = {nnz}, build {wall:.3} s, {hwm}");
+    assert_eq!(info.n_elements, 4480);
 }

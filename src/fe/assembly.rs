@@ -8,7 +8,9 @@
 
 use super::element::{Integration, N_DOF, N_NODES};
 use super::error::FeError;
-use super::geometry::{element_mass_into, element_stiffness_into, Elasticity, ElementCoords, NonPositiveJacobian};
+use super::geometry::{
+    element_mass_into, element_stiffness_into, Elasticity, ElementCoords, NonPositiveJacobian,
+};
 use super::mesh::HexMesh;
 use super::model::SpMat;
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
@@ -154,10 +156,12 @@ impl Pattern {
                 .par_iter()
                 .zip(bufs.par_chunks_mut(N_DOF * N_DOF))
                 .map(|(&e, buf)| {
-                    kernel(e, &mesh.element_coords(e), buf).map_err(|err| FeError::DegenerateElement {
-                        key: "structure.mesh".into(),
-                        element: e,
-                        det_j: err.det_j,
+                    kernel(e, &mesh.element_coords(e), buf).map_err(|err| {
+                        FeError::DegenerateElement {
+                            key: "structure.mesh".into(),
+                            element: e,
+                            det_j: err.det_j,
+                        }
                     })
                 })
                 .collect();
@@ -168,7 +172,13 @@ impl Pattern {
                 self.scatter(mesh, dofs, e, buf, &mut val);
             }
         }
-        let symbolic = SymbolicSparseColMat::new_checked(self.n, self.n, self.col_ptr.clone(), None, self.row_idx.clone());
+        let symbolic = SymbolicSparseColMat::new_checked(
+            self.n,
+            self.n,
+            self.col_ptr.clone(),
+            None,
+            self.row_idx.clone(),
+        );
         Ok(SparseColMat::new(symbolic, val))
     }
 
@@ -217,8 +227,14 @@ impl<'a> Assembler<'a> {
     }
 
     /// Consistent mass over `pattern`'s elements, density `rho_of(element)` (kg/m^3).
-    pub fn mass(&self, pattern: &Pattern, rho_of: impl Fn(usize) -> f64 + Sync) -> Result<SpMat, FeError> {
-        pattern.fill(self.mesh, self.dofs, |e, c, out| element_mass_into(c, rho_of(e), out))
+    pub fn mass(
+        &self,
+        pattern: &Pattern,
+        rho_of: impl Fn(usize) -> f64 + Sync,
+    ) -> Result<SpMat, FeError> {
+        pattern.fill(self.mesh, self.dofs, |e, c, out| {
+            element_mass_into(c, rho_of(e), out)
+        })
     }
 
     /// Isotropic elastic stiffness over `pattern`'s elements with `mat_of(element)`.
@@ -228,7 +244,9 @@ impl<'a> Assembler<'a> {
         mat_of: impl Fn(usize) -> Elasticity + Sync,
         rule: Integration,
     ) -> Result<SpMat, FeError> {
-        pattern.fill(self.mesh, self.dofs, |e, c, out| element_stiffness_into(c, mat_of(e), rule, out))
+        pattern.fill(self.mesh, self.dofs, |e, c, out| {
+            element_stiffness_into(c, mat_of(e), rule, out)
+        })
     }
 }
 

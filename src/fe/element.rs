@@ -94,7 +94,11 @@ pub fn shape_values(xi: [f64; 3], n: &mut [f64; N_NODES]) {
     for (a, node) in NODE_XI.iter().enumerate() {
         let [xa, ya, za] = *node;
         n[a] = if a < 8 {
-            0.125 * (1.0 + x * xa) * (1.0 + y * ya) * (1.0 + z * za) * (x * xa + y * ya + z * za - 2.0)
+            0.125
+                * (1.0 + x * xa)
+                * (1.0 + y * ya)
+                * (1.0 + z * za)
+                * (x * xa + y * ya + z * za - 2.0)
         } else if xa == 0.0 {
             0.25 * (1.0 - x * x) * (1.0 + y * ya) * (1.0 + z * za)
         } else if ya == 0.0 {

@@ -32,7 +32,10 @@ impl Elasticity {
     /// Lame constants (lambda, mu) in Pa.
     pub fn lame(&self) -> (f64, f64) {
         let (e, nu) = (self.e_pa, self.nu);
-        (e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)), e / (2.0 * (1.0 + nu)))
+        (
+            e * nu / ((1.0 + nu) * (1.0 - 2.0 * nu)),
+            e / (2.0 * (1.0 + nu)),
+        )
     }
 
     /// 6 x 6 isotropic elasticity matrix D in Voigt order (xx, yy, zz, xy, yz, zx),
@@ -132,9 +135,21 @@ pub fn det_inv3(m: &[[f64; 3]; 3]) -> (f64, Option<[[f64; 3]; 3]>) {
     }
     let r = 1.0 / det;
     let inv = [
-        [c00 * r, (m[0][2] * m[2][1] - m[0][1] * m[2][2]) * r, (m[0][1] * m[1][2] - m[0][2] * m[1][1]) * r],
-        [c01 * r, (m[0][0] * m[2][2] - m[0][2] * m[2][0]) * r, (m[0][2] * m[1][0] - m[0][0] * m[1][2]) * r],
-        [c02 * r, (m[0][1] * m[2][0] - m[0][0] * m[2][1]) * r, (m[0][0] * m[1][1] - m[0][1] * m[1][0]) * r],
+        [
+            c00 * r,
+            (m[0][2] * m[2][1] - m[0][1] * m[2][2]) * r,
+            (m[0][1] * m[1][2] - m[0][2] * m[1][1]) * r,
+        ],
+        [
+            c01 * r,
+            (m[0][0] * m[2][2] - m[0][2] * m[2][0]) * r,
+            (m[0][2] * m[1][0] - m[0][0] * m[1][2]) * r,
+        ],
+        [
+            c02 * r,
+            (m[0][1] * m[2][0] - m[0][0] * m[2][1]) * r,
+            (m[0][0] * m[1][1] - m[0][1] * m[1][0]) * r,
+        ],
     ];
     (det, Some(inv))
 }
@@ -228,7 +243,11 @@ pub fn element_stiffness_into(
     rule: Integration,
     ke: &mut [f64],
 ) -> Result<(), NonPositiveJacobian> {
-    assert_eq!(ke.len(), N_DOF * N_DOF, "element stiffness buffer must hold 60 x 60");
+    assert_eq!(
+        ke.len(),
+        N_DOF * N_DOF,
+        "element stiffness buffer must hold 60 x 60"
+    );
     ke.fill(0.0);
     let (lam, mu) = mat.lame();
     let t = rule_table(rule);
@@ -274,7 +293,11 @@ pub fn element_mass_into(
     rho_kg_m3: f64,
     me: &mut [f64],
 ) -> Result<(), NonPositiveJacobian> {
-    assert_eq!(me.len(), N_DOF * N_DOF, "element mass buffer must hold 60 x 60");
+    assert_eq!(
+        me.len(),
+        N_DOF * N_DOF,
+        "element mass buffer must hold 60 x 60"
+    );
     me.fill(0.0);
     let t = rule_table(Integration::Full);
     for ((w, dn), n) in t.weights.iter().zip(&t.dn).zip(&t.n) {
@@ -314,7 +337,10 @@ pub fn element_stiffness(
 }
 
 /// Allocating form of [`element_mass_into`].
-pub fn element_mass(coords: &ElementCoords, rho_kg_m3: f64) -> Result<Vec<f64>, NonPositiveJacobian> {
+pub fn element_mass(
+    coords: &ElementCoords,
+    rho_kg_m3: f64,
+) -> Result<Vec<f64>, NonPositiveJacobian> {
     let mut me = vec![0.0; N_DOF * N_DOF];
     element_mass_into(coords, rho_kg_m3, &mut me)?;
     Ok(me)

@@ -9,7 +9,10 @@ use super::assembly::{Assembler, DofMap};
 use super::element::Integration;
 use super::error::FeError;
 use super::geometry::Elasticity;
-use super::mesh::{box_mesh, joint_mesh, segment_divisions, ClampedFace, HexMesh, JointDivisions, JointLayout, Region};
+use super::mesh::{
+    box_mesh, joint_mesh, segment_divisions, ClampedFace, HexMesh, JointDivisions, JointLayout,
+    Region,
+};
 use super::model::{SpMat, StructuralModel};
 use super::points::{map_point, PointMapping};
 use crate::common::Direction;
@@ -165,7 +168,10 @@ fn dim(key: &str, v: f64) -> Result<(), FeError> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(FeError::InvalidDimension { key: key.into(), value: v })
+        Err(FeError::InvalidDimension {
+            key: key.into(),
+            value: v,
+        })
     }
 }
 
@@ -219,7 +225,9 @@ fn validate_geometry(g: &JointGeometry) -> Result<JointLayout, FeError> {
     if x0 < 0.0 {
         return Err(FeError::AdhesiveOutsideBeam {
             key: "structure.adhesive.x_start".into(),
-            detail: format!("the adhesive starts at x = {x0} m, before the beam's end x = 0: use x_start >= 0"),
+            detail: format!(
+                "the adhesive starts at x = {x0} m, before the beam's end x = 0: use x_start >= 0"
+            ),
         });
     }
     let tol = 1e-12 * l;
@@ -243,7 +251,11 @@ fn validate_geometry(g: &JointGeometry) -> Result<JointLayout, FeError> {
     }
     // snap near-empty outside segments to exactly empty
     let x0 = if x0 <= tol { 0.0 } else { x0 };
-    let la = if (x0 + la - l).abs() <= tol { l - x0 } else { la };
+    let la = if (x0 + la - l).abs() <= tol {
+        l - x0
+    } else {
+        la
+    };
     Ok(JointLayout {
         beam_length_m: l,
         beam_thickness_m: g.beam_thickness_m,
@@ -269,7 +281,13 @@ fn resolve_divisions(l: &JointLayout, size: &MeshSize) -> Result<JointDivisions,
                     detail: format!("{h} m is not a valid element size: give a positive length in metres, e.g. 0.005"),
                 });
             }
-            let n = |len: f64| if len > 0.0 { segment_divisions(len, h) } else { 0 };
+            let n = |len: f64| {
+                if len > 0.0 {
+                    segment_divisions(len, h)
+                } else {
+                    0
+                }
+            };
             JointDivisions {
                 x: [n(seg[0]), n(seg[1]), n(seg[2])],
                 y_adhesive: n(l.adhesive_thickness_m),
@@ -322,7 +340,8 @@ fn resolve_divisions(l: &JointLayout, size: &MeshSize) -> Result<JointDivisions,
             }
         }
     };
-    let n_el = (div.x.iter().sum::<usize>() as f64) * (div.y_beam + div.y_adhesive) as f64 * div.z as f64;
+    let n_el =
+        (div.x.iter().sum::<usize>() as f64) * (div.y_beam + div.y_adhesive) as f64 * div.z as f64;
     if n_el > 2.0e6 {
         return Err(FeError::InvalidMesh {
             key: match size {
@@ -339,17 +358,33 @@ fn resolve_divisions(l: &JointLayout, size: &MeshSize) -> Result<JointDivisions,
 /// Validate a joint spec and build its mesh (no assembly): for plots and point checks.
 pub fn joint_mesh_from_spec(spec: &JointSpec) -> Result<(HexMesh, JointLayout), FeError> {
     let layout = validate_geometry(&spec.geometry)?;
-    material("structure.beam.material", Some(spec.beam.e_pa), spec.beam.nu, spec.beam.rho_kg_m3)?;
-    material("structure.adhesive", None, spec.adhesive_nu, spec.adhesive_rho_kg_m3)?;
+    material(
+        "structure.beam.material",
+        Some(spec.beam.e_pa),
+        spec.beam.nu,
+        spec.beam.rho_kg_m3,
+    )?;
+    material(
+        "structure.adhesive",
+        None,
+        spec.adhesive_nu,
+        spec.adhesive_rho_kg_m3,
+    )?;
     let div = resolve_divisions(&layout, &spec.mesh.size)?;
     Ok((joint_mesh(&layout, &div), layout))
 }
 
 fn check_damping(d: &AdherendDamping) -> Result<(), FeError> {
     for (k, v) in [
-        ("structure.beam.damping.rayleigh_alpha", d.rayleigh_alpha_per_s),
+        (
+            "structure.beam.damping.rayleigh_alpha",
+            d.rayleigh_alpha_per_s,
+        ),
         ("structure.beam.damping.rayleigh_beta", d.rayleigh_beta_s),
-        ("structure.beam.damping.structural_loss_factor", d.structural_loss_factor),
+        (
+            "structure.beam.damping.structural_loss_factor",
+            d.structural_loss_factor,
+        ),
     ] {
         if !(v.is_finite() && v >= 0.0) {
             return Err(FeError::InvalidMaterial {
@@ -371,9 +406,13 @@ fn scaled(a: &SpMat, s: f64) -> SpMat {
 }
 
 fn lin_comb(a: &SpMat, alpha: f64, b: &SpMat, beta: f64, what: &str) -> Result<SpMat, FeError> {
-    faer::sparse::ops::binary_op(a.as_ref(), b.as_ref(), |x: Option<&f64>, y: Option<&f64>| {
-        alpha * x.copied().unwrap_or(0.0) + beta * y.copied().unwrap_or(0.0)
-    })
+    faer::sparse::ops::binary_op(
+        a.as_ref(),
+        b.as_ref(),
+        |x: Option<&f64>, y: Option<&f64>| {
+            alpha * x.copied().unwrap_or(0.0) + beta * y.copied().unwrap_or(0.0)
+        },
+    )
     .map_err(|_| FeError::OutOfMemory {
         key: "structure.mesh".into(),
         what: what.into(),
@@ -415,7 +454,13 @@ pub fn build_joint_model(spec: &JointSpec) -> Result<(StructuralModel, MeshInfo)
     let rule = spec.mesh.integration;
     let (rho_b, rho_a) = (spec.beam.rho_kg_m3, spec.adhesive_rho_kg_m3);
     let regions = &mesh.regions;
-    let m = asm.mass(&asm.pattern(&all), |e| if regions[e] == Region::Beam { rho_b } else { rho_a })?;
+    let m = asm.mass(&asm.pattern(&all), |e| {
+        if regions[e] == Region::Beam {
+            rho_b
+        } else {
+            rho_a
+        }
+    })?;
     let beam_mat = Elasticity {
         e_pa: spec.beam.e_pa,
         nu: spec.beam.nu,
@@ -428,7 +473,13 @@ pub fn build_joint_model(spec: &JointSpec) -> Result<(StructuralModel, MeshInfo)
     let s = asm.stiffness(&asm.pattern(&adh_el), |_| unit, rule)?;
     let d = &spec.damping;
     let c_b = if d.rayleigh_alpha_per_s != 0.0 || d.rayleigh_beta_s != 0.0 {
-        Some(lin_comb(&m, d.rayleigh_alpha_per_s, &k_b, d.rayleigh_beta_s, "C_b = alpha M + beta K_b")?)
+        Some(lin_comb(
+            &m,
+            d.rayleigh_alpha_per_s,
+            &k_b,
+            d.rayleigh_beta_s,
+            "C_b = alpha M + beta K_b",
+        )?)
     } else {
         None
     };
@@ -436,7 +487,11 @@ pub fn build_joint_model(spec: &JointSpec) -> Result<(StructuralModel, MeshInfo)
     let assembly_seconds = t0.elapsed().as_secs_f64();
 
     let lo = [0.0, 0.0, 0.0];
-    let hi = [layout.beam_length_m, layout.beam_thickness_m, layout.width_m];
+    let hi = [
+        layout.beam_length_m,
+        layout.beam_thickness_m,
+        layout.width_m,
+    ];
     let mut points = Vec::with_capacity(spec.points.len());
     for (i, p) in spec.points.iter().enumerate() {
         points.push(map_point(
@@ -493,13 +548,22 @@ pub fn build_cantilever(
     material_: &IsoMaterial,
     rule: Integration,
 ) -> Result<(StructuralModel, HexMesh), FeError> {
-    for (k, v) in ["structure.beam.length", "structure.beam.thickness", "structure.beam.width"]
-        .iter()
-        .zip(size_m)
+    for (k, v) in [
+        "structure.beam.length",
+        "structure.beam.thickness",
+        "structure.beam.width",
+    ]
+    .iter()
+    .zip(size_m)
     {
         dim(k, v)?;
     }
-    material("structure.beam.material", Some(material_.e_pa), material_.nu, material_.rho_kg_m3)?;
+    material(
+        "structure.beam.material",
+        Some(material_.e_pa),
+        material_.nu,
+        material_.rho_kg_m3,
+    )?;
     if divisions.contains(&0) {
         return Err(FeError::InvalidMesh {
             key: "structure.mesh.divisions".into(),

@@ -92,7 +92,11 @@ impl HexMesh {
     }
     /// Smallest element edge length over all directions (m).
     pub fn min_cell_size(&self) -> f64 {
-        let f = |v: &[f64]| v.windows(2).map(|w| w[1] - w[0]).fold(f64::INFINITY, f64::min);
+        let f = |v: &[f64]| {
+            v.windows(2)
+                .map(|w| w[1] - w[0])
+                .fold(f64::INFINITY, f64::min)
+        };
         f(&self.grid.xs).min(f(&self.grid.ys)).min(f(&self.grid.zs))
     }
 }
@@ -110,7 +114,11 @@ fn push_segment(out: &mut Vec<f64>, a: f64, b: f64, n: usize) {
         out.push(a);
     }
     for i in 1..=n {
-        out.push(if i == n { b } else { a + (b - a) * i as f64 / n as f64 });
+        out.push(if i == n {
+            b
+        } else {
+            a + (b - a) * i as f64 / n as f64
+        });
     }
 }
 

@@ -8,11 +8,11 @@
 //! [`PointMapping::Snap`] a point between nodes is moved to the nearest node and the
 //! [`ObservationPoint::note`] says so.
 
-use super::error::FeError;
+use super::assembly::DofMap;
 use super::element::{shape_values, NODE_XI, N_NODES};
+use super::error::FeError;
 use super::mesh::{HexMesh, Region};
 use super::model::ObservationPoint;
-use super::assembly::DofMap;
 use crate::common::Direction;
 
 /// How a point that is not on a node is mapped.
@@ -52,7 +52,10 @@ pub fn map_point(
     if direction.sign != 1 && direction.sign != -1 {
         return Err(FeError::InvalidPointDirection {
             key: key(index, "direction"),
-            detail: format!("point {id}: direction sign {} is not +1 or -1", direction.sign),
+            detail: format!(
+                "point {id}: direction sign {} is not +1 or -1",
+                direction.sign
+            ),
         });
     }
     let p = position_m;
@@ -106,7 +109,9 @@ pub fn map_point(
     let cells = |d: usize| -> Vec<usize> {
         let v = axes[d];
         let n = v.len() - 1;
-        (0..n).filter(|&i| q[d] >= v[i] - SURFACE_TOL_M && q[d] <= v[i + 1] + SURFACE_TOL_M).collect()
+        (0..n)
+            .filter(|&i| q[d] >= v[i] - SURFACE_TOL_M && q[d] <= v[i + 1] + SURFACE_TOL_M)
+            .collect()
     };
     let (ci, cj, ck) = (cells(0), cells(1), cells(2));
     let mut found = None;
@@ -149,12 +154,19 @@ pub fn map_point(
         id,
         position: Some(position_m),
         direction,
-        dofs: dofs.dof(node, c).map(|d| vec![(d, sign)]).unwrap_or_default(),
+        dofs: dofs
+            .dof(node, c)
+            .map(|d| vec![(d, sign)])
+            .unwrap_or_default(),
         note,
     };
     if near.0 <= tol {
         let node = conn[near.1];
-        let note = if dofs.dof(node, c).is_none() { format!("on node {node}, which is fixed") } else { String::new() };
+        let note = if dofs.dof(node, c).is_none() {
+            format!("on node {node}, which is fixed")
+        } else {
+            String::new()
+        };
         return Ok(single(node, note));
     }
     match mapping {
