@@ -163,9 +163,9 @@ fn patch_residual(rule: Integration, seed: u64, amp: f64) -> (f64, f64) {
 fn spmv(a: &rfmlab::fe::model::SpMat, x: &[f64]) -> Vec<f64> {
     let (sym, val) = a.parts();
     let mut y = vec![0.0; a.nrows()];
-    for j in 0..a.ncols() {
+    for (j, &xj) in x.iter().enumerate().take(a.ncols()) {
         for p in sym.col_ptr()[j]..sym.col_ptr()[j + 1] {
-            y[sym.row_idx()[p]] += val[p] * x[j];
+            y[sym.row_idx()[p]] += val[p] * xj;
         }
     }
     y

@@ -256,10 +256,8 @@ pub fn element_stiffness_into(
         let det = physical_gradients_from(coords, dn, &mut g)?;
         let f = w * det;
         let (fl, fm) = (f * lam, f * mu);
-        for a in 0..N_NODES {
-            let ga = g[a];
-            for b in a..N_NODES {
-                let gb = g[b];
+        for (a, &ga) in g.iter().enumerate() {
+            for (b, &gb) in g.iter().enumerate().skip(a) {
                 let dot = fm * (ga[0] * gb[0] + ga[1] * gb[1] + ga[2] * gb[2]);
                 for i in 0..3 {
                     let row = (3 * a + i) * N_DOF + 3 * b;
