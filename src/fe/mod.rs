@@ -10,6 +10,14 @@
 //! [`mesh`] structured mesher of beam + adhesive, [`points`] measurement point -> DOF map,
 //! [`matrix_market`] import/export of externally assembled models.
 
+pub mod assembly;
+pub mod element;
+pub mod error;
+pub mod geometry;
+pub mod joint;
+pub mod mesh;
 pub mod model;
+pub mod points;
 
+pub use error::FeError;
 pub use model::{ObservationPoint, StructuralModel};
