@@ -38,3 +38,4 @@ pub mod plot;
 pub mod rfm;
 pub mod rom;
 pub mod study;
+pub mod linalg;

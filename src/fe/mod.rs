@@ -10,6 +10,7 @@
 //! [`mesh`] structured mesher of beam + adhesive, [`points`] measurement point -> DOF map,
 //! [`matrix_market`] import/export of externally assembled models.
 
+pub mod matrix_market;
 pub mod model;
 
 pub use model::{ObservationPoint, StructuralModel};

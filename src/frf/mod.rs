@@ -6,6 +6,9 @@
 
 use crate::common::C64;
 
+pub mod full;
+pub use full::{FullModel, FullParams};
+
 /// What a sweep returns, for n_lines frequency lines, n_out observation points (outputs) and
 /// n_in input (excitation) points. Index of entry (line l, output i, input j):
 /// `(l * n_out + i) * n_in + j`.
