@@ -24,7 +24,9 @@ fn model() -> StructuralModel {
 
 fn sweep(model: &StructuralModel) -> Vec<C64> {
     let fm = FullModel::new(model, &[1], FullParams::default()).unwrap();
-    let w: Vec<f64> = (0..25).map(|l| 2.0 * std::f64::consts::PI * (20.0 + 80.0 * l as f64)).collect();
+    let w: Vec<f64> = (0..25)
+        .map(|l| 2.0 * std::f64::consts::PI * (20.0 + 80.0 * l as f64))
+        .collect();
     let e = vec![C64::new(7e6, 1.5e6); w.len()];
     fm.sweep(&w, &e, false).unwrap().h
 }
@@ -35,7 +37,11 @@ fn same_matrix(a: &rfmlab::fe::model::SpMat, b: &rfmlab::fe::model::SpMat) {
     assert_eq!((da.nrows(), da.ncols()), (db.nrows(), db.ncols()));
     for j in 0..da.ncols() {
         for i in 0..da.nrows() {
-            assert_eq!(da[(i, j)].to_bits(), db[(i, j)].to_bits(), "entry ({i},{j})");
+            assert_eq!(
+                da[(i, j)].to_bits(),
+                db[(i, j)].to_bits(),
+                "entry ({i},{j})"
+            );
         }
     }
 }
@@ -69,7 +75,9 @@ fn python() -> Option<PathBuf> {
 fn scipy_round_trip_gives_same_frfs() {
     let Some(py) = python() else {
         if std::env::var_os("CI").is_some() {
-            panic!("CI is set but no Python with SciPy was found (set RFMLAB_PYTHON or create .venv)");
+            panic!(
+                "CI is set but no Python with SciPy was found (set RFMLAB_PYTHON or create .venv)"
+            );
         }
         eprintln!("SKIP scipy_round_trip_gives_same_frfs: no Python found (set RFMLAB_PYTHON or create <crate>/.venv with numpy and scipy)");
         return;
@@ -114,10 +122,16 @@ fn malformed_matrix_market_is_a_clear_error() {
     let ok = "%%MatrixMarket matrix coordinate real symmetric\n% c\n2 2 2\n1 1 4.0\n2 1 -1\n";
     let a = parse_mtx(ok, Path::new("x.mtx")).unwrap();
     let d = rfmlab::linalg::synthetic::to_dense(&a);
-    assert_eq!((d[(0, 0)], d[(1, 0)], d[(0, 1)], d[(1, 1)]), (4.0, -1.0, -1.0, 0.0));
+    assert_eq!(
+        (d[(0, 0)], d[(1, 0)], d[(0, 1)], d[(1, 1)]),
+        (4.0, -1.0, -1.0, 0.0)
+    );
 
     let e = parse_err("%%MatrixMarket matrix coordinate real general\n2 2 1\n3 1 1.0\n");
-    assert!(e.contains("K_b.mtx, line 3") && e.contains("outside"), "{e}");
+    assert!(
+        e.contains("K_b.mtx, line 3") && e.contains("outside"),
+        "{e}"
+    );
     let e = parse_err("%%MatrixMarket matrix coordinate real general\n2 2 2\n1 1 1.0\n");
     assert!(e.contains("announces 2 entries"), "{e}");
     let e = parse_err("%%MatrixMarket matrix coordinate pattern general\n2 2 1\n1 1\n");
@@ -143,7 +157,10 @@ fn mismatched_sizes_name_the_files() {
     let e = import_model(&MmPaths::in_dir(dir.path())).unwrap_err();
     let msg = e.to_string();
     assert!(matches!(e, MmError::SizeMismatch(_)));
-    assert!(msg.contains("S.mtx is 3x3") && msg.contains("M.mtx"), "{msg}");
+    assert!(
+        msg.contains("S.mtx is 3x3") && msg.contains("M.mtx"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -153,8 +170,15 @@ fn dof_map_format() {
     assert_eq!(pts.len(), 3);
     assert_eq!(pts[1].dofs, vec![(6, 0.5), (7, 0.5)]);
     assert_eq!(pts[2].dofs, vec![(0, 1.0)]);
-    let e = parse_dof_map("1,+y,11,1\n", Path::new("dofmap.csv"), 10).unwrap_err().to_string();
-    assert!(e.contains("dofmap.csv, line 1") && e.contains("outside 1..=10"), "{e}");
-    let e = parse_dof_map("1,+w,1,1\n", Path::new("dofmap.csv"), 10).unwrap_err().to_string();
+    let e = parse_dof_map("1,+y,11,1\n", Path::new("dofmap.csv"), 10)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("dofmap.csv, line 1") && e.contains("outside 1..=10"),
+        "{e}"
+    );
+    let e = parse_dof_map("1,+w,1,1\n", Path::new("dofmap.csv"), 10)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("direction '+w'"), "{e}");
 }

@@ -62,7 +62,12 @@ fn real_modes_match_dense_oracle() {
     let ev = c.self_adjoint_eigenvalues(Side::Lower).unwrap();
     for i in 0..n {
         let r = (lam[i] - ev[i]).abs() / ev[i];
-        assert!(r < 1e-10, "eigenvalue {i}: {} vs dense {} (rel {r:e})", lam[i], ev[i]);
+        assert!(
+            r < 1e-10,
+            "eigenvalue {i}: {} vs dense {} (rel {r:e})",
+            lam[i],
+            ev[i]
+        );
         if i > 0 {
             assert!(lam[i] >= lam[i - 1]);
         }
@@ -75,14 +80,21 @@ fn real_modes_match_dense_oracle() {
             .map(|i| (kx[(i, c)] - lam[c] * mx[(i, c)]).powi(2))
             .sum::<f64>()
             .sqrt();
-        let kn: f64 = (0..kd.nrows()).map(|i| kx[(i, c)].powi(2)).sum::<f64>().sqrt();
+        let kn: f64 = (0..kd.nrows())
+            .map(|i| kx[(i, c)].powi(2))
+            .sum::<f64>()
+            .sqrt();
         assert!(r / kn < 1e-10, "residual of mode {c}: {:e}", r / kn);
     }
     let g = x.transpose() * &mx;
     for i in 0..n {
         for j in 0..n {
             let target = if i == j { 1.0 } else { 0.0 };
-            assert!((g[(i, j)] - target).abs() < 1e-10, "X^T M X [{i},{j}] = {}", g[(i, j)]);
+            assert!(
+                (g[(i, j)] - target).abs() < 1e-10,
+                "X^T M X [{i},{j}] = {}",
+                g[(i, j)]
+            );
         }
     }
 }
@@ -100,7 +112,10 @@ fn check_complex(model: &StructuralModel, axes: &[u8]) {
         );
         assert!(r < 1e-8, "mode {i}: {} vs dense {}", md.lambda, dense[i]);
         assert!(md.residual < 1e-10);
-        assert!((md.freq_hz - md.lambda.re.sqrt() / (2.0 * std::f64::consts::PI)).abs() < 1e-12 * md.freq_hz);
+        assert!(
+            (md.freq_hz - md.lambda.re.sqrt() / (2.0 * std::f64::consts::PI)).abs()
+                < 1e-12 * md.freq_hz
+        );
         assert!((md.loss_factor - md.lambda.im / md.lambda.re).abs() < 1e-14);
         // phi^T M phi = 1 (no conjugate), and at_points reads phi
         let mut mphi = vec![C64::new(0.0, 0.0); model.n_dof()];
@@ -161,5 +176,11 @@ fn bad_inputs_are_errors_not_panics() {
     assert!(complex_modes(&lat.model, E0, 2, Some(&[0u8; 3]), &p).is_err());
     // K_b alone (free-free lattice) is not positive definite
     assert!(real_modes(&lat.model.k_b, &lat.model.m, 2, &EigenParams::default()).is_err());
-    assert!(real_modes(&lat.model.k_b, &lat.model.m, 10_000, &EigenParams::default()).is_err());
+    assert!(real_modes(
+        &lat.model.k_b,
+        &lat.model.m,
+        10_000,
+        &EigenParams::default()
+    )
+    .is_err());
 }

@@ -60,7 +60,11 @@ pub enum MmError {
         source: std::io::Error,
     },
     #[error("{path}, line {line}: {msg}")]
-    Parse { path: PathBuf, line: usize, msg: String },
+    Parse {
+        path: PathBuf,
+        line: usize,
+        msg: String,
+    },
     #[error("matrix sizes do not match: {0}")]
     SizeMismatch(String),
     #[error("{0}")]
@@ -104,13 +108,19 @@ pub fn parse_mtx(text: &str, path: &Path) -> Result<SpMat, MmError> {
     if h[2] != "coordinate" {
         return Err(perr(
             ln,
-            format!("only sparse 'coordinate' files are supported, not '{}'", h[2]),
+            format!(
+                "only sparse 'coordinate' files are supported, not '{}'",
+                h[2]
+            ),
         ));
     }
     if h[3] != "real" && h[3] != "integer" && h[3] != "double" {
         return Err(perr(
             ln,
-            format!("only 'real' (or 'integer') values are supported, not '{}'", h[3]),
+            format!(
+                "only 'real' (or 'integer') values are supported, not '{}'",
+                h[3]
+            ),
         ));
     }
     let symmetric = match h[4].as_str() {
@@ -136,15 +146,26 @@ pub fn parse_mtx(text: &str, path: &Path) -> Result<SpMat, MmError> {
         match size {
             None => {
                 if f.len() != 3 {
-                    return Err(perr(ln, format!("expected the size line 'rows cols entries', got '{t}'")));
+                    return Err(perr(
+                        ln,
+                        format!("expected the size line 'rows cols entries', got '{t}'"),
+                    ));
                 }
                 let p = |s: &str, what: &str| {
-                    s.parse::<usize>()
-                        .map_err(|_| perr(ln, format!("{what} '{s}' is not a non-negative integer")))
+                    s.parse::<usize>().map_err(|_| {
+                        perr(ln, format!("{what} '{s}' is not a non-negative integer"))
+                    })
                 };
-                let (r, c, nnz) = (p(f[0], "row count")?, p(f[1], "column count")?, p(f[2], "entry count")?);
+                let (r, c, nnz) = (
+                    p(f[0], "row count")?,
+                    p(f[1], "column count")?,
+                    p(f[2], "entry count")?,
+                );
                 if symmetric && r != c {
-                    return Err(perr(ln, format!("a symmetric matrix must be square, got {r}x{c}")));
+                    return Err(perr(
+                        ln,
+                        format!("a symmetric matrix must be square, got {r}x{c}"),
+                    ));
                 }
                 size = Some((r, c, nnz));
                 triplets.reserve(if symmetric { 2 * nnz } else { nnz });
@@ -155,13 +176,33 @@ pub fn parse_mtx(text: &str, path: &Path) -> Result<SpMat, MmError> {
                 }
                 count += 1;
                 if count > nnz {
-                    return Err(perr(ln, format!("more entries than the {nnz} announced in the size line")));
+                    return Err(perr(
+                        ln,
+                        format!("more entries than the {nnz} announced in the size line"),
+                    ));
                 }
-                let i = f[0].parse::<usize>().map_err(|_| perr(ln, format!("row index '{}' is not a positive integer", f[0])))?;
-                let j = f[1].parse::<usize>().map_err(|_| perr(ln, format!("column index '{}' is not a positive integer", f[1])))?;
-                let v = f[2].parse::<f64>().map_err(|_| perr(ln, format!("value '{}' is not a number", f[2])))?;
+                let i = f[0].parse::<usize>().map_err(|_| {
+                    perr(
+                        ln,
+                        format!("row index '{}' is not a positive integer", f[0]),
+                    )
+                })?;
+                let j = f[1].parse::<usize>().map_err(|_| {
+                    perr(
+                        ln,
+                        format!("column index '{}' is not a positive integer", f[1]),
+                    )
+                })?;
+                let v = f[2]
+                    .parse::<f64>()
+                    .map_err(|_| perr(ln, format!("value '{}' is not a number", f[2])))?;
                 if i == 0 || j == 0 || i > r || j > c {
-                    return Err(perr(ln, format!("index ({i}, {j}) outside the {r}x{c} matrix (indices are 1-based)")));
+                    return Err(perr(
+                        ln,
+                        format!(
+                            "index ({i}, {j}) outside the {r}x{c} matrix (indices are 1-based)"
+                        ),
+                    ));
                 }
                 if !v.is_finite() {
                     return Err(perr(ln, format!("value '{}' is not finite", f[2])));
@@ -176,15 +217,24 @@ pub fn parse_mtx(text: &str, path: &Path) -> Result<SpMat, MmError> {
             }
         }
     }
-    let (r, c, nnz) = size.ok_or_else(|| perr(text.lines().count().max(1), "missing the size line 'rows cols entries'".into()))?;
+    let (r, c, nnz) = size.ok_or_else(|| {
+        perr(
+            text.lines().count().max(1),
+            "missing the size line 'rows cols entries'".into(),
+        )
+    })?;
     if count != nnz {
         return Err(perr(
             text.lines().count().max(1),
             format!("the size line announces {nnz} entries but the file has {count}"),
         ));
     }
-    SpMat::try_new_from_triplets(r, c, &triplets)
-        .map_err(|e| MmError::Invalid(format!("{}: cannot build the sparse matrix: {e:?}", path.display())))
+    SpMat::try_new_from_triplets(r, c, &triplets).map_err(|e| {
+        MmError::Invalid(format!(
+            "{}: cannot build the sparse matrix: {e:?}",
+            path.display()
+        ))
+    })
 }
 
 /// True when A_ij == A_ji exactly for all stored entries (duplicates summed).
@@ -273,7 +323,11 @@ pub fn read_dof_map(path: &Path, n_dof: usize) -> Result<Vec<ObservationPoint>, 
 }
 
 /// Parse DOF-map text (`path` is only used in error messages).
-pub fn parse_dof_map(text: &str, path: &Path, n_dof: usize) -> Result<Vec<ObservationPoint>, MmError> {
+pub fn parse_dof_map(
+    text: &str,
+    path: &Path,
+    n_dof: usize,
+) -> Result<Vec<ObservationPoint>, MmError> {
     let perr = |line: usize, msg: String| MmError::Parse {
         path: path.to_path_buf(),
         line,
@@ -290,30 +344,63 @@ pub fn parse_dof_map(text: &str, path: &Path, n_dof: usize) -> Result<Vec<Observ
         let f: Vec<&str> = t.split(',').map(|s| s.trim()).collect();
         if !header_seen {
             header_seen = true;
-            if f.first().map(|s| s.eq_ignore_ascii_case("id")).unwrap_or(false) {
+            if f.first()
+                .map(|s| s.eq_ignore_ascii_case("id"))
+                .unwrap_or(false)
+            {
                 let want = ["id", "direction", "dof", "weight"];
                 if f.len() < 3 || f.iter().zip(want).any(|(a, b)| !a.eq_ignore_ascii_case(b)) {
-                    return Err(perr(ln, format!("header must be 'id,direction,dof,weight', got '{t}'")));
+                    return Err(perr(
+                        ln,
+                        format!("header must be 'id,direction,dof,weight', got '{t}'"),
+                    ));
                 }
                 continue;
             }
         }
         if f.len() < 3 || f.len() > 4 {
-            return Err(perr(ln, format!("expected 'id,direction,dof[,weight]', got '{t}'")));
+            return Err(perr(
+                ln,
+                format!("expected 'id,direction,dof[,weight]', got '{t}'"),
+            ));
         }
-        let id = f[0].parse::<u32>().map_err(|_| perr(ln, format!("id '{}' is not a non-negative integer", f[0])))?;
+        let id = f[0]
+            .parse::<u32>()
+            .map_err(|_| perr(ln, format!("id '{}' is not a non-negative integer", f[0])))?;
         let direction = Direction::parse(f[1])
             .or_else(|| f[1].parse::<i32>().ok().and_then(Direction::from_uff_code))
-            .ok_or_else(|| perr(ln, format!("direction '{}' is not one of +x, -y, z, ... or a UFF code 1..3, -1..-3", f[1])))?;
-        let dof = f[2].parse::<usize>().map_err(|_| perr(ln, format!("dof '{}' is not a positive integer", f[2])))?;
+            .ok_or_else(|| {
+                perr(
+                    ln,
+                    format!(
+                        "direction '{}' is not one of +x, -y, z, ... or a UFF code 1..3, -1..-3",
+                        f[1]
+                    ),
+                )
+            })?;
+        let dof = f[2]
+            .parse::<usize>()
+            .map_err(|_| perr(ln, format!("dof '{}' is not a positive integer", f[2])))?;
         if dof == 0 || dof > n_dof {
-            return Err(perr(ln, format!("dof {dof} is outside 1..={n_dof} (1-based free-DOF numbers of the matrices)")));
+            return Err(perr(
+                ln,
+                format!(
+                    "dof {dof} is outside 1..={n_dof} (1-based free-DOF numbers of the matrices)"
+                ),
+            ));
         }
         let weight = match f.get(3) {
-            Some(w) if !w.is_empty() => w.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| perr(ln, format!("weight '{w}' is not a finite number")))?,
+            Some(w) if !w.is_empty() => w
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| perr(ln, format!("weight '{w}' is not a finite number")))?,
             _ => 1.0,
         };
-        match points.iter_mut().find(|p| p.id == id && p.direction == direction) {
+        match points
+            .iter_mut()
+            .find(|p| p.id == id && p.direction == direction)
+        {
             Some(p) => p.dofs.push((dof - 1, weight)),
             None => points.push(ObservationPoint {
                 id,
@@ -349,7 +436,12 @@ pub fn import_model(paths: &MmPaths) -> Result<StructuralModel, MmError> {
     let n = m.nrows();
     let mut problems = Vec::new();
     if m.ncols() != n {
-        problems.push(format!("{} is {}x{} (not square)", paths.m.display(), n, m.ncols()));
+        problems.push(format!(
+            "{} is {}x{} (not square)",
+            paths.m.display(),
+            n,
+            m.ncols()
+        ));
     }
     let mut check = |p: &Path, a: &SpMat| {
         if a.nrows() != n || a.ncols() != n {
@@ -396,14 +488,34 @@ pub fn import_model(paths: &MmPaths) -> Result<StructuralModel, MmError> {
 pub fn export_model(model: &StructuralModel, dir: &Path) -> Result<(), MmError> {
     std::fs::create_dir_all(dir).map_err(io_err(dir))?;
     let note = format!("rfmlab export: {}", model.description);
-    write_mtx(&dir.join("M.mtx"), &model.m, &format!("{note}\nmass matrix M (kg)"))?;
-    write_mtx(&dir.join("K_b.mtx"), &model.k_b, &format!("{note}\nadherend stiffness K_b (N/m)"))?;
-    write_mtx(&dir.join("S.mtx"), &model.s, &format!("{note}\nadhesive stiffness per unit Young's modulus S (m)"))?;
+    write_mtx(
+        &dir.join("M.mtx"),
+        &model.m,
+        &format!("{note}\nmass matrix M (kg)"),
+    )?;
+    write_mtx(
+        &dir.join("K_b.mtx"),
+        &model.k_b,
+        &format!("{note}\nadherend stiffness K_b (N/m)"),
+    )?;
+    write_mtx(
+        &dir.join("S.mtx"),
+        &model.s,
+        &format!("{note}\nadhesive stiffness per unit Young's modulus S (m)"),
+    )?;
     if let Some(c) = &model.c_b {
-        write_mtx(&dir.join("C_b.mtx"), c, &format!("{note}\nviscous damping C_b (N s/m)"))?;
+        write_mtx(
+            &dir.join("C_b.mtx"),
+            c,
+            &format!("{note}\nviscous damping C_b (N s/m)"),
+        )?;
     }
     if let Some(d) = &model.d_b {
-        write_mtx(&dir.join("D_b.mtx"), d, &format!("{note}\nstructural damping D_b (N/m)"))?;
+        write_mtx(
+            &dir.join("D_b.mtx"),
+            d,
+            &format!("{note}\nstructural damping D_b (N/m)"),
+        )?;
     }
     write_atomic(&dir.join("dofmap.csv"), &format_dof_map(&model.points))
 }

@@ -28,9 +28,9 @@ use crate::common::C64;
 use crate::fe::model::{SpMat, StructuralModel};
 use crate::linalg::UnionPattern;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::sparse::linalg::lu::{factorize_symbolic_lu, NumericLu, SymbolicLu};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
-use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Conj, Mat, MatMut, Par};
 use rayon::prelude::*;
 
@@ -277,8 +277,17 @@ impl FullModel {
                 Default::default(),
             )
             .map_err(|_| singular())?;
-        lu.solve_in_place_with_conj(Conj::No, rhs.rb_mut(), Par::Seq, MemStack::new(&mut ws.solve_buf));
-        if rhs.rb().col_iter().any(|c| c.iter().any(|v| !v.re.is_finite() || !v.im.is_finite())) {
+        lu.solve_in_place_with_conj(
+            Conj::No,
+            rhs.rb_mut(),
+            Par::Seq,
+            MemStack::new(&mut ws.solve_buf),
+        );
+        if rhs
+            .rb()
+            .col_iter()
+            .any(|c| c.iter().any(|v| !v.re.is_finite() || !v.im.is_finite()))
+        {
             return Err(singular());
         }
         Ok(())
@@ -343,7 +352,12 @@ impl FullModel {
 
     /// Solve Z(w) X = B for a dense right-hand side B (n x k) and return X. This is the
     /// general entry point (RFM uses it for whole receptance columns).
-    pub fn solve(&self, omega_rad_s: f64, modulus_pa: C64, rhs: &Mat<C64>) -> Result<Mat<C64>, FrfError> {
+    pub fn solve(
+        &self,
+        omega_rad_s: f64,
+        modulus_pa: C64,
+        rhs: &Mat<C64>,
+    ) -> Result<Mat<C64>, FrfError> {
         if rhs.nrows() != self.n {
             return Err(FrfError::Length {
                 what: "right-hand side rows",
@@ -370,11 +384,21 @@ impl FullModel {
 
     /// Receptance columns over all free DOFs: X = Z(w)^-1 B, one column per observation
     /// point (column j is receptance column of point j, and by symmetry of H also row j).
-    pub fn receptance_columns(&self, omega_rad_s: f64, modulus_pa: C64) -> Result<Mat<C64>, FrfError> {
+    pub fn receptance_columns(
+        &self,
+        omega_rad_s: f64,
+        modulus_pa: C64,
+    ) -> Result<Mat<C64>, FrfError> {
         self.solve(omega_rad_s, modulus_pa, &self.observation_matrix())
     }
 
-    fn line(&self, omega: f64, e: C64, with_derivatives: bool, ws: &mut Workspace) -> Result<LineResult, FrfError> {
+    fn line(
+        &self,
+        omega: f64,
+        e: C64,
+        with_derivatives: bool,
+        ws: &mut Workspace,
+    ) -> Result<LineResult, FrfError> {
         let n_out = self.obs.len();
         let n_in = self.inputs.len();
         let mut x = self.observation_matrix();

@@ -26,6 +26,7 @@ use crate::fe::model::StructuralModel;
 use crate::frf::full::{FullModel, FullParams};
 use crate::linalg::spmv_complex;
 use faer::Mat;
+use rayon::prelude::*;
 
 /// Errors of the modal solvers.
 #[derive(Debug, thiserror::Error)]
@@ -35,7 +36,11 @@ pub enum ModesError {
     #[error("factorisation failed: {0}")]
     Factorization(String),
     #[error("{what} did not converge: residual {residual:e} > tolerance {tol:e}; raise the iteration limits or loosen the tolerance")]
-    NotConverged { what: String, residual: f64, tol: f64 },
+    NotConverged {
+        what: String,
+        residual: f64,
+        tol: f64,
+    },
 }
 
 /// Tuning knobs of [`complex_modes`].
@@ -207,11 +212,11 @@ pub fn complex_modes(
     let full = FullModel::new(model, &[], FullParams::default())
         .map_err(|e| ModesError::BadInput(e.to_string()))?;
     let pencil = Pencil { model, e: modulus };
-    let mut tmp = vec![C64::new(0.0, 0.0); nd];
-    let mut kphi = vec![C64::new(0.0, 0.0); nd];
-    let mut mphi = vec![C64::new(0.0, 0.0); nd];
-    let mut modes = Vec::with_capacity(n_modes);
-    for &idx in &order {
+    // modes are refined independently: in parallel over modes, sequential inside
+    let refine = |idx: usize| -> Result<ComplexMode, ModesError> {
+        let mut tmp = vec![C64::new(0.0, 0.0); nd];
+        let mut kphi = vec![C64::new(0.0, 0.0); nd];
+        let mut mphi = vec![C64::new(0.0, 0.0); nd];
         // initial vector phi = Phi_r y
         let mut phi: Vec<C64> = (0..nd)
             .map(|r| (0..p).map(|i| u[(i, idx)] * phi_r[(r, i)]).sum())
@@ -232,7 +237,11 @@ pub fn complex_modes(
             mphi.iter_mut().for_each(|v| *v *= inv);
             pencil.k_mul(&phi, &mut kphi, &mut tmp);
             lambda = tdot(&phi, &kphi); // phi^T M phi = 1
-            let r: Vec<C64> = kphi.iter().zip(&mphi).map(|(k, m)| k - lambda * m).collect();
+            let r: Vec<C64> = kphi
+                .iter()
+                .zip(&mphi)
+                .map(|(k, m)| k - lambda * m)
+                .collect();
             residual = norm2(&r) / norm2(&kphi).max(f64::MIN_POSITIVE);
             if residual <= params.tol || it == params.max_refine {
                 break;
@@ -281,7 +290,7 @@ pub fn complex_modes(
             }
             None => (None, None),
         };
-        modes.push(ComplexMode {
+        Ok(ComplexMode {
             lambda,
             freq_hz: lambda.re.max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
             loss_factor: lambda.im / lambda.re,
@@ -291,8 +300,12 @@ pub fn complex_modes(
             y_dominant: ydom,
             residual,
             phi,
-        });
-    }
+        })
+    };
+    let mut modes: Vec<ComplexMode> = order
+        .par_iter()
+        .map(|&idx| refine(idx))
+        .collect::<Result<Vec<_>, _>>()?;
     modes.sort_by(|a, b| a.lambda.re.total_cmp(&b.lambda.re));
     // two starting guesses that converged to the same eigenvalue would be a silent error
     for w in modes.windows(2) {

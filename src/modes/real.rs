@@ -59,7 +59,6 @@ impl Default for EigenParams {
 pub(crate) struct SparseLlt {
     symbolic: faer::sparse::linalg::cholesky::SymbolicCholesky<usize>,
     values: Vec<f64>,
-    n: usize,
 }
 
 impl SparseLlt {
@@ -94,16 +93,14 @@ impl SparseLlt {
                     "K - sigma M is not positive definite: is the model constrained (adhesive modulus > 0, fixed DOFs removed) and the shift <= 0?".into(),
                 )
             })?;
-        Ok(SparseLlt {
-            symbolic,
-            values,
-            n: a.nrows(),
-        })
+        Ok(SparseLlt { symbolic, values })
     }
 
     /// Solve A X = B in place.
     pub(crate) fn solve_in_place(&self, rhs: faer::MatMut<'_, f64>) {
-        let req = self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), Par::Seq);
+        let req = self
+            .symbolic
+            .solve_in_place_scratch::<f64>(rhs.ncols(), Par::Seq);
         let mut buf = MemBuffer::new(req);
         LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
             Conj::No,
@@ -301,11 +298,14 @@ pub fn real_modes(
 /// Dense generalized symmetric-definite eigenproblem A y = theta B y (B SPD) via
 /// B = L L^T, C = L^-1 A L^-T, C z = theta z, y = L^-T z. Eigenvalues ascending,
 /// Y^T B Y = I.
-pub(crate) fn dense_generalized_spd(a: &Mat<f64>, b: &Mat<f64>) -> Result<(Vec<f64>, Mat<f64>), ModesError> {
+pub(crate) fn dense_generalized_spd(
+    a: &Mat<f64>,
+    b: &Mat<f64>,
+) -> Result<(Vec<f64>, Mat<f64>), ModesError> {
     let p = a.nrows();
-    let llt = b
-        .llt(Side::Lower)
-        .map_err(|_| ModesError::Factorization("projected mass matrix is not positive definite".into()))?;
+    let llt = b.llt(Side::Lower).map_err(|_| {
+        ModesError::Factorization("projected mass matrix is not positive definite".into())
+    })?;
     let l = llt.L();
     // C = L^-1 A L^-T
     let mut c = a.clone();
@@ -318,6 +318,10 @@ pub(crate) fn dense_generalized_spd(a: &Mat<f64>, b: &Mat<f64>) -> Result<(Vec<f
         .map_err(|e| ModesError::Factorization(format!("dense symmetric eigensolver: {e:?}")))?;
     let theta: Vec<f64> = (0..p).map(|i| evd.S()[i]).collect();
     let mut y = evd.U().to_owned();
-    faer::linalg::triangular_solve::solve_upper_triangular_in_place(l.transpose(), y.as_mut(), Par::Seq);
+    faer::linalg::triangular_solve::solve_upper_triangular_in_place(
+        l.transpose(),
+        y.as_mut(),
+        Par::Seq,
+    );
     Ok((theta, y))
 }
