@@ -6,7 +6,9 @@ pub use num_complex::Complex64 as C64;
 pub const J: C64 = C64::new(0.0, 1.0);
 
 /// A global Cartesian axis.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub enum Axis {
     X,
     Y,
@@ -33,7 +35,9 @@ impl Axis {
 }
 
 /// A signed measurement or excitation direction along a global axis (UFF: +-1..+-3).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub struct Direction {
     pub axis: Axis,
     /// +1 or -1.

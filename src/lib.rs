@@ -30,6 +30,7 @@ pub mod experiment;
 pub mod fe;
 pub mod frf;
 pub mod iem;
+pub mod linalg;
 pub mod material;
 pub mod modal;
 pub mod modes;

@@ -16,7 +16,11 @@ mod run;
 mod simulate;
 
 #[derive(Parser, Debug)]
-#[command(name = "rfmlab", version, about = "Identify viscoelastic adhesive models in bonded joints from measured FRFs")]
+#[command(
+    name = "rfmlab",
+    version,
+    about = "Identify viscoelastic adhesive models in bonded joints from measured FRFs"
+)]
 struct Cli {
     /// No progress bars and no informational messages.
     #[arg(long, global = true)]

@@ -16,6 +16,7 @@ pub mod error;
 pub mod geometry;
 pub mod joint;
 pub mod mesh;
+pub mod matrix_market;
 pub mod model;
 pub mod points;
 

@@ -6,6 +6,9 @@
 
 use crate::common::C64;
 
+pub mod full;
+pub use full::{FullModel, FullParams};
+
 /// What a sweep returns, for n_lines frequency lines, n_out observation points (outputs) and
 /// n_in input (excitation) points. Index of entry (line l, output i, input j):
 /// `(l * n_out + i) * n_in + j`.
@@ -37,8 +40,16 @@ impl Sweep {
             n_out,
             n_in,
             h: vec![C64::new(0.0, 0.0); n],
-            dh_de: if with_derivatives { vec![C64::new(0.0, 0.0); n] } else { Vec::new() },
-            sh: if with_derivatives { vec![C64::new(0.0, 0.0); n] } else { Vec::new() },
+            dh_de: if with_derivatives {
+                vec![C64::new(0.0, 0.0); n]
+            } else {
+                Vec::new()
+            },
+            sh: if with_derivatives {
+                vec![C64::new(0.0, 0.0); n]
+            } else {
+                Vec::new()
+            },
         }
     }
 }
@@ -49,7 +60,11 @@ pub enum FrfError {
     #[error("the dynamic stiffness is singular at {freq_hz} Hz (E* = {modulus:?} Pa): is the model constrained?")]
     Singular { freq_hz: f64, modulus: C64 },
     #[error("{what}: expected length {expected}, got {got}")]
-    Length { what: &'static str, expected: usize, got: usize },
+    Length {
+        what: &'static str,
+        expected: usize,
+        got: usize,
+    },
     #[error("input point index {0} is not an observation point of the model")]
     BadInput(usize),
     #[error("{0}")]

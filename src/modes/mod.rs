@@ -1,1 +1,324 @@
-//! (under construction)
+//! Modes of the bonded joint: the real generalized eigensolver ([`real_modes`]) and the
+//! complex modes of (K_b + E* S + j D_b, M) ([`complex_modes`]).
+//!
+//! Complex eigenproblem (method.md, IEM section):
+//!
+//! (K_b + E* S + j D_b - lambda M) phi = 0,   phi^T M phi = 1 (no conjugate),
+//!
+//! f = sqrt(Re lambda) / (2 pi), modal loss factor eta = Im lambda / Re lambda, and the
+//! eigenvalue sensitivities d lambda / dE' = phi^T S phi, d lambda / dE'' = j phi^T S phi.
+//! Viscous damping C_b is not part of this (linear) pencil and is ignored here.
+//!
+//! Method: real modes of (K_b + Re(E*) S, M) (2 n + 8 of them) span a subspace onto which
+//! the complex pencil is projected; in that M-orthonormal basis it is the standard complex
+//! symmetric eigenproblem (Lambda + j Im(E*) Phi^T S Phi + j Phi^T D_b Phi) y = lambda y,
+//! solved densely. Each of the lowest n approximations is then refined on the full model by
+//! complex Rayleigh-quotient iteration (the complex-symmetric Rayleigh quotient
+//! lambda = phi^T K phi / phi^T M phi, no conjugate; one sparse complex LU per step, symbolic
+//! analysis shared) until ||(K - lambda M) phi|| / ||K phi|| <= `ModesParams::tol`.
+
+pub mod real;
+
+pub use real::{real_modes, EigenParams};
+
+use crate::common::C64;
+use crate::fe::model::StructuralModel;
+use crate::frf::full::{FullModel, FullParams};
+use crate::linalg::spmv_complex;
+use faer::Mat;
+use rayon::prelude::*;
+
+/// Errors of the modal solvers.
+#[derive(Debug, thiserror::Error)]
+pub enum ModesError {
+    #[error("invalid input to the modal solver: {0}")]
+    BadInput(String),
+    #[error("factorisation failed: {0}")]
+    Factorization(String),
+    #[error("{what} did not converge: residual {residual:e} > tolerance {tol:e}; raise the iteration limits or loosen the tolerance")]
+    NotConverged {
+        what: String,
+        residual: f64,
+        tol: f64,
+    },
+}
+
+/// Tuning knobs of [`complex_modes`].
+#[derive(Clone, Debug)]
+pub struct ModesParams {
+    /// Real eigensolver settings for the projection basis (default [`EigenParams::default`],
+    /// whose tolerance is then relaxed to 1e-8: the basis only needs to be good enough
+    /// for the refinement to start in the right basin).
+    pub eigen: EigenParams,
+    /// Size of the real basis: `extra_factor * n + extra` modes (defaults 2 and 8).
+    pub extra_factor: usize,
+    pub extra: usize,
+    /// Target relative residual of each complex mode (default 1e-10).
+    pub tol: f64,
+    /// Maximum Rayleigh-quotient iterations per mode (default 10).
+    pub max_refine: usize,
+    /// A mode is flagged `y_dominant` when the y fraction of its kinetic energy exceeds this
+    /// (default 0.5).
+    pub y_dominant_threshold: f64,
+}
+
+impl Default for ModesParams {
+    fn default() -> Self {
+        ModesParams {
+            eigen: EigenParams {
+                tol: 1e-8,
+                ..EigenParams::default()
+            },
+            extra_factor: 2,
+            extra: 8,
+            tol: 1e-10,
+            max_refine: 10,
+            y_dominant_threshold: 0.5,
+        }
+    }
+}
+
+/// One complex mode (see the module docs for the definitions).
+#[derive(Clone, Debug)]
+pub struct ComplexMode {
+    /// Eigenvalue lambda = w_r^2 (1 + j eta) (rad^2/s^2).
+    pub lambda: C64,
+    /// sqrt(Re lambda) / (2 pi).
+    pub freq_hz: f64,
+    /// Im lambda / Re lambda.
+    pub loss_factor: f64,
+    /// phi^T S phi = d lambda / dE' (phi normalised phi^T M phi = 1, no conjugate).
+    pub phi_s_phi: C64,
+    /// b_i^T phi for each observation point i of the model.
+    pub at_points: Vec<C64>,
+    /// Fraction of the kinetic energy phi^H M_aa phi in the x, y, z DOFs (M_aa: the block of
+    /// M coupling DOFs of axis a; normalised to sum 1). None when no DOF axes were given.
+    pub energy_fraction_xyz: Option<[f64; 3]>,
+    /// y fraction > `ModesParams::y_dominant_threshold` (the measurements see y only).
+    pub y_dominant: Option<bool>,
+    /// Final relative residual ||(K - lambda M) phi|| / ||K phi||, K = K_b + E* S + j D_b.
+    pub residual: f64,
+    /// Full mode shape over the free DOFs (phi^T M phi = 1).
+    pub phi: Vec<C64>,
+}
+
+/// K phi with K = K_b + E* S + j D_b, and M phi.
+struct Pencil<'a> {
+    model: &'a StructuralModel,
+    e: C64,
+}
+
+impl Pencil<'_> {
+    fn k_mul(&self, x: &[C64], out: &mut [C64], tmp: &mut [C64]) {
+        spmv_complex(&self.model.k_b, x, out);
+        spmv_complex(&self.model.s, x, tmp);
+        for (o, t) in out.iter_mut().zip(tmp.iter()) {
+            *o += self.e * t;
+        }
+        if let Some(d) = &self.model.d_b {
+            spmv_complex(d, x, tmp);
+            for (o, t) in out.iter_mut().zip(tmp.iter()) {
+                *o += C64::new(-t.im, t.re);
+            }
+        }
+    }
+    fn m_mul(&self, x: &[C64], out: &mut [C64]) {
+        spmv_complex(&self.model.m, x, out);
+    }
+}
+
+fn tdot(a: &[C64], b: &[C64]) -> C64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+fn norm2(a: &[C64]) -> f64 {
+    a.iter().map(|x| x.norm_sqr()).sum::<f64>().sqrt()
+}
+
+/// Lowest `n_modes` complex modes of (K_b + E* S + j D_b, M) for the complex modulus
+/// `modulus` (Pa), sorted by Re lambda. `dof_axes` (0 = x, 1 = y, 2 = z per free DOF), when
+/// given, enables the kinetic-energy classification. See the module docs for the method.
+pub fn complex_modes(
+    model: &StructuralModel,
+    modulus: C64,
+    n_modes: usize,
+    dof_axes: Option<&[u8]>,
+    params: &ModesParams,
+) -> Result<Vec<ComplexMode>, ModesError> {
+    let nd = model.n_dof();
+    if let Some(ax) = dof_axes {
+        if ax.len() != nd || ax.iter().any(|&a| a > 2) {
+            return Err(ModesError::BadInput(format!(
+                "dof_axes must have one entry 0, 1 or 2 per free DOF ({nd}); got {} entries",
+                ax.len()
+            )));
+        }
+    }
+    if !(modulus.re > 0.0) || !modulus.im.is_finite() {
+        return Err(ModesError::BadInput(format!(
+            "the storage modulus must be positive and finite, got E* = {modulus} Pa"
+        )));
+    }
+    if n_modes == 0 {
+        return Ok(Vec::new());
+    }
+    let n_basis = (params.extra_factor * n_modes + params.extra)
+        .max(n_modes)
+        .min(nd);
+    // 1. real basis
+    let k_re = real::sp_add(&model.k_b, &model.s, modulus.re)?;
+    let (lam_r, phi_r) = real_modes(&k_re, &model.m, n_basis, &params.eigen)?;
+    // 2. projected complex pencil A = Lambda + j Im(E) Phi^T S Phi + j Phi^T D Phi (symmetric)
+    let p = n_basis;
+    let mut sphi = Mat::<f64>::zeros(nd, p);
+    let mut dphi = model.d_b.as_ref().map(|_| Mat::<f64>::zeros(nd, p));
+    let mut col = vec![0.0; nd];
+    let mut out = vec![0.0; nd];
+    for c in 0..p {
+        for r in 0..nd {
+            col[r] = phi_r[(r, c)];
+        }
+        crate::linalg::spmv_real(&model.s, &col, &mut out);
+        for r in 0..nd {
+            sphi[(r, c)] = out[r];
+        }
+        if let (Some(d), Some(dp)) = (&model.d_b, dphi.as_mut()) {
+            crate::linalg::spmv_real(d, &col, &mut out);
+            for r in 0..nd {
+                dp[(r, c)] = out[r];
+            }
+        }
+    }
+    let ps = phi_r.transpose() * &sphi;
+    let pd = dphi.as_ref().map(|dp| phi_r.transpose() * dp);
+    let a = Mat::<C64>::from_fn(p, p, |i, j| {
+        let mut v = C64::new(if i == j { lam_r[i] } else { 0.0 }, 0.0);
+        v += C64::new(0.0, modulus.im * 0.5 * (ps[(i, j)] + ps[(j, i)]));
+        if let Some(pd) = &pd {
+            v += C64::new(0.0, 0.5 * (pd[(i, j)] + pd[(j, i)]));
+        }
+        v
+    });
+    let evd = a
+        .eigen()
+        .map_err(|e| ModesError::Factorization(format!("dense complex eigensolver: {e:?}")))?;
+    let s = evd.S();
+    let u = evd.U();
+    let mut order: Vec<usize> = (0..p).collect();
+    order.sort_by(|&x, &y| s[x].re.total_cmp(&s[y].re));
+    order.truncate(n_modes);
+
+    // 3. refinement on the full model
+    let full = FullModel::new(model, &[], FullParams::default())
+        .map_err(|e| ModesError::BadInput(e.to_string()))?;
+    let pencil = Pencil { model, e: modulus };
+    // modes are refined independently: in parallel over modes, sequential inside
+    let refine = |idx: usize| -> Result<ComplexMode, ModesError> {
+        let mut tmp = vec![C64::new(0.0, 0.0); nd];
+        let mut kphi = vec![C64::new(0.0, 0.0); nd];
+        let mut mphi = vec![C64::new(0.0, 0.0); nd];
+        // initial vector phi = Phi_r y
+        let mut phi: Vec<C64> = (0..nd)
+            .map(|r| (0..p).map(|i| u[(i, idx)] * phi_r[(r, i)]).sum())
+            .collect();
+        let mut lambda = s[idx];
+        let mut residual = f64::INFINITY;
+        for it in 0..=params.max_refine {
+            // normalise phi^T M phi = 1, Rayleigh quotient, residual
+            pencil.m_mul(&phi, &mut mphi);
+            let nrm = tdot(&phi, &mphi).sqrt();
+            if nrm.norm() == 0.0 || !nrm.re.is_finite() {
+                return Err(ModesError::Factorization(
+                    "mode refinement produced a vector with phi^T M phi = 0".into(),
+                ));
+            }
+            let inv = C64::new(1.0, 0.0) / nrm;
+            phi.iter_mut().for_each(|v| *v *= inv);
+            mphi.iter_mut().for_each(|v| *v *= inv);
+            pencil.k_mul(&phi, &mut kphi, &mut tmp);
+            lambda = tdot(&phi, &kphi); // phi^T M phi = 1
+            let r: Vec<C64> = kphi
+                .iter()
+                .zip(&mphi)
+                .map(|(k, m)| k - lambda * m)
+                .collect();
+            residual = norm2(&r) / norm2(&kphi).max(f64::MIN_POSITIVE);
+            if residual <= params.tol || it == params.max_refine {
+                break;
+            }
+            // (K - lambda M) x = M phi
+            let mut rhs = Mat::<C64>::from_fn(nd, 1, |i, _| mphi[i]);
+            match full.solve_pencil_in_place(lambda, modulus, rhs.as_mut()) {
+                Ok(()) => phi = (0..nd).map(|i| rhs[(i, 0)]).collect(),
+                Err(_) => break, // lambda is an eigenvalue to machine precision
+            }
+        }
+        if residual > params.tol {
+            return Err(ModesError::NotConverged {
+                what: format!(
+                    "complex mode near {:.4} Hz (Rayleigh-quotient refinement, ModesParams::max_refine = {})",
+                    lambda.re.max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
+                    params.max_refine
+                ),
+                residual,
+                tol: params.tol,
+            });
+        }
+        // outputs
+        let sp = {
+            spmv_complex(&model.s, &phi, &mut tmp);
+            tdot(&phi, &tmp)
+        };
+        let at_points = model
+            .points
+            .iter()
+            .map(|pt| pt.dofs.iter().map(|&(d, w)| phi[d] * w).sum())
+            .collect();
+        let (energy, ydom) = match dof_axes {
+            Some(ax) => {
+                let mut e = [0.0f64; 3];
+                for t in model.m.triplet_iter() {
+                    if ax[t.row] == ax[t.col] {
+                        e[ax[t.row] as usize] += (phi[t.row].conj() * phi[t.col] * *t.val).re;
+                    }
+                }
+                let tot: f64 = e.iter().sum();
+                if tot > 0.0 {
+                    e.iter_mut().for_each(|v| *v /= tot);
+                }
+                (Some(e), Some(e[1] > params.y_dominant_threshold))
+            }
+            None => (None, None),
+        };
+        Ok(ComplexMode {
+            lambda,
+            freq_hz: lambda.re.max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
+            loss_factor: lambda.im / lambda.re,
+            phi_s_phi: sp,
+            at_points,
+            energy_fraction_xyz: energy,
+            y_dominant: ydom,
+            residual,
+            phi,
+        })
+    };
+    let mut modes: Vec<ComplexMode> = order
+        .par_iter()
+        .map(|&idx| refine(idx))
+        .collect::<Result<Vec<_>, _>>()?;
+    modes.sort_by(|a, b| a.lambda.re.total_cmp(&b.lambda.re));
+    // two starting guesses that converged to the same eigenvalue would be a silent error
+    for w in modes.windows(2) {
+        if (w[1].lambda - w[0].lambda).norm() <= 1e-8 * w[0].lambda.norm() {
+            return Err(ModesError::NotConverged {
+                what: format!(
+                    "complex modes: two approximations converged to the same eigenvalue {} (raise ModesParams::extra)",
+                    w[0].lambda
+                ),
+                residual: 0.0,
+                tol: params.tol,
+            });
+        }
+    }
+    Ok(modes)
+}
