@@ -15,6 +15,11 @@ const E0: C64 = C64::new(7.0e6, 1.4e6);
 
 fn small_model(damped: bool) -> StructuralModel {
     let mut m = lattice_model(&LatticeParams::new(8, 3, 2, 11)).model;
+    // a point on a bonded DOF (node (0,0,0), y), where S X is not zero
+    let mut p = m.points[0].clone();
+    p.id = 6;
+    p.dofs = vec![(1, 1.0), (4, 0.3)];
+    m.points.push(p);
     if damped {
         // Rayleigh (alpha M + beta K_b) and structural (g K_b) adherend damping
         add_damping(&mut m, 5.0, 2e-6, 0.01);
@@ -78,11 +83,11 @@ fn lines() -> (Vec<f64>, Vec<C64>) {
 }
 
 fn check_against_dense(model: &StructuralModel) {
-    let inputs = [1usize, 4];
+    let inputs = [1usize, 4, 5];
     let fm = FullModel::new(model, &inputs, FullParams::default()).unwrap();
     let (w, e) = lines();
     let sw = fm.sweep(&w, &e, true).unwrap();
-    assert_eq!((sw.n_lines, sw.n_out, sw.n_in), (30, 5, 2));
+    assert_eq!((sw.n_lines, sw.n_out, sw.n_in), (30, 6, 3));
     let s = to_dense_c64(&model.s);
     let b = obs_matrix(model);
     let mut worst_h = 0.0f64;
@@ -92,7 +97,7 @@ fn check_against_dense(model: &StructuralModel) {
         let (h, x) = dense_h(model, w[l], e[l]);
         let dh = -(x.transpose() * &s * &x); // -X^T S X
         let sh = b.transpose() * &s * &x;
-        for i in 0..5 {
+        for i in 0..6 {
             for (jj, &j) in inputs.iter().enumerate() {
                 let k = sw.idx(l, i, jj);
                 worst_h = worst_h.max(rel(sw.h[k], h[(i, j)]));
@@ -121,13 +126,13 @@ fn frf_matches_dense_solve_with_rayleigh_and_structural_damping() {
 #[test]
 fn reciprocity() {
     let model = small_model(true);
-    let fm = FullModel::new(&model, &[0, 1, 2, 3, 4], FullParams::default()).unwrap();
+    let fm = FullModel::new(&model, &[0, 1, 2, 3, 4, 5], FullParams::default()).unwrap();
     let (w, e) = lines();
     let sw = fm.sweep(&w, &e, false).unwrap();
     assert!(sw.dh_de.is_empty() && sw.sh.is_empty());
     for l in 0..w.len() {
-        for i in 0..5 {
-            for j in 0..5 {
+        for i in 0..6 {
+            for j in 0..6 {
                 let (a, b) = (sw.h[sw.idx(l, i, j)], sw.h[sw.idx(l, j, i)]);
                 assert!(rel(a, b) < 1e-10, "h{i}{j} != h{j}{i} at line {l}");
             }
@@ -136,34 +141,40 @@ fn reciprocity() {
 }
 
 /// dH/dE' against central differences in E', and dH/dE'' = j dH/dE' against central
-/// differences in E'' (relative step 1e-5, tolerance 1e-6 relative; see the notes below).
+/// differences in E'' (Richardson-extrapolated, relative step 1e-4, tolerance 1e-6 relative;
+/// see the notes below).
 #[test]
 fn sensitivities_match_central_differences() {
     for damped in [false, true] {
         let model = small_model(damped);
-        let fm = FullModel::new(&model, &[1], FullParams::default()).unwrap();
+        let fm = FullModel::new(&model, &[1, 5], FullParams::default()).unwrap();
         let (w, e) = lines();
         let base = fm.sweep(&w, &e, true).unwrap();
         let mut worst_re = 0.0f64;
         let mut worst_im = 0.0f64;
-        // relative step 1e-5: H is accurate to ~1e-14 relative, so with step 1e-6 the
-        // difference quotient alone carries ~1e-8 / (|E' dH/dE'| / |H|) relative noise, which
-        // exceeds 1e-6 on the many entries the adhesive barely affects; the truncation error
-        // at 1e-5 is ~(step / E'')^2 ~ 1e-9.
-        let step = 1e-5 * E0.re;
+        // Central differences with Richardson extrapolation, D = (4 D(h) - D(2h)) / 3
+        // (truncation O(h^4) ~ (h / E'')^4 ~ 1e-13), relative step h = 1e-4. Near resonances H is
+        // accurate to ~1e-13 relative (cf. the dense comparison), so
+        // the difference quotient carries ~1e-13 / h / (|E' dH/dE'| / |H|) relative noise;
+        // entries whose relative sensitivity is below 1e-3 (the adhesive barely affects them)
+        // are therefore compared on the scale 1e-3 |H| / E' instead of |dH/dE'|.
+        let step = 1e-4 * E0.re;
         for (dir, worst) in [(C64::new(1.0, 0.0), &mut worst_re), (J, &mut worst_im)] {
-            let ep: Vec<C64> = e.iter().map(|&x| x + dir * step).collect();
-            let em: Vec<C64> = e.iter().map(|&x| x - dir * step).collect();
-            let hp = fm.sweep(&w, &ep, false).unwrap();
-            let hm = fm.sweep(&w, &em, false).unwrap();
+            let d = |h: f64| -> Vec<C64> {
+                let ep: Vec<C64> = e.iter().map(|&x| x + dir * h).collect();
+                let em: Vec<C64> = e.iter().map(|&x| x - dir * h).collect();
+                let hp = fm.sweep(&w, &ep, false).unwrap();
+                let hm = fm.sweep(&w, &em, false).unwrap();
+                hp.h.iter()
+                    .zip(&hm.h)
+                    .map(|(p, m)| (p - m) / (2.0 * h))
+                    .collect()
+            };
+            let (d1, d2) = (d(step), d(2.0 * step));
             for k in 0..base.h.len() {
-                let fd = (hp.h[k] - hm.h[k]) / (2.0 * step);
+                let fd = (d1[k] * 4.0 - d2[k]) / 3.0;
                 // dH/dE'' = j dH/dE'
                 let an = dir * base.dh_de[k];
-                // FD rounding floor: the difference quotient has absolute error
-                // ~1e-14 |H| / step = 1e-9 |H| / E'. Entries whose relative sensitivity
-                // |E' dH/dE'| / |H| is below 1e-3 are therefore compared on the scale
-                // 1e-3 |H| / E' instead of |dH/dE'|.
                 let scale = an.norm().max(1e-3 * base.h[k].norm() / E0.re);
                 *worst = worst.max((an - fd).norm() / scale);
             }
