@@ -154,7 +154,7 @@ pub fn complex_modes(
             )));
         }
     }
-    if !(modulus.re > 0.0) || !modulus.im.is_finite() {
+    if !modulus.re.is_finite() || modulus.re <= 0.0 || !modulus.im.is_finite() {
         return Err(ModesError::BadInput(format!(
             "the storage modulus must be positive and finite, got E* = {modulus} Pa"
         )));

@@ -212,7 +212,7 @@ pub fn real_modes(
             }
             spmv_real(m, &next, &mut tmp);
             let norm = dot(&next, &tmp).max(0.0).sqrt();
-            if !(norm > 1e-10 * norm0) || !norm.is_finite() {
+            if !norm.is_finite() || norm <= 1e-10 * norm0 {
                 // invariant subspace found (or breakdown): restart with a fresh random vector
                 next = (0..nd).map(|_| rng.random_range(-1.0..1.0)).collect();
                 continue;
