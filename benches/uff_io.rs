@@ -14,12 +14,24 @@ fn level() -> FrfSet {
             response_dir: Direction::PY,
             reference_id: 2,
             reference_dir: Direction::PY,
-            values: freq_hz.iter().map(|f| C64::new(1.0 / (1.0 + f * p as f64), 0.01 * f)).collect(),
+            values: freq_hz
+                .iter()
+                .map(|f| C64::new(1.0 / (1.0 + f * p as f64), 0.01 * f))
+                .collect(),
             coherence: Some(vec![0.99; 500]),
             source: None,
         })
         .collect();
-    FrfSet { levels: vec![FrfLevel { name: "L1".into(), force_rms_n: Some(3.3), n_averages: Some(200), quantity: Quantity::Accelerance, freq_hz, channels }] }
+    FrfSet {
+        levels: vec![FrfLevel {
+            name: "L1".into(),
+            force_rms_n: Some(3.3),
+            n_averages: Some(200),
+            quantity: Quantity::Accelerance,
+            freq_hz,
+            channels,
+        }],
+    }
 }
 
 fn bench(c: &mut Criterion) {
@@ -27,8 +39,12 @@ fn bench(c: &mut Criterion) {
     for binary in [false, true] {
         let tag = if binary { "58b" } else { "ascii" };
         let bytes = serialize_uff(&ds, binary, "bench").unwrap();
-        c.bench_function(&format!("uff write 4ch x 500 {tag}"), |b| b.iter(|| serialize_uff(&ds, binary, "bench").unwrap()));
-        c.bench_function(&format!("uff read 4ch x 500 {tag}"), |b| b.iter(|| parse_uff(&bytes, "bench").unwrap()));
+        c.bench_function(&format!("uff write 4ch x 500 {tag}"), |b| {
+            b.iter(|| serialize_uff(&ds, binary, "bench").unwrap())
+        });
+        c.bench_function(&format!("uff read 4ch x 500 {tag}"), |b| {
+            b.iter(|| parse_uff(&bytes, "bench").unwrap())
+        });
     }
 }
 

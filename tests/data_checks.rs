@@ -36,7 +36,10 @@ fn bad_files_name_file_dataset_line() {
     assert!(e.line.is_some() && e.message.contains("truncated"), "{e}");
     // missing records
     let e = bad(&GOOD[..GOOD.find("        18").unwrap()]);
-    assert!(e.message.contains("record 7 of 11") && e.line.is_some(), "{e}");
+    assert!(
+        e.message.contains("record 7 of 11") && e.line.is_some(),
+        "{e}"
+    );
     // garbage numbers
     let e = bad(&GOOD.replace("   5.00000000000e+00", "   5.0000x000000e+00"));
     assert_eq!(e.line, Some(15), "{e}");
@@ -47,10 +50,16 @@ fn bad_files_name_file_dataset_line() {
     let e = bad(&GOOD.replace("         6         3", "         7         3"));
     assert_eq!(e.line, Some(9), "{e}");
     // the second of two datasets is bad -> index 1
-    let two = format!("{GOOD}{}", GOOD.replace("   5.00000000000e+00", "   garbage"));
+    let two = format!(
+        "{GOOD}{}",
+        GOOD.replace("   5.00000000000e+00", "   garbage")
+    );
     let e = parse_uff(two.as_bytes(), "bad.uff").unwrap_err();
     assert_eq!(e.dataset, Some(1));
-    assert!(e.to_string().starts_with("bad.uff: dataset 1, line 31"), "{e}");
+    assert!(
+        e.to_string().starts_with("bad.uff: dataset 1, line 31"),
+        "{e}"
+    );
 }
 
 fn level() -> FrfLevel {
@@ -63,7 +72,14 @@ fn level() -> FrfLevel {
         coherence: Some(vec![0.9; 3]),
         source: Some(("f.uff".into(), r as usize)),
     };
-    FrfLevel { name: "L1".into(), force_rms_n: None, n_averages: None, quantity: Quantity::Accelerance, freq_hz: vec![1.0, 2.0, 3.0], channels: vec![ch(1, 2), ch(2, 2)] }
+    FrfLevel {
+        name: "L1".into(),
+        force_rms_n: None,
+        n_averages: None,
+        quantity: Quantity::Accelerance,
+        freq_hz: vec![1.0, 2.0, 3.0],
+        channels: vec![ch(1, 2), ch(2, 2)],
+    }
 }
 
 #[test]
@@ -81,17 +97,29 @@ fn level_checks() {
     d.channels[1].response_id = 1;
     d.channels[1].response_dir = Direction::new(rfmlab::common::Axis::Y, -1);
     let e = check_level(&d, None, None).unwrap_err();
-    assert!(e.message.contains("duplicate") && e.dataset == Some(1), "{e}");
+    assert!(
+        e.message.contains("duplicate") && e.dataset == Some(2),
+        "{e}"
+    );
     // non-finite value, grid not increasing, mixed grid length
     let mut d = level();
     d.channels[0].values[1] = C64::new(f64::NAN, 0.0);
-    assert!(check_level(&d, None, None).unwrap_err().message.contains("non-finite"));
+    assert!(check_level(&d, None, None)
+        .unwrap_err()
+        .message
+        .contains("non-finite"));
     let mut d = level();
     d.freq_hz[2] = 2.0;
-    assert!(check_level(&d, None, None).unwrap_err().message.contains("strictly increasing"));
+    assert!(check_level(&d, None, None)
+        .unwrap_err()
+        .message
+        .contains("strictly increasing"));
     let mut d = level();
     d.channels[1].values.pop();
-    assert!(check_level(&d, None, None).unwrap_err().message.contains("one grid per level"));
+    assert!(check_level(&d, None, None)
+        .unwrap_err()
+        .message
+        .contains("one grid per level"));
 }
 
 #[test]

@@ -5,7 +5,9 @@ mod common_data;
 use common_data::*;
 
 use rfmlab::common::C64;
-use rfmlab::data::uff58::{parse_uff, read_uff, serialize_uff, write_uff, AxisSpec, Ordinate, Precision, Uff58Dataset};
+use rfmlab::data::uff58::{
+    parse_uff, read_uff, serialize_uff, write_uff, AxisSpec, Ordinate, Precision, Uff58Dataset,
+};
 
 fn sample(case: usize) -> Uff58Dataset {
     // case 1..8 as in the spec table: real/complex x single/double x even/uneven
@@ -21,16 +23,28 @@ fn sample(case: usize) -> Uff58Dataset {
         (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
     };
     let values = if complex {
-        Ordinate::Complex((0..n).map(|_| C64::new(rnd() * 1e-3, rnd() * 1e2)).collect())
+        Ordinate::Complex(
+            (0..n)
+                .map(|_| C64::new(rnd() * 1e-3, rnd() * 1e2))
+                .collect(),
+        )
     } else {
         Ordinate::Real((0..n).map(|_| rnd() * 3.0).collect())
     };
     let mut d = if even {
         Uff58Dataset::new_even(4, 1.0, 0.5, values)
     } else {
-        Uff58Dataset::new_uneven(4, (0..n).map(|k| 10.0 + 1.25 * (k * k) as f64).collect(), values)
+        Uff58Dataset::new_uneven(
+            4,
+            (0..n).map(|k| 10.0 + 1.25 * (k * k) as f64).collect(),
+            values,
+        )
     };
-    d.precision = if single { Precision::Single } else { Precision::Double };
+    d.precision = if single {
+        Precision::Single
+    } else {
+        Precision::Double
+    };
     d.rsp_node = 2;
     d.rsp_dir = -3;
     d.ref_node = 1;
@@ -56,9 +70,16 @@ fn all_eight_layouts_round_trip() {
             let f = parse_uff(&bytes, "mem").unwrap();
             let r = &f.datasets[0];
             assert_eq!(r.binary, binary);
-            assert_eq!((r.rsp_node, r.rsp_dir, r.ref_node, r.ref_dir), (2, -3, 1, 2));
+            assert_eq!(
+                (r.rsp_node, r.rsp_dir, r.ref_node, r.ref_dir),
+                (2, -3, 1, 2)
+            );
             assert_eq!(r.ordinate.units_label, "m/s²");
-            assert!(r.notes.is_empty(), "case {case} binary {binary}: {:?}", r.notes);
+            assert!(
+                r.notes.is_empty(),
+                "case {case} binary {binary}: {:?}",
+                r.notes
+            );
             // binary double exact; binary single = f32 rounding; ASCII: 12 or 6 significant digits
             let tol = match (binary, d.precision) {
                 (true, Precision::Double) => 0.0,
@@ -67,7 +88,10 @@ fn all_eight_layouts_round_trip() {
                 (false, Precision::Single) => 5e-6,
             };
             for (a, b) in flat(r).iter().zip(flat(&d)) {
-                assert!((a - b).abs() <= tol * b.abs(), "case {case} binary {binary}: {a} vs {b}");
+                assert!(
+                    (a - b).abs() <= tol * b.abs(),
+                    "case {case} binary {binary}: {a} vs {b}"
+                );
             }
             for (a, b) in r.x.iter().zip(&d.x) {
                 assert!((a - b).abs() <= 5e-6 * b.abs(), "x {a} vs {b}");
@@ -84,34 +108,68 @@ fn several_datasets_per_file_atomic_write() {
     write_uff(&p, &ds, true).unwrap();
     let f = read_uff(&p).unwrap();
     assert_eq!(f.datasets.len(), 8);
-    assert_eq!(f.datasets.iter().map(|d| d.index).collect::<Vec<_>>(), (0..8).collect::<Vec<_>>());
-    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 1, "no temporary file left");
+    assert_eq!(
+        f.datasets.iter().map(|d| d.index).collect::<Vec<_>>(),
+        (0..8).collect::<Vec<_>>()
+    );
+    assert_eq!(
+        std::fs::read_dir(tmp.path()).unwrap().count(),
+        1,
+        "no temporary file left"
+    );
 }
 
 #[test]
 fn pyuff_interop_both_ways() {
-    let Some(py) = python_with_pyuff() else { return };
+    let Some(py) = python_with_pyuff() else {
+        return;
+    };
     let tmp = tempfile::tempdir().unwrap();
     // (c) pyuff writes, rfmlab reads
-    let st = std::process::Command::new(&py).arg(script()).arg("write").arg(tmp.path()).status().unwrap();
+    let st = std::process::Command::new(&py)
+        .arg(script())
+        .arg("write")
+        .arg(tmp.path())
+        .status()
+        .unwrap();
     assert!(st.success());
-    let exp: serde_json::Value = serde_json::from_slice(&std::fs::read(tmp.path().join("expected.json")).unwrap()).unwrap();
+    let exp: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(tmp.path().join("expected.json")).unwrap()).unwrap();
     for (name, e) in exp.as_object().unwrap() {
         let p = tmp.path().join(name);
         let f = read_uff(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
         let d = &f.datasets[0];
         let (re, im) = (nums(&e["re"]), nums(&e["im"]));
-        let Ordinate::Complex(v) = &d.values else { panic!("complex expected") };
+        let Ordinate::Complex(v) = &d.values else {
+            panic!("complex expected")
+        };
         // binary double exact; ASCII double written by pyuff with %20.11e: 5e-12 relative
         // (its last digit), ASCII single 5e-6.
-        let tol = if name.contains("single") { 5e-6 } else if d.binary { 1e-15 } else { 5e-12 };
+        let tol = if name.contains("single") {
+            5e-6
+        } else if d.binary {
+            1e-15
+        } else {
+            5e-12
+        };
         for k in 0..re.len() {
-            assert!((v[k].re - re[k]).abs() <= tol * re[k].abs() && (v[k].im - im[k]).abs() <= tol * im[k].abs(), "{name} {k}: {} vs {}+{}j", v[k], re[k], im[k]);
+            assert!(
+                (v[k].re - re[k]).abs() <= tol * re[k].abs()
+                    && (v[k].im - im[k]).abs() <= tol * im[k].abs(),
+                "{name} {k}: {} vs {}+{}j",
+                v[k],
+                re[k],
+                im[k]
+            );
         }
         // byte-exact: rfmlab re-writes pyuff's ASCII output identically
         if !d.binary {
             let again = serialize_uff(std::slice::from_ref(d), false, "mem").unwrap();
-            assert_eq!(String::from_utf8_lossy(&again), String::from_utf8_lossy(&std::fs::read(&p).unwrap()), "{name}");
+            assert_eq!(
+                String::from_utf8_lossy(&again),
+                String::from_utf8_lossy(&std::fs::read(&p).unwrap()),
+                "{name}"
+            );
         }
     }
     // (b) rfmlab writes (all 8 layouts ASCII, even/double and single layouts binary), pyuff reads
@@ -132,7 +190,12 @@ fn pyuff_interop_both_ways() {
     let dump = pyuff_dump(&py, &files, tmp.path());
     for (p, d) in files.iter().zip(&ours) {
         let t = &dump[p.to_string_lossy().as_ref()];
-        assert!(t.get("error").is_none(), "pyuff failed on {}: {}", p.display(), t["error"]);
+        assert!(
+            t.get("error").is_none(),
+            "pyuff failed on {}: {}",
+            p.display(),
+            t["error"]
+        );
         let t = &t[0];
         let mut tv = nums(&t["re"]);
         if !t["im"].is_null() {
@@ -141,7 +204,11 @@ fn pyuff_interop_both_ways() {
         }
         // same text (or bytes) parsed by two readers: agree to 1e-12 relative
         for (a, b) in flat(d).iter().zip(&tv) {
-            assert!((a - b).abs() <= 1e-12 * b.abs(), "{}: {a} vs {b}", p.display());
+            assert!(
+                (a - b).abs() <= 1e-12 * b.abs(),
+                "{}: {a} vs {b}",
+                p.display()
+            );
         }
         assert_eq!(tv.len(), flat(d).len());
     }

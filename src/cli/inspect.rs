@@ -30,7 +30,23 @@ pub fn run(a: &InspectArgs, _g: &Global) -> anyhow::Result<()> {
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
-    let head = ["file", "ds", "set", "kind", "response", "reference", "f0", "f1", "df", "n", "quantity", "units", "storage", "level", "notes"];
+    let head = [
+        "file",
+        "ds",
+        "set",
+        "kind",
+        "response",
+        "reference",
+        "f0",
+        "f1",
+        "df",
+        "n",
+        "quantity",
+        "units",
+        "storage",
+        "level",
+        "notes",
+    ];
     let table: Vec<[String; 15]> = rows
         .iter()
         .map(|r| {
@@ -43,7 +59,13 @@ pub fn run(a: &InspectArgs, _g: &Global) -> anyhow::Result<()> {
                 r.reference.clone(),
                 opt(r.f0),
                 opt(r.f1),
-                r.df.map(|d| format!("{d}")).unwrap_or_else(|| if r.n > 0 { "uneven".into() } else { "-".into() }),
+                r.df.map(|d| format!("{d}")).unwrap_or_else(|| {
+                    if r.n > 0 {
+                        "uneven".into()
+                    } else {
+                        "-".into()
+                    }
+                }),
                 r.n.to_string(),
                 r.quantity.clone(),
                 r.units.clone(),
@@ -60,7 +82,11 @@ pub fn run(a: &InspectArgs, _g: &Global) -> anyhow::Result<()> {
         }
     }
     let line = |cells: Vec<String>| {
-        let s: Vec<String> = cells.iter().enumerate().map(|(k, c)| format!("{c:<width$}", width = w[k])).collect();
+        let s: Vec<String> = cells
+            .iter()
+            .enumerate()
+            .map(|(k, c)| format!("{c:<width$}", width = w[k]))
+            .collect();
         println!("{}", s.join("  ").trim_end());
     };
     line(head.iter().map(|s| s.to_string()).collect());

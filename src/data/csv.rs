@@ -35,7 +35,8 @@ use crate::data::uff58::atomic_write;
 use crate::data::{Channel, DataError, FrfLevel, FrfSet, Quantity};
 
 /// The header of the rfmlab CSV layout.
-pub const CSV_HEADER: &str = "level,response_id,response_dir,reference_id,reference_dir,freq_hz,re,im,coherence";
+pub const CSV_HEADER: &str =
+    "level,response_id,response_dir,reference_id,reference_dir,freq_hz,re,im,coherence";
 
 /// Options of [`read_csv`].
 #[derive(Clone, Debug)]
@@ -51,7 +52,11 @@ pub struct CsvOptions {
 
 impl Default for CsvOptions {
     fn default() -> Self {
-        CsvOptions { quantity: None, level: "L1".into(), wide_direction: Direction::PZ }
+        CsvOptions {
+            quantity: None,
+            level: "L1".into(),
+            wide_direction: Direction::PZ,
+        }
     }
 }
 
@@ -85,7 +90,14 @@ struct LevelMeta {
 pub fn read_csv(path: impl AsRef<Path>, opts: &CsvOptions) -> Result<FrfSet, DataError> {
     let path = path.as_ref();
     let label = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| DataError::at(&label, None, None, format!("cannot read the file: {e}; check the path")))?;
+    let bytes = std::fs::read(path).map_err(|e| {
+        DataError::at(
+            &label,
+            None,
+            None,
+            format!("cannot read the file: {e}; check the path"),
+        )
+    })?;
     let text = crate::data::uff58::decode_text(&bytes);
     parse_csv(&text, &label, opts)
 }
@@ -103,11 +115,21 @@ pub fn parse_csv(text: &str, label: &str, opts: &CsvOptions) -> Result<FrfSet, D
             continue;
         }
         if let Some(c) = line.strip_prefix('#') {
-            let kv: BTreeMap<&str, &str> = c.split_whitespace().filter_map(|t| t.split_once('=')).collect();
+            let kv: BTreeMap<&str, &str> = c
+                .split_whitespace()
+                .filter_map(|t| t.split_once('='))
+                .collect();
             if let Some(name) = kv.get("level") {
                 let m = meta.entry(name.to_string()).or_default();
                 if let Some(q) = kv.get("quantity") {
-                    m.quantity = Some(parse_quantity(q).ok_or_else(|| err(ln, format!("unknown quantity {q:?}; use receptance, mobility or accelerance")))?);
+                    m.quantity = Some(parse_quantity(q).ok_or_else(|| {
+                        err(
+                            ln,
+                            format!(
+                                "unknown quantity {q:?}; use receptance, mobility or accelerance"
+                            ),
+                        )
+                    })?);
                 }
                 m.force_rms_n = kv.get("force_rms_n").and_then(|v| v.parse().ok());
                 m.n_averages = kv.get("n_averages").and_then(|v| v.parse().ok());
@@ -127,13 +149,25 @@ pub fn parse_csv(text: &str, label: &str, opts: &CsvOptions) -> Result<FrfSet, D
     let set = if h.first().is_some_and(|c| c == "level") {
         let want: Vec<&str> = CSV_HEADER.split(',').collect();
         if h.len() < 8 || h.iter().zip(&want).any(|(a, b)| a != b) {
-            return Err(err(hl, format!("header {:?} is not the rfmlab layout {CSV_HEADER}", h.join(","))));
+            return Err(err(
+                hl,
+                format!(
+                    "header {:?} is not the rfmlab layout {CSV_HEADER}",
+                    h.join(",")
+                ),
+            ));
         }
         parse_long(&rows, &meta, label, opts)?
     } else if h.first().is_some_and(|c| c.starts_with('f')) {
         parse_wide(hl, &h, &rows, label, opts)?
     } else {
-        return Err(err(hl, format!("unrecognised header {:?}; expected {CSV_HEADER} or f_Hz,re_<name>,im_<name>,...", h.join(","))));
+        return Err(err(
+            hl,
+            format!(
+                "unrecognised header {:?}; expected {CSV_HEADER} or f_Hz,re_<name>,im_<name>,...",
+                h.join(",")
+            ),
+        ));
     };
     for l in &set.levels {
         check_level(l, None, None)?;
@@ -142,12 +176,24 @@ pub fn parse_csv(text: &str, label: &str, opts: &CsvOptions) -> Result<FrfSet, D
 }
 
 fn num(s: &str, what: &str, ln: usize, label: &str) -> Result<f64, DataError> {
-    s.parse::<f64>().map_err(|_| DataError::at(label, None, Some(ln), format!("column {what}: {s:?} is not a number")))
+    s.parse::<f64>().map_err(|_| {
+        DataError::at(
+            label,
+            None,
+            Some(ln),
+            format!("column {what}: {s:?} is not a number"),
+        )
+    })
 }
 
 type Key = (u32, Direction, u32, Direction);
 
-fn parse_long(rows: &[(usize, Vec<&str>)], meta: &BTreeMap<String, LevelMeta>, label: &str, opts: &CsvOptions) -> Result<FrfSet, DataError> {
+fn parse_long(
+    rows: &[(usize, Vec<&str>)],
+    meta: &BTreeMap<String, LevelMeta>,
+    label: &str,
+    opts: &CsvOptions,
+) -> Result<FrfSet, DataError> {
     let err = |line: usize, m: String| DataError::at(label, None, Some(line), m);
     // level -> (channel order, channel -> (freqs, values, coherence, first line))
     type Acc = (Vec<f64>, Vec<C64>, Vec<Option<f64>>, usize);
@@ -155,11 +201,33 @@ fn parse_long(rows: &[(usize, Vec<&str>)], meta: &BTreeMap<String, LevelMeta>, l
     for (ln, f) in rows {
         let ln = *ln;
         if f.len() < 8 || f.len() > 9 {
-            return Err(err(ln, format!("{} columns; expected 9 ({CSV_HEADER})", f.len())));
+            return Err(err(
+                ln,
+                format!("{} columns; expected 9 ({CSV_HEADER})", f.len()),
+            ));
         }
-        let id = |s: &str, what: &str| s.parse::<u32>().map_err(|_| err(ln, format!("column {what}: {s:?} is not a point id (unsigned integer)")));
-        let dir = |s: &str, what: &str| Direction::parse(s).ok_or_else(|| err(ln, format!("column {what}: {s:?} is not a direction like +x, -y, z")));
-        let key = (id(f[1], "response_id")?, dir(f[2], "response_dir")?, id(f[3], "reference_id")?, dir(f[4], "reference_dir")?);
+        let id = |s: &str, what: &str| {
+            s.parse::<u32>().map_err(|_| {
+                err(
+                    ln,
+                    format!("column {what}: {s:?} is not a point id (unsigned integer)"),
+                )
+            })
+        };
+        let dir = |s: &str, what: &str| {
+            Direction::parse(s).ok_or_else(|| {
+                err(
+                    ln,
+                    format!("column {what}: {s:?} is not a direction like +x, -y, z"),
+                )
+            })
+        };
+        let key = (
+            id(f[1], "response_id")?,
+            dir(f[2], "response_dir")?,
+            id(f[3], "reference_id")?,
+            dir(f[4], "reference_dir")?,
+        );
         let fr = num(f[5], "freq_hz", ln, label)?;
         let h = C64::new(num(f[6], "re", ln, label)?, num(f[7], "im", ln, label)?);
         let coh = match f.get(8) {
@@ -177,7 +245,9 @@ fn parse_long(rows: &[(usize, Vec<&str>)], meta: &BTreeMap<String, LevelMeta>, l
         if !lv.2.contains_key(&key) {
             lv.1.push(key);
         }
-        let acc = lv.2.entry(key).or_insert_with(|| (Vec::new(), Vec::new(), Vec::new(), ln));
+        let acc =
+            lv.2.entry(key)
+                .or_insert_with(|| (Vec::new(), Vec::new(), Vec::new(), ln));
         acc.0.push(fr);
         acc.1.push(h);
         acc.2.push(coh);
@@ -197,7 +267,9 @@ fn parse_long(rows: &[(usize, Vec<&str>)], meta: &BTreeMap<String, LevelMeta>, l
             channels: Vec::new(),
         };
         for (k, key) in order.iter().enumerate() {
-            let Some((fr, vals, coh, line)) = chans.remove(key) else { continue };
+            let Some((fr, vals, coh, line)) = chans.remove(key) else {
+                continue;
+            };
             if k == 0 {
                 level.freq_hz = fr;
             } else if fr != level.freq_hz {
@@ -225,7 +297,13 @@ fn parse_long(rows: &[(usize, Vec<&str>)], meta: &BTreeMap<String, LevelMeta>, l
     Ok(set)
 }
 
-fn parse_wide(hl: usize, h: &[String], rows: &[(usize, Vec<&str>)], label: &str, opts: &CsvOptions) -> Result<FrfSet, DataError> {
+fn parse_wide(
+    hl: usize,
+    h: &[String],
+    rows: &[(usize, Vec<&str>)],
+    label: &str,
+    opts: &CsvOptions,
+) -> Result<FrfSet, DataError> {
     let err = |line: usize, m: String| DataError::at(label, None, Some(line), m);
     let quantity = opts.quantity.ok_or_else(|| {
         err(hl, "wide CSV layout does not state the quantity; set it (e.g. accelerance for the bundled beam data)".into())
@@ -234,24 +312,38 @@ fn parse_wide(hl: usize, h: &[String], rows: &[(usize, Vec<&str>)], label: &str,
     let mut pairs: Vec<(String, usize, usize, Option<usize>)> = Vec::new();
     for (i, c) in h.iter().enumerate() {
         if let Some(n) = c.strip_prefix("re_") {
-            let im = h.iter().position(|x| x.strip_prefix("im_") == Some(n)).ok_or_else(|| err(hl, format!("column re_{n} has no im_{n}")))?;
+            let im = h
+                .iter()
+                .position(|x| x.strip_prefix("im_") == Some(n))
+                .ok_or_else(|| err(hl, format!("column re_{n} has no im_{n}")))?;
             let coh = h.iter().position(|x| x.strip_prefix("coh_") == Some(n));
             pairs.push((n.to_string(), i, im, coh));
         }
     }
     if pairs.is_empty() {
-        return Err(err(hl, "no re_<name>/im_<name> column pairs in the header".into()));
+        return Err(err(
+            hl,
+            "no re_<name>/im_<name> column pairs in the header".into(),
+        ));
     }
     let shared_coh = h.iter().position(|x| x == "coherence");
     let wd = opts.wide_direction;
-    let mut level = FrfLevel { name: opts.level.clone(), force_rms_n: None, n_averages: None, quantity, freq_hz: Vec::new(), channels: Vec::new() };
+    let mut level = FrfLevel {
+        name: opts.level.clone(),
+        force_rms_n: None,
+        n_averages: None,
+        quantity,
+        freq_hz: Vec::new(),
+        channels: Vec::new(),
+    };
     for (k, (name, _, _, coh)) in pairs.iter().enumerate() {
         let b = name.as_bytes();
-        let (r, c) = if b.len() == 3 && (b[0] == b'h') && b[1].is_ascii_digit() && b[2].is_ascii_digit() {
-            ((b[1] - b'0') as u32, (b[2] - b'0') as u32)
-        } else {
-            (k as u32 + 1, 1)
-        };
+        let (r, c) =
+            if b.len() == 3 && (b[0] == b'h') && b[1].is_ascii_digit() && b[2].is_ascii_digit() {
+                ((b[1] - b'0') as u32, (b[2] - b'0') as u32)
+            } else {
+                (k as u32 + 1, 1)
+            };
         let has_coh = coh.is_some() || (shared_coh.is_some() && pairs.len() == 1);
         level.channels.push(Channel {
             response_id: r,
@@ -265,11 +357,17 @@ fn parse_wide(hl: usize, h: &[String], rows: &[(usize, Vec<&str>)], label: &str,
     }
     for (ln, f) in rows {
         if f.len() != h.len() {
-            return Err(err(*ln, format!("{} columns, the header has {}", f.len(), h.len())));
+            return Err(err(
+                *ln,
+                format!("{} columns, the header has {}", f.len(), h.len()),
+            ));
         }
         level.freq_hz.push(num(f[0], &h[0], *ln, label)?);
         for (k, (_, re, im, coh)) in pairs.iter().enumerate() {
-            let v = C64::new(num(f[*re], &h[*re], *ln, label)?, num(f[*im], &h[*im], *ln, label)?);
+            let v = C64::new(
+                num(f[*re], &h[*re], *ln, label)?,
+                num(f[*im], &h[*im], *ln, label)?,
+            );
             level.channels[k].values.push(v);
             if let Some(cv) = level.channels[k].coherence.as_mut() {
                 let ci = coh.or(shared_coh).unwrap_or(0);
@@ -277,7 +375,9 @@ fn parse_wide(hl: usize, h: &[String], rows: &[(usize, Vec<&str>)], label: &str,
             }
         }
     }
-    Ok(FrfSet { levels: vec![level] })
+    Ok(FrfSet {
+        levels: vec![level],
+    })
 }
 
 /// The CSV text of a set (rfmlab layout).
@@ -286,9 +386,19 @@ pub fn csv_string(set: &FrfSet) -> Result<String, DataError> {
     let mut s = String::from("# rfmlab FRF CSV (SI units)\n");
     for l in &set.levels {
         if l.name.contains(',') || l.name.contains(char::is_whitespace) || l.name.is_empty() {
-            return Err(DataError::at(format!("level {}", l.name), None, None, "a level name for CSV must be non-empty without commas or blanks; rename the level"));
+            return Err(DataError::at(
+                format!("level {}", l.name),
+                None,
+                None,
+                "a level name for CSV must be non-empty without commas or blanks; rename the level",
+            ));
         }
-        let _ = write!(s, "# level={} quantity={}", l.name, quantity_name(l.quantity));
+        let _ = write!(
+            s,
+            "# level={} quantity={}",
+            l.name,
+            quantity_name(l.quantity)
+        );
         if let Some(f) = l.force_rms_n {
             let _ = write!(s, " force_rms_n={f}");
         }
@@ -302,8 +412,23 @@ pub fn csv_string(set: &FrfSet) -> Result<String, DataError> {
     for l in &set.levels {
         for c in &l.channels {
             for (k, f) in l.freq_hz.iter().enumerate() {
-                let h = c.values.get(k).copied().unwrap_or(C64::new(f64::NAN, f64::NAN));
-                let _ = write!(s, "{},{},{},{},{},{:?},{:?},{:?},", l.name, c.response_id, c.response_dir, c.reference_id, c.reference_dir, f, h.re, h.im);
+                let h = c
+                    .values
+                    .get(k)
+                    .copied()
+                    .unwrap_or(C64::new(f64::NAN, f64::NAN));
+                let _ = write!(
+                    s,
+                    "{},{},{},{},{},{:?},{:?},{:?},",
+                    l.name,
+                    c.response_id,
+                    c.response_dir,
+                    c.reference_id,
+                    c.reference_dir,
+                    f,
+                    h.re,
+                    h.im
+                );
                 if let Some(g) = c.coherence.as_ref().and_then(|g| g.get(k)) {
                     let _ = write!(s, "{g:?}");
                 }

@@ -67,7 +67,11 @@ impl FrfLevel {
     }
 
     /// Index of the channel with this response and reference (axes compared, signs ignored).
-    pub fn find_channel(&self, response: (u32, Direction), reference: (u32, Direction)) -> Option<usize> {
+    pub fn find_channel(
+        &self,
+        response: (u32, Direction),
+        reference: (u32, Direction),
+    ) -> Option<usize> {
         self.channels.iter().position(|c| {
             c.response_id == response.0
                 && c.response_dir.axis == response.1.axis

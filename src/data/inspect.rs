@@ -38,7 +38,8 @@ pub struct InspectRow {
 }
 
 fn is_csv(path: &Path) -> bool {
-    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
 }
 
 /// Describe a UFF (any extension but `.csv`) or CSV file. CSV files whose quantity is not
@@ -48,7 +49,10 @@ pub fn inspect_file(path: impl AsRef<Path>) -> Result<Vec<InspectRow>, DataError
     let label = path.display().to_string();
     let mut rows = Vec::new();
     if is_csv(path) {
-        let opts = CsvOptions { quantity: Some(crate::data::Quantity::Accelerance), ..Default::default() };
+        let opts = CsvOptions {
+            quantity: Some(crate::data::Quantity::Accelerance),
+            ..Default::default()
+        };
         let set = read_csv(path, &opts)?;
         for l in &set.levels {
             let n = l.freq_hz.len();
@@ -57,7 +61,11 @@ pub fn inspect_file(path: impl AsRef<Path>) -> Result<Vec<InspectRow>, DataError
                     file: label.clone(),
                     dataset: i,
                     number: 0,
-                    kind: if c.coherence.is_some() { "csv FRF+coherence".into() } else { "csv FRF".into() },
+                    kind: if c.coherence.is_some() {
+                        "csv FRF+coherence".into()
+                    } else {
+                        "csv FRF".into()
+                    },
                     response: format!("{}{}", c.response_id, c.response_dir),
                     reference: format!("{}{}", c.reference_id, c.reference_dir),
                     f0: l.freq_hz.first().copied(),
@@ -84,17 +92,30 @@ pub fn inspect_file(path: impl AsRef<Path>) -> Result<Vec<InspectRow>, DataError
         };
         let (response, reference) = match dataset_dofs(d, &opts) {
             Some(((r, rd), (c, cd))) => (format!("{r}{rd}"), format!("{c}{cd}")),
-            None => (format!("{} {} {}", d.rsp_entity, d.rsp_node, d.rsp_dir), format!("{} {} {}", d.ref_entity, d.ref_node, d.ref_dir)),
+            None => (
+                format!("{} {} {}", d.rsp_entity, d.rsp_node, d.rsp_dir),
+                format!("{} {} {}", d.ref_entity, d.ref_node, d.ref_dir),
+            ),
         };
         let quantity = if role(d, &opts) == Role::Frf {
-            detect_quantity(d).map(|(q, _)| quantity_name(q).to_string()).unwrap_or_else(|| "unknown".into())
+            detect_quantity(d)
+                .map(|(q, _)| quantity_name(q).to_string())
+                .unwrap_or_else(|| "unknown".into())
         } else {
             String::new()
         };
         let storage = format!(
             "{} {}{}",
-            if d.values.is_complex() { "complex" } else { "real" },
-            if d.precision == Precision::Single { "single" } else { "double" },
+            if d.values.is_complex() {
+                "complex"
+            } else {
+                "real"
+            },
+            if d.precision == Precision::Single {
+                "single"
+            } else {
+                "double"
+            },
             if d.binary { " 58b" } else { "" }
         );
         let level = d.ids[3].trim();
@@ -112,7 +133,11 @@ pub fn inspect_file(path: impl AsRef<Path>) -> Result<Vec<InspectRow>, DataError
             quantity,
             units: d.ordinate.units_label.clone(),
             storage,
-            level: if level == "NONE" { String::new() } else { level.to_string() },
+            level: if level == "NONE" {
+                String::new()
+            } else {
+                level.to_string()
+            },
             notes: d.notes.join("; "),
         });
     }
@@ -167,5 +192,8 @@ fn even_df(f: &[f64]) -> Option<f64> {
     }
     let df = (f[f.len() - 1] - f[0]) / (f.len() - 1) as f64;
     let scale = f[f.len() - 1].abs().max(f[0].abs());
-    f.iter().enumerate().all(|(k, x)| (x - (f[0] + k as f64 * df)).abs() <= 1e-9 * scale).then_some(df)
+    f.iter()
+        .enumerate()
+        .all(|(k, x)| (x - (f[0] + k as f64 * df)).abs() <= 1e-9 * scale)
+        .then_some(df)
 }

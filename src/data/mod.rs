@@ -10,7 +10,7 @@ pub mod uff_frf;
 pub use checks::check_level;
 pub use frf::{Channel, FrfLevel, FrfSet, Quantity};
 pub use inspect::{inspect_file, InspectRow};
-pub use uff58::{parse_uff, read_uff, write_uff, UffFile, Uff58Dataset};
+pub use uff58::{parse_uff, read_uff, write_uff, Uff58Dataset, UffFile};
 pub use uff_frf::{frf_set_from_uff, frf_set_to_uff, UffImportOptions};
 
 /// An error reading or checking measured data: names the file, the dataset (0-based index)
@@ -26,7 +26,17 @@ pub struct DataError {
 
 impl DataError {
     /// An error at `file`, optional dataset index (0-based) and line (1-based).
-    pub fn at(file: impl Into<String>, dataset: Option<usize>, line: Option<usize>, message: impl Into<String>) -> Self {
-        DataError { file: file.into(), dataset, line, message: message.into() }
+    pub fn at(
+        file: impl Into<String>,
+        dataset: Option<usize>,
+        line: Option<usize>,
+        message: impl Into<String>,
+    ) -> Self {
+        DataError {
+            file: file.into(),
+            dataset,
+            line,
+            message: message.into(),
+        }
     }
 }

@@ -71,7 +71,12 @@ pub struct AxisSpec {
 impl AxisSpec {
     /// A record with the given type and labels, exponents 0.
     pub fn new(spec_type: i32, axis_label: &str, units_label: &str) -> Self {
-        AxisSpec { spec_type, axis_label: axis_label.to_string(), units_label: units_label.to_string(), ..Default::default() }
+        AxisSpec {
+            spec_type,
+            axis_label: axis_label.to_string(),
+            units_label: units_label.to_string(),
+            ..Default::default()
+        }
     }
 }
 
@@ -129,7 +134,13 @@ impl Uff58Dataset {
         let n = values.len();
         let x = (0..n).map(|k| x0 + k as f64 * dx).collect();
         Uff58Dataset {
-            ids: ["NONE".into(), "NONE".into(), "NONE".into(), "NONE".into(), "NONE".into()],
+            ids: [
+                "NONE".into(),
+                "NONE".into(),
+                "NONE".into(),
+                "NONE".into(),
+                "NONE".into(),
+            ],
             func_type,
             func_id: 0,
             version: 0,
@@ -206,8 +217,14 @@ pub struct UffFile {
 pub fn read_uff(path: impl AsRef<Path>) -> Result<UffFile, DataError> {
     let path = path.as_ref();
     let label = path.display().to_string();
-    let bytes = std::fs::read(path)
-        .map_err(|e| DataError::at(&label, None, None, format!("cannot read the file: {e}; check the path")))?;
+    let bytes = std::fs::read(path).map_err(|e| {
+        DataError::at(
+            &label,
+            None,
+            None,
+            format!("cannot read the file: {e}; check the path"),
+        )
+    })?;
     parse_uff(&bytes, &label)
 }
 
@@ -223,8 +240,14 @@ pub(crate) fn decode_text(b: &[u8]) -> String {
 }
 
 fn trim_bytes(b: &[u8]) -> &[u8] {
-    let s = b.iter().position(|c| !c.is_ascii_whitespace()).unwrap_or(b.len());
-    let e = b.iter().rposition(|c| !c.is_ascii_whitespace()).map_or(s, |p| p + 1);
+    let s = b
+        .iter()
+        .position(|c| !c.is_ascii_whitespace())
+        .unwrap_or(b.len());
+    let e = b
+        .iter()
+        .rposition(|c| !c.is_ascii_whitespace())
+        .map_or(s, |p| p + 1);
     &b[s..e.max(s)]
 }
 
@@ -252,16 +275,25 @@ pub(crate) fn parse_fortran_f64(b: &[u8]) -> Option<f64> {
     if t.is_empty() || t.len() > 64 {
         return None;
     }
-    let mut s: Vec<u8> = t.iter().map(|&c| if c == b'D' || c == b'd' { b'E' } else { c }).collect();
+    let mut s: Vec<u8> = t
+        .iter()
+        .map(|&c| if c == b'D' || c == b'd' { b'E' } else { c })
+        .collect();
     if !s.iter().any(|&c| c == b'E' || c == b'e') {
         // 1.234-105 -> 1.234E-105
-        if let Some(p) = (1..s.len()).rev().find(|&i| (s[i] == b'-' || s[i] == b'+') && s[i - 1].is_ascii_digit()) {
+        if let Some(p) = (1..s.len())
+            .rev()
+            .find(|&i| (s[i] == b'-' || s[i] == b'+') && s[i - 1].is_ascii_digit())
+        {
             s.insert(p, b'E');
         }
     }
     let st = std::str::from_utf8(&s).ok()?;
     // Reject words Rust would accept (inf, nan) only when they are not numeric-looking.
-    if !st.bytes().all(|c| c.is_ascii_digit() || matches!(c, b'+' | b'-' | b'.' | b'E' | b'e')) {
+    if !st
+        .bytes()
+        .all(|c| c.is_ascii_digit() || matches!(c, b'+' | b'-' | b'.' | b'E' | b'e'))
+    {
         return None;
     }
     st.parse().ok()
@@ -276,7 +308,9 @@ fn parse_header_f64(b: &[u8]) -> Option<f64> {
 }
 
 fn tokens(line: &[u8]) -> Vec<&[u8]> {
-    line.split(|c| c.is_ascii_whitespace()).filter(|t| !t.is_empty()).collect()
+    line.split(|c| c.is_ascii_whitespace())
+        .filter(|t| !t.is_empty())
+        .collect()
 }
 
 /// A delimiter line: `-1` alone (any surrounding blanks).
@@ -324,8 +358,15 @@ impl<'a> Cursor<'a> {
 /// naming the file, the dataset index and the line.
 pub fn parse_uff(bytes: &[u8], file_label: &str) -> Result<UffFile, DataError> {
     let bytes: &[u8] = bytes;
-    let mut out = UffFile { label: file_label.to_string(), ..Default::default() };
-    let mut cur = Cursor { b: bytes, pos: 0, line: 0 };
+    let mut out = UffFile {
+        label: file_label.to_string(),
+        ..Default::default()
+    };
+    let mut cur = Cursor {
+        b: bytes,
+        pos: 0,
+        line: 0,
+    };
     let mut index = 0usize;
     let mut carried_delim: Option<usize> = None;
     loop {
@@ -346,7 +387,9 @@ pub fn parse_uff(bytes: &[u8], file_label: &str) -> Result<UffFile, DataError> {
                 }
             }
         };
-        let Some(id_line) = cur.next_line() else { break };
+        let Some(id_line) = cur.next_line() else {
+            break;
+        };
         if is_delim(id_line) {
             // consecutive delimiters: treat the second as the opening one
             carried_delim = Some(cur.line);
@@ -357,14 +400,20 @@ pub fn parse_uff(bytes: &[u8], file_label: &str) -> Result<UffFile, DataError> {
         }
         let id_tok = trim_bytes(cols(id_line, 0, 6));
         let number = parse_int(id_tok).filter(|_| !id_tok.is_empty());
-        let binary = id_line.get(6).is_some_and(|c| c.eq_ignore_ascii_case(&b'b'));
+        let binary = id_line
+            .get(6)
+            .is_some_and(|c| c.eq_ignore_ascii_case(&b'b'));
         let number = match number {
             Some(n) => n,
             None => {
                 // maybe a left-justified id such as "58b"
                 let t = tokens(id_line);
                 let first = t.first().copied().unwrap_or(&[]);
-                let digits: Vec<u8> = first.iter().copied().take_while(|c| c.is_ascii_digit()).collect();
+                let digits: Vec<u8> = first
+                    .iter()
+                    .copied()
+                    .take_while(|c| c.is_ascii_digit())
+                    .collect();
                 match parse_int(&digits).filter(|_| !digits.is_empty()) {
                     Some(n) => n,
                     None => {
@@ -419,7 +468,9 @@ pub fn parse_uff(bytes: &[u8], file_label: &str) -> Result<UffFile, DataError> {
                     number,
                     index,
                     line: open_line,
-                    reason: format!("dataset {number} carries no functions (only 58 and 164 are read)"),
+                    reason: format!(
+                        "dataset {number} carries no functions (only 58 and 164 are read)"
+                    ),
                 });
                 if !closed {
                     break;
@@ -443,11 +494,17 @@ fn parse_164(cur: &mut Cursor) -> (Option<UnitFactors>, bool) {
         }
         lines.push(l);
     }
-    let Some(r1) = lines.first() else { return (None, closed) };
+    let Some(r1) = lines.first() else {
+        return (None, closed);
+    };
     let code = parse_int(cols(r1, 0, 10)).unwrap_or(0) as i32;
     let description = decode_text(trim_bytes(cols(r1, 10, 20)));
     let temperature_mode = parse_int(cols(r1, 30, 10)).unwrap_or(0) as i32;
-    let vals: Vec<f64> = lines[1..].iter().flat_map(|l| tokens(l)).filter_map(parse_fortran_f64).collect();
+    let vals: Vec<f64> = lines[1..]
+        .iter()
+        .flat_map(|l| tokens(l))
+        .filter_map(parse_fortran_f64)
+        .collect();
     if vals.len() < 3 || vals[..3].iter().any(|v| !v.is_finite() || *v <= 0.0) {
         return (None, closed);
     }
@@ -567,10 +624,18 @@ fn parse_58(
             return Err(err(cur.line, format!("58b floating-point format {fp} is not IEEE 754 (2); convert the file to IEEE or ASCII")));
         }
         if byte_order != 1 && byte_order != 2 {
-            return Err(err(cur.line, format!("58b byte order {byte_order} is neither 1 (little endian) nor 2 (big endian)")));
+            return Err(err(
+                cur.line,
+                format!(
+                    "58b byte order {byte_order} is neither 1 (little endian) nor 2 (big endian)"
+                ),
+            ));
         }
         if f[2] != Some(11) {
-            notes.push(format!("58b header says {} ASCII lines (expected 11)", f[2].unwrap_or(0)));
+            notes.push(format!(
+                "58b header says {} ASCII lines (expected 11)",
+                f[2].unwrap_or(0)
+            ));
         }
         n_bytes_hdr = f[3].and_then(|v| usize::try_from(v).ok());
     }
@@ -600,7 +665,18 @@ fn parse_58(
     }
     let ints_at = [0usize, 1, 2, 3, 5, 6, 8, 9];
     let fixed_ok = ints_at.iter().all(|&k| parse_int(fields6[k]).is_some());
-    let (func_type, func_id, version, load_case, rsp_entity, rsp_node, rsp_dir, ref_entity, ref_node, ref_dir) = if fixed_ok {
+    let (
+        func_type,
+        func_id,
+        version,
+        load_case,
+        rsp_entity,
+        rsp_node,
+        rsp_dir,
+        ref_entity,
+        ref_node,
+        ref_dir,
+    ) = if fixed_ok {
         let g = |k: usize| parse_int(fields6[k]).unwrap_or(0);
         (
             g(0),
@@ -617,14 +693,27 @@ fn parse_58(
     } else {
         let t = tokens(r6);
         let gi = |k: usize| t.get(k).and_then(|x| parse_int(x));
-        match (t.len(), gi(0), gi(1), gi(2), gi(3), gi(5), gi(6), gi(8), gi(9)) {
+        match (
+            t.len(),
+            gi(0),
+            gi(1),
+            gi(2),
+            gi(3),
+            gi(5),
+            gi(6),
+            gi(8),
+            gi(9),
+        ) {
             (10, Some(a), Some(b), Some(c), Some(d), Some(e), Some(f), Some(g), Some(h)) => {
                 (a, b, c, d, decode_text(t[4]), e, f, decode_text(t[7]), g, h)
             }
             _ => {
                 return Err(err(
                     hdr_line0 + 5,
-                    format!("record 6 (DOF identification) unreadable: {:?}", decode_text(r6).trim_end()),
+                    format!(
+                        "record 6 (DOF identification) unreadable: {:?}",
+                        decode_text(r6).trim_end()
+                    ),
                 ))
             }
         }
@@ -632,31 +721,61 @@ fn parse_58(
     // record 7
     let r7 = rec[6];
     let t7 = tokens(r7);
-    let tok_vals: Option<Vec<f64>> =
-        if t7.len() == 6 { t7.iter().map(|x| parse_header_f64(x)).collect() } else { None };
+    let tok_vals: Option<Vec<f64>> = if t7.len() == 6 {
+        t7.iter().map(|x| parse_header_f64(x)).collect()
+    } else {
+        None
+    };
     let vals7: Vec<f64> = match tok_vals {
         Some(v) => v,
         None => {
             let w7 = [(0, 10), (10, 10), (20, 10), (30, 13), (43, 13), (56, 13)];
-            let v: Option<Vec<f64>> = w7.iter().map(|(s, w)| parse_header_f64(cols(r7, *s, *w))).collect();
-            v.ok_or_else(|| err(hdr_line0 + 6, format!("record 7 (data form) unreadable: {:?}", decode_text(r7).trim_end())))?
+            let v: Option<Vec<f64>> = w7
+                .iter()
+                .map(|(s, w)| parse_header_f64(cols(r7, *s, *w)))
+                .collect();
+            v.ok_or_else(|| {
+                err(
+                    hdr_line0 + 6,
+                    format!(
+                        "record 7 (data form) unreadable: {:?}",
+                        decode_text(r7).trim_end()
+                    ),
+                )
+            })?
         }
     };
-    let as_int = |v: f64| -> Option<i64> { (v.fract() == 0.0 && v.abs() < 1e15).then_some(v as i64) };
+    let as_int =
+        |v: f64| -> Option<i64> { (v.fract() == 0.0 && v.abs() < 1e15).then_some(v as i64) };
     let ord_data_type = as_int(vals7[0]).unwrap_or(-1);
     let num_pts = as_int(vals7[1]).unwrap_or(-1);
     let spacing = as_int(vals7[2]).unwrap_or(-1);
     if ![2, 4, 5, 6].contains(&ord_data_type) {
         return Err(err(
             hdr_line0 + 6,
-            format!("record 7: ordinate data type {} is not 2, 4, 5 or 6 (real/complex, single/double)", vals7[0]),
+            format!(
+                "record 7: ordinate data type {} is not 2, 4, 5 or 6 (real/complex, single/double)",
+                vals7[0]
+            ),
         ));
     }
     if num_pts < 0 {
-        return Err(err(hdr_line0 + 6, format!("record 7: number of points {} is not a non-negative integer", vals7[1])));
+        return Err(err(
+            hdr_line0 + 6,
+            format!(
+                "record 7: number of points {} is not a non-negative integer",
+                vals7[1]
+            ),
+        ));
     }
     if spacing != 0 && spacing != 1 {
-        return Err(err(hdr_line0 + 6, format!("record 7: abscissa spacing {} is neither 0 (uneven) nor 1 (even)", vals7[2])));
+        return Err(err(
+            hdr_line0 + 6,
+            format!(
+                "record 7: abscissa spacing {} is neither 0 (uneven) nor 1 (even)",
+                vals7[2]
+            ),
+        ));
     }
     let num_pts = num_pts as usize;
     let even = spacing == 1;
@@ -664,14 +783,27 @@ fn parse_58(
     let mut axes = Vec::with_capacity(4);
     for k in 0..4 {
         axes.push(parse_axis(rec[7 + k]).ok_or_else(|| {
-            err(hdr_line0 + 7 + k, format!("record {} (axis data) unreadable: {:?}", 8 + k, decode_text(rec[7 + k]).trim_end()))
+            err(
+                hdr_line0 + 7 + k,
+                format!(
+                    "record {} (axis data) unreadable: {:?}",
+                    8 + k,
+                    decode_text(rec[7 + k]).trim_end()
+                ),
+            )
         })?);
     }
     let ord_type = ord_data_type as i32;
     let complex = ord_type == 5 || ord_type == 6;
-    let precision = if ord_type == 2 || ord_type == 5 { Precision::Single } else { Precision::Double };
+    let precision = if ord_type == 2 || ord_type == 5 {
+        Precision::Single
+    } else {
+        Precision::Double
+    };
     let (per_pt, widths) = layout(ord_type, even);
-    let n_want = num_pts.checked_mul(per_pt).ok_or_else(|| err(hdr_line0 + 6, "record 7: number of points too large".into()))?;
+    let n_want = num_pts
+        .checked_mul(per_pt)
+        .ok_or_else(|| err(hdr_line0 + 6, "record 7: number of points too large".into()))?;
 
     // record 12
     let mut raw: Vec<f64>;
@@ -727,7 +859,9 @@ fn parse_58(
                 abscissa_f64_in_binary = ord_size == 8;
                 notes.push("58b uneven abscissa stored in ordinate precision (not float32 as the spec says); decoded that way".into());
             } else {
-                notes.push(format!("58b: using {n_used} bytes from the header; the layout needs {spec}"));
+                notes.push(format!(
+                    "58b: using {n_used} bytes from the header; the layout needs {spec}"
+                ));
             }
         }
         if let Some(h) = n_bytes_hdr {
@@ -742,7 +876,11 @@ fn parse_58(
         let mut p = 0usize;
         let rd4 = |p: usize| -> f64 {
             let a = [blob[p], blob[p + 1], blob[p + 2], blob[p + 3]];
-            (if le { f32::from_le_bytes(a) } else { f32::from_be_bytes(a) }) as f64
+            (if le {
+                f32::from_le_bytes(a)
+            } else {
+                f32::from_be_bytes(a)
+            }) as f64
         };
         let rd8 = |p: usize| -> f64 {
             let mut a = [0u8; 8];
@@ -753,7 +891,13 @@ fn parse_58(
                 f64::from_be_bytes(a)
             }
         };
-        let x_size = if even { 0 } else if abscissa_f64_in_binary || (n_used == alt && ord_size == 4) { ord_size } else { 4 };
+        let x_size = if even {
+            0
+        } else if abscissa_f64_in_binary || (n_used == alt && ord_size == 4) {
+            ord_size
+        } else {
+            4
+        };
         let pt_size = x_size + nv * ord_size;
         for _ in 0..num_pts {
             if p + pt_size > blob.len() {
@@ -786,7 +930,14 @@ fn parse_58(
             notes.push("no closing '-1' after the binary data".into());
         }
         if raw.len() < n_want {
-            return Err(err(data_line, format!("58b data truncated: {} of {} values present", raw.len(), n_want)));
+            return Err(err(
+                data_line,
+                format!(
+                    "58b data truncated: {} of {} values present",
+                    raw.len(),
+                    n_want
+                ),
+            ));
         }
     } else {
         data_line = cur.line + 1;
@@ -809,12 +960,19 @@ fn parse_58(
             if !parse_data_line(l, widths, &mut raw) {
                 return Err(err(
                     cur.line,
-                    format!("record 12: garbage in data line {:?}; expected numbers", decode_text(cols(l, 0, 80)).trim_end()),
+                    format!(
+                        "record 12: garbage in data line {:?}; expected numbers",
+                        decode_text(cols(l, 0, 80)).trim_end()
+                    ),
                 ));
             }
         }
         if raw.len() < n_want {
-            let what = if closed { "inconsistent num_pts" } else { "truncated dataset (no closing '-1')" };
+            let what = if closed {
+                "inconsistent num_pts"
+            } else {
+                "truncated dataset (no closing '-1')"
+            };
             return Err(err(
                 cur.line,
                 format!(
@@ -828,7 +986,9 @@ fn parse_58(
         }
         if raw.len() > n_want {
             let pts_found = raw.len() as f64 / per_pt as f64;
-            notes.push(format!("num_pts {num_pts} but {pts_found} values present; kept {num_pts}"));
+            notes.push(format!(
+                "num_pts {num_pts} but {pts_found} values present; kept {num_pts}"
+            ));
             raw.truncate(n_want);
         }
     }
@@ -865,8 +1025,9 @@ fn parse_58(
     if even {
         x = (0..num_pts).map(|k| x0 + k as f64 * dx).collect();
     }
-    let [abscissa, ordinate, denominator, z_axis]: [AxisSpec; 4] =
-        axes.try_into().map_err(|_| err(hdr_line0, "internal: axis records".into()))?;
+    let [abscissa, ordinate, denominator, z_axis]: [AxisSpec; 4] = axes
+        .try_into()
+        .map_err(|_| err(hdr_line0, "internal: axis records".into()))?;
     Ok(Uff58Dataset {
         ids,
         func_type: func_type as i32,
@@ -909,7 +1070,11 @@ pub fn fmt_e(v: f64, width: usize, prec: usize) -> String {
     let body = match s.split_once('e') {
         Some((m, e)) => {
             let exp: i32 = e.parse().unwrap_or(0);
-            format!("{m}e{}{:02}", if exp < 0 { '-' } else { '+' }, exp.unsigned_abs())
+            format!(
+                "{m}e{}{:02}",
+                if exp < 0 { '-' } else { '+' },
+                exp.unsigned_abs()
+            )
         }
         None => s,
     };
@@ -949,20 +1114,29 @@ fn push_line(out: &mut Vec<u8>, s: &str) {
 /// `2(E13.5,E20.11)`; double uneven complex `E13.5,2E20.11`, exactly as pyuff writes. 58b: the
 /// ordinate in its precision (float32/float64), uneven abscissa as float32 as the spec says,
 /// the header byte count equal to the data length. Non-finite values are an error.
-pub fn serialize_uff(datasets: &[Uff58Dataset], binary: bool, file_label: &str) -> Result<Vec<u8>, DataError> {
+pub fn serialize_uff(
+    datasets: &[Uff58Dataset],
+    binary: bool,
+    file_label: &str,
+) -> Result<Vec<u8>, DataError> {
     let mut out = Vec::new();
     for (k, d) in datasets.iter().enumerate() {
         let err = |m: String| DataError::at(file_label, Some(k), None, m);
         let n = d.values.len();
         if !d.even && d.x.len() != n {
-            return Err(err(format!("uneven dataset has {} abscissa values for {n} ordinate values", d.x.len())));
+            return Err(err(format!(
+                "uneven dataset has {} abscissa values for {n} ordinate values",
+                d.x.len()
+            )));
         }
         let finite = match &d.values {
             Ordinate::Real(v) => v.iter().all(|x| x.is_finite()),
             Ordinate::Complex(v) => v.iter().all(|x| x.re.is_finite() && x.im.is_finite()),
         };
         if !finite || (!d.even && d.x.iter().any(|x| !x.is_finite())) {
-            return Err(err("non-finite values cannot be written to UFF; remove or replace them first".into()));
+            return Err(err(
+                "non-finite values cannot be written to UFF; remove or replace them first".into(),
+            ));
         }
         let complex = d.values.is_complex();
         let single = d.precision == Precision::Single;
@@ -977,7 +1151,13 @@ pub fn serialize_uff(datasets: &[Uff58Dataset], binary: bool, file_label: &str) 
         let n_bytes = n * (nv * ord_size + if d.even { 0 } else { 4 });
         push_line(&mut out, "    -1");
         if binary {
-            push_line(&mut out, &format!("    58b{:6}{:6}{:12}{:12}{:6}{:6}{:12}{:12}", 1, 2, 11, n_bytes, 0, 0, 0, 0));
+            push_line(
+                &mut out,
+                &format!(
+                    "    58b{:6}{:6}{:12}{:12}{:6}{:6}{:12}{:12}",
+                    1, 2, 11, n_bytes, 0, 0, 0, 0
+                ),
+            );
         } else {
             push_line(&mut out, &format!("    58{:74}", ""));
         }
@@ -1093,7 +1273,11 @@ pub fn serialize_uff(datasets: &[Uff58Dataset], binary: bool, file_label: &str) 
 
 /// Write datasets 58 to `path` (ASCII, or 58b when `binary`), atomically (temporary file in the
 /// same folder, then rename). See [`serialize_uff`] for the layout.
-pub fn write_uff(path: impl AsRef<Path>, datasets: &[Uff58Dataset], binary: bool) -> Result<(), DataError> {
+pub fn write_uff(
+    path: impl AsRef<Path>,
+    datasets: &[Uff58Dataset],
+    binary: bool,
+) -> Result<(), DataError> {
     let path = path.as_ref();
     let label = path.display().to_string();
     let bytes = serialize_uff(datasets, binary, &label)?;
@@ -1108,7 +1292,10 @@ pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), DataError> {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => std::path::PathBuf::from("."),
     };
-    let fname = path.file_name().map(|s| s.to_string_lossy().to_string()).unwrap_or_else(|| "out".into());
+    let fname = path
+        .file_name()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_else(|| "out".into());
     let tmp = dir.join(format!(".{fname}.tmp{}", std::process::id()));
     let res = (|| -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
@@ -1118,7 +1305,9 @@ pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), DataError> {
     })();
     if let Err(err) = res {
         let _ = std::fs::remove_file(&tmp);
-        return Err(e(format!("cannot write the file: {err}; check that the folder exists and is writable")));
+        return Err(e(format!(
+            "cannot write the file: {err}; check that the folder exists and is writable"
+        )));
     }
     Ok(())
 }
@@ -1140,14 +1329,18 @@ mod tests {
     fn c_style_exponent() {
         assert_eq!(fmt_e(1.0, 13, 5), "  1.00000e+00");
         assert_eq!(fmt_e(-0.000123456789, 20, 11), "  -1.23456789000e-04");
-        assert_eq!(fmt_e(1e-100, 13, 5), "  1.00000e-100");
+        assert_eq!(fmt_e(1e-100, 13, 5), " 1.00000e-100");
         assert_eq!(fmt_e(0.0, 13, 5), "  0.00000e+00");
     }
 
     #[test]
     fn glued_fields() {
         let mut v = Vec::new();
-        assert!(parse_data_line(b"-3.09944E-004-2.74181E-004  -0.00115633", &[13; 6], &mut v));
+        assert!(parse_data_line(
+            b"-3.09944E-004-2.74181E-004  -0.00115633",
+            &[13; 6],
+            &mut v
+        ));
         assert_eq!(v, vec![-3.09944e-4, -2.74181e-4, -0.00115633]);
     }
 }

@@ -21,7 +21,9 @@ use std::path::Path;
 
 use crate::common::{Direction, C64};
 use crate::data::checks::check_level;
-use crate::data::uff58::{read_uff, write_uff, AxisSpec, Ordinate, Precision, Uff58Dataset, UffFile};
+use crate::data::uff58::{
+    read_uff, write_uff, AxisSpec, Ordinate, Precision, Uff58Dataset, UffFile,
+};
 use crate::data::{Channel, DataError, FrfLevel, FrfSet, Quantity};
 
 /// Standard gravity (m/s^2) for labels in g.
@@ -43,7 +45,12 @@ pub struct UffImportOptions {
 
 impl Default for UffImportOptions {
     fn default() -> Self {
-        UffImportOptions { quantity: None, accept_general_frf: true, dof_from_entity_name: true, grid_rel_tol: 1e-6 }
+        UffImportOptions {
+            quantity: None,
+            accept_general_frf: true,
+            dof_from_entity_name: true,
+            grid_rel_tol: 1e-6,
+        }
     }
 }
 
@@ -60,7 +67,9 @@ pub fn role(d: &Uff58Dataset, opts: &UffImportOptions) -> Role {
     match d.func_type {
         4 => Role::Frf,
         6 => Role::Coherence,
-        0 if opts.accept_general_frf && d.denominator.spec_type == 13 && d.values.is_complex() => Role::Frf,
+        0 if opts.accept_general_frf && d.denominator.spec_type == 13 && d.values.is_complex() => {
+            Role::Frf
+        }
         _ => Role::Other,
     }
 }
@@ -75,18 +84,29 @@ pub fn quantity_from_label(label: &str) -> Option<(Quantity, f64)> {
         .filter(|c| !c.is_whitespace())
         .collect();
     let l = l.replace("s2", "s^2");
-    let scale = if l.contains("mm/") || l.contains("(mm)") { 1e-3 } else { 1.0 };
+    let scale = if l.contains("mm/") || l.contains("(mm)") {
+        1e-3
+    } else {
+        1.0
+    };
     if l.contains("m/s^2") || l.contains("m/s/s") {
         return Some((Quantity::Accelerance, scale));
     }
     if l.contains("m/s") {
         return Some((Quantity::Mobility, scale));
     }
-    let words: Vec<&str> = l.split(|c: char| !c.is_ascii_alphanumeric()).filter(|w| !w.is_empty()).collect();
+    let words: Vec<&str> = l
+        .split(|c: char| !c.is_ascii_alphanumeric())
+        .filter(|w| !w.is_empty())
+        .collect();
     if words.contains(&"g") {
         return Some((Quantity::Accelerance, G_STANDARD));
     }
-    if l.contains("m/n") || words == ["m"] || words == ["mm"] || (words.contains(&"m") && words.contains(&"n")) {
+    if l.contains("m/n")
+        || words == ["m"]
+        || words == ["mm"]
+        || (words.contains(&"m") && words.contains(&"n"))
+    {
         return Some((Quantity::Receptance, scale));
     }
     None
@@ -112,7 +132,9 @@ pub fn detect_quantity(d: &Uff58Dataset) -> Option<(Quantity, f64)> {
 /// Node and signed direction from an entity name such as `.1.Z-`, `.56.Z`, `3+X`, `12:-y`.
 pub fn dof_from_entity(name: &str) -> Option<(u32, Direction)> {
     let b: Vec<char> = name.trim().chars().collect();
-    let ai = b.iter().rposition(|c| matches!(c.to_ascii_lowercase(), 'x' | 'y' | 'z'))?;
+    let ai = b
+        .iter()
+        .rposition(|c| matches!(c.to_ascii_lowercase(), 'x' | 'y' | 'z'))?;
     let mut sign = 1i8;
     if b.get(ai + 1) == Some(&'-') || (ai > 0 && b[ai - 1] == '-') {
         sign = -1;
@@ -120,13 +142,23 @@ pub fn dof_from_entity(name: &str) -> Option<(u32, Direction)> {
     let axis_s = b[ai].to_string();
     let dir = Direction::parse(&axis_s)?;
     let digits_end = b[..ai].iter().rposition(|c| c.is_ascii_digit())? + 1;
-    let digits_start = b[..digits_end].iter().rposition(|c| !c.is_ascii_digit()).map_or(0, |p| p + 1);
-    let node: u32 = b[digits_start..digits_end].iter().collect::<String>().parse().ok()?;
+    let digits_start = b[..digits_end]
+        .iter()
+        .rposition(|c| !c.is_ascii_digit())
+        .map_or(0, |p| p + 1);
+    let node: u32 = b[digits_start..digits_end]
+        .iter()
+        .collect::<String>()
+        .parse()
+        .ok()?;
     Some((node, Direction::new(dir.axis, sign)))
 }
 
 /// Response and reference DOF of a dataset (record 6, else entity names).
-pub fn dataset_dofs(d: &Uff58Dataset, opts: &UffImportOptions) -> Option<((u32, Direction), (u32, Direction))> {
+pub fn dataset_dofs(
+    d: &Uff58Dataset,
+    opts: &UffImportOptions,
+) -> Option<((u32, Direction), (u32, Direction))> {
     let one = |node: i64, dir: i32, ent: &str| -> Option<(u32, Direction)> {
         if dir == 0 && opts.dof_from_entity_name {
             if let Some(v) = dof_from_entity(ent) {
@@ -136,18 +168,27 @@ pub fn dataset_dofs(d: &Uff58Dataset, opts: &UffImportOptions) -> Option<((u32, 
         let n = u32::try_from(node).ok()?;
         Some((n, Direction::from_uff_code(dir)?))
     };
-    Some((one(d.rsp_node, d.rsp_dir, &d.rsp_entity)?, one(d.ref_node, d.ref_dir, &d.ref_entity)?))
+    Some((
+        one(d.rsp_node, d.rsp_dir, &d.rsp_entity)?,
+        one(d.ref_node, d.ref_dir, &d.ref_entity)?,
+    ))
 }
 
 fn parse_kv(ids: &[String; 5], key: &str) -> Option<f64> {
-    ids.iter().flat_map(|s| s.split_whitespace()).find_map(|t| t.strip_prefix(key)?.strip_prefix('=')?.parse().ok())
+    ids.iter()
+        .flat_map(|s| s.split_whitespace())
+        .find_map(|t| t.strip_prefix(key)?.strip_prefix('=')?.parse().ok())
 }
 
 fn grids_match(a: &[f64], b: &[f64], rel: f64) -> bool {
     if a.len() != b.len() {
         return false;
     }
-    let scale = a.iter().chain(b.iter()).fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300);
+    let scale = a
+        .iter()
+        .chain(b.iter())
+        .fold(0.0f64, |m, x| m.max(x.abs()))
+        .max(1e-300);
     a.iter().zip(b).all(|(x, y)| (x - y).abs() <= rel * scale)
 }
 
@@ -168,7 +209,10 @@ pub fn convert_value(h: C64, freq_hz: f64, from: Quantity, to: Quantity) -> C64 
 /// each dataset's ID line 4 (load case name; `NONE` -> `L1`). RMS force and averages are read
 /// from `force_rms_n=...` / `n_averages=...` tokens in the ID lines (written by
 /// [`frf_set_to_uff`]). Each level is checked with [`check_level`] (no excitation, no band).
-pub fn frf_set_from_uff<P: AsRef<Path>>(files: &[(P, String)], opts: &UffImportOptions) -> Result<FrfSet, DataError> {
+pub fn frf_set_from_uff<P: AsRef<Path>>(
+    files: &[(P, String)],
+    opts: &UffImportOptions,
+) -> Result<FrfSet, DataError> {
     let mut loaded = Vec::new();
     for (p, lvl) in files {
         loaded.push((read_uff(p)?, lvl.clone()));
@@ -177,7 +221,10 @@ pub fn frf_set_from_uff<P: AsRef<Path>>(files: &[(P, String)], opts: &UffImportO
 }
 
 /// [`frf_set_from_uff`] on files already read.
-pub fn frf_set_from_uff_files(files: &[(UffFile, String)], opts: &UffImportOptions) -> Result<FrfSet, DataError> {
+pub fn frf_set_from_uff_files(
+    files: &[(UffFile, String)],
+    opts: &UffImportOptions,
+) -> Result<FrfSet, DataError> {
     let mut order: Vec<String> = Vec::new();
     let mut levels: BTreeMap<String, FrfLevel> = BTreeMap::new();
     // coherences are attached after all FRFs are in
@@ -225,7 +272,9 @@ pub fn frf_set_from_uff_files(files: &[(UffFile, String)], opts: &UffImportOptio
                 Ordinate::Real(v) => v.iter().map(|h| C64::new(h * scale, 0.0)).collect(),
             };
             if d.abscissa.spec_type == 17 {
-                return Err(err("FRF over a time abscissa (spec type 17); expected frequency in Hz".into()));
+                return Err(err(
+                    "FRF over a time abscissa (spec type 17); expected frequency in Hz".into(),
+                ));
             }
             let level = levels.entry(name.clone()).or_insert_with(|| {
                 order.push(name.clone());
@@ -252,7 +301,11 @@ pub fn frf_set_from_uff_files(files: &[(UffFile, String)], opts: &UffImportOptio
             let values = if q == level.quantity {
                 values
             } else {
-                values.iter().zip(&level.freq_hz).map(|(h, f)| convert_value(*h, *f, q, level.quantity)).collect()
+                values
+                    .iter()
+                    .zip(&level.freq_hz)
+                    .map(|(h, f)| convert_value(*h, *f, q, level.quantity))
+                    .collect()
             };
             level.channels.push(Channel {
                 response_id: rid,
@@ -267,22 +320,35 @@ pub fn frf_set_from_uff_files(files: &[(UffFile, String)], opts: &UffImportOptio
     }
     for (name, f, d) in coh {
         let err = |m: String| DataError::at(&f.label, Some(d.index), Some(d.line), m);
-        let Some(level) = levels.get_mut(&name) else { continue };
-        let Some(((rid, rdir), (fid, fdir))) = dataset_dofs(d, opts) else { continue };
+        let Some(level) = levels.get_mut(&name) else {
+            continue;
+        };
+        let Some(((rid, rdir), (fid, fdir))) = dataset_dofs(d, opts) else {
+            continue;
+        };
         let Some(ch) = level.channels.iter_mut().find(|c| {
-            c.response_id == rid && c.response_dir.axis == rdir.axis && c.reference_id == fid && c.reference_dir.axis == fdir.axis
+            c.response_id == rid
+                && c.response_dir.axis == rdir.axis
+                && c.reference_id == fid
+                && c.reference_dir.axis == fdir.axis
         }) else {
             continue;
         };
         if !grids_match(&level.freq_hz, &d.x, opts.grid_rel_tol) {
-            return Err(err(format!("coherence grid ({} lines) differs from its FRF's grid ({} lines)", d.x.len(), level.freq_hz.len())));
+            return Err(err(format!(
+                "coherence grid ({} lines) differs from its FRF's grid ({} lines)",
+                d.x.len(),
+                level.freq_hz.len()
+            )));
         }
         let c: Vec<f64> = match &d.values {
             Ordinate::Real(v) => v.clone(),
             Ordinate::Complex(v) => v.iter().map(|z| z.re).collect(),
         };
         if ch.coherence.is_some() {
-            return Err(err(format!("a second coherence for channel {rid}{rdir}/{fid}{fdir}; remove the duplicate")));
+            return Err(err(format!(
+                "a second coherence for channel {rid}{rdir}/{fid}{fdir}; remove the duplicate"
+            )));
         }
         ch.coherence = Some(c);
     }
@@ -303,9 +369,15 @@ fn even_grid(f: &[f64]) -> Option<(f64, f64)> {
     }
     let n = f.len();
     let df = (f[n - 1] - f[0]) / (n - 1) as f64;
-    let exact = |v: f64| crate::data::uff58::parse_fortran_f64(crate::data::uff58::fmt_e(v, 13, 5).as_bytes()) == Some(v);
+    let exact = |v: f64| {
+        crate::data::uff58::parse_fortran_f64(crate::data::uff58::fmt_e(v, 13, 5).as_bytes())
+            == Some(v)
+    };
     let scale = f.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let ok = f.iter().enumerate().all(|(k, x)| (x - (f[0] + k as f64 * df)).abs() <= 1e-12 * scale);
+    let ok = f
+        .iter()
+        .enumerate()
+        .all(|(k, x)| (x - (f[0] + k as f64 * df)).abs() <= 1e-12 * scale);
     (ok && exact(f[0]) && exact(df)).then_some((f[0], df))
 }
 
@@ -333,7 +405,11 @@ pub fn frf_set_datasets(set: &FrfSet) -> Vec<Uff58Dataset> {
         if let Some(n) = level.n_averages {
             id5.push(format!("n_averages={n}"));
         }
-        let id5 = if id5.is_empty() { "NONE".to_string() } else { id5.join(" ") };
+        let id5 = if id5.is_empty() {
+            "NONE".to_string()
+        } else {
+            id5.join(" ")
+        };
         for ch in &level.channels {
             let mk = |func: i32, values: Ordinate| {
                 let mut d = match grid {
@@ -359,7 +435,10 @@ pub fn frf_set_datasets(set: &FrfSet) -> Vec<Uff58Dataset> {
             out.push(frf);
             if let Some(c) = &ch.coherence {
                 let mut d = mk(6, Ordinate::Real(c.clone()));
-                d.ids[0] = format!("Coherence {}{}/{}{}", ch.response_id, ch.response_dir, ch.reference_id, ch.reference_dir);
+                d.ids[0] = format!(
+                    "Coherence {}{}/{}{}",
+                    ch.response_id, ch.response_dir, ch.reference_id, ch.reference_dir
+                );
                 d.ordinate = AxisSpec::new(0, "Coherence", "NONE");
                 out.push(d);
             }
@@ -380,7 +459,10 @@ mod tests {
 
     #[test]
     fn entity_names() {
-        assert_eq!(dof_from_entity(".1.Z-"), Some((1, Direction::new(Axis::Z, -1))));
+        assert_eq!(
+            dof_from_entity(".1.Z-"),
+            Some((1, Direction::new(Axis::Z, -1)))
+        );
         assert_eq!(dof_from_entity(".56.Z"), Some((56, Direction::PZ)));
         assert_eq!(dof_from_entity("3+X"), Some((3, Direction::PX)));
         assert_eq!(dof_from_entity("NONE"), None);
@@ -388,11 +470,26 @@ mod tests {
 
     #[test]
     fn labels() {
-        assert_eq!(quantity_from_label("(m/s)/N"), Some((Quantity::Mobility, 1.0)));
-        assert_eq!(quantity_from_label("(1/N)*(m/s²)"), Some((Quantity::Accelerance, 1.0)));
-        assert_eq!(quantity_from_label("(m/s\u{b2})/N"), Some((Quantity::Accelerance, 1.0)));
-        assert_eq!(quantity_from_label("g/N"), Some((Quantity::Accelerance, G_STANDARD)));
-        assert_eq!(quantity_from_label("m/N"), Some((Quantity::Receptance, 1.0)));
+        assert_eq!(
+            quantity_from_label("(m/s)/N"),
+            Some((Quantity::Mobility, 1.0))
+        );
+        assert_eq!(
+            quantity_from_label("(1/N)*(m/s²)"),
+            Some((Quantity::Accelerance, 1.0))
+        );
+        assert_eq!(
+            quantity_from_label("(m/s\u{b2})/N"),
+            Some((Quantity::Accelerance, 1.0))
+        );
+        assert_eq!(
+            quantity_from_label("g/N"),
+            Some((Quantity::Accelerance, G_STANDARD))
+        );
+        assert_eq!(
+            quantity_from_label("m/N"),
+            Some((Quantity::Receptance, 1.0))
+        );
         assert_eq!(quantity_from_label("NONE"), None);
     }
 
@@ -404,7 +501,12 @@ mod tests {
         let a = convert_value(h, f, Quantity::Receptance, Quantity::Accelerance);
         assert!((a - h * (-w * w)).norm() < 1e-12 * a.norm());
         let m = convert_value(h, f, Quantity::Receptance, Quantity::Mobility);
-        assert!((convert_value(m, f, Quantity::Mobility, Quantity::Accelerance) - a).norm() < 1e-12 * a.norm());
-        assert!((convert_value(a, f, Quantity::Accelerance, Quantity::Receptance) - h).norm() < 1e-12);
+        assert!(
+            (convert_value(m, f, Quantity::Mobility, Quantity::Accelerance) - a).norm()
+                < 1e-12 * a.norm()
+        );
+        assert!(
+            (convert_value(a, f, Quantity::Accelerance, Quantity::Receptance) - h).norm() < 1e-12
+        );
     }
 }

@@ -34,7 +34,10 @@ pub fn python_with_pyuff() -> Option<PathBuf> {
         return Some(py);
     }
     if std::env::var_os("CI").is_some() {
-        panic!("CI is set but {} cannot import pyuff and numpy; set RFMLAB_PYTHON or create the venv", py.display());
+        panic!(
+            "CI is set but {} cannot import pyuff and numpy; set RFMLAB_PYTHON or create the venv",
+            py.display()
+        );
     }
     eprintln!(
         "SKIP: no Python with pyuff at {} (python3 -m venv .venv && .venv/bin/pip install pyuff numpy)",
@@ -50,12 +53,20 @@ pub fn script() -> PathBuf {
 /// Run `pyuff_interop.py dump` on files; the parsed JSON.
 pub fn pyuff_dump(py: &PathBuf, files: &[PathBuf], tmp: &std::path::Path) -> serde_json::Value {
     let out = tmp.join("dump.json");
-    let st = std::process::Command::new(py).arg(script()).arg("dump").arg(&out).args(files).status().expect("run python");
+    let st = std::process::Command::new(py)
+        .arg(script())
+        .arg("dump")
+        .arg(&out)
+        .args(files)
+        .status()
+        .expect("run python");
     assert!(st.success(), "pyuff_interop.py dump failed");
     serde_json::from_slice(&std::fs::read(&out).expect("dump json")).expect("json")
 }
 
 /// A JSON array of numbers.
 pub fn nums(v: &serde_json::Value) -> Vec<f64> {
-    v.as_array().map(|a| a.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect()).unwrap_or_default()
+    v.as_array()
+        .map(|a| a.iter().map(|x| x.as_f64().unwrap_or(f64::NAN)).collect())
+        .unwrap_or_default()
 }
