@@ -144,7 +144,7 @@ pub fn inspect_file(path: impl AsRef<Path>) -> Result<Vec<InspectRow>, DataError
     if let Some(u) = &f.units {
         rows.push(InspectRow {
             file: label.clone(),
-            dataset: usize::MAX,
+            dataset: u.index,
             number: 164,
             kind: "units".into(),
             response: String::new(),
@@ -180,9 +180,6 @@ pub fn inspect_file(path: impl AsRef<Path>) -> Result<Vec<InspectRow>, DataError
         });
     }
     rows.sort_by_key(|r| r.dataset);
-    if let Some(r) = rows.iter_mut().find(|r| r.number == 164) {
-        r.dataset = f.skipped.len() + f.datasets.len(); // listed last; index not tracked for 164
-    }
     Ok(rows)
 }
 

@@ -183,6 +183,8 @@ impl Uff58Dataset {
 /// Unit factors of a dataset 164: divide a file value by `length^l force^f` to get SI.
 #[derive(Clone, Debug, PartialEq)]
 pub struct UnitFactors {
+    /// 0-based index of the dataset 164 in the file.
+    pub index: usize,
     /// 1 SI, 2 BG, 3 MG, 4 BA, 5 MM, 6 CM, 7 IN, 8 GM, 9 user.
     pub code: i32,
     pub description: String,
@@ -436,7 +438,10 @@ pub fn parse_uff(bytes: &[u8], file_label: &str) -> Result<UffFile, DataError> {
                 out.datasets.push(ds);
             }
             164 => {
-                let (u, closed) = parse_164(&mut cur);
+                let (mut u, closed) = parse_164(&mut cur);
+                if let Some(u) = u.as_mut() {
+                    u.index = index;
+                }
                 match u {
                     Some(u) if out.units.is_none() => out.units = Some(u),
                     Some(_) => out.skipped.push(SkippedDataset {
@@ -509,6 +514,7 @@ fn parse_164(cur: &mut Cursor) -> (Option<UnitFactors>, bool) {
         return (None, closed);
     }
     let u = UnitFactors {
+        index: 0,
         code,
         description,
         temperature_mode,
