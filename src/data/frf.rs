@@ -48,3 +48,35 @@ pub struct FrfLevel {
 pub struct FrfSet {
     pub levels: Vec<FrfLevel>,
 }
+
+impl FrfLevel {
+    /// The level in another quantity: accelerance = j w mobility = -w^2 receptance
+    /// (w = 2 pi f). Converting towards receptance divides by j w, so a 0 Hz line becomes
+    /// non-finite: drop it first.
+    pub fn convert(&self, to: Quantity) -> FrfLevel {
+        let mut out = self.clone();
+        out.quantity = to;
+        if to != self.quantity {
+            for ch in &mut out.channels {
+                for (h, f) in ch.values.iter_mut().zip(&self.freq_hz) {
+                    *h = crate::data::uff_frf::convert_value(*h, *f, self.quantity, to);
+                }
+            }
+        }
+        out
+    }
+
+    /// Index of the channel with this response and reference (axes compared, signs ignored).
+    pub fn find_channel(
+        &self,
+        response: (u32, Direction),
+        reference: (u32, Direction),
+    ) -> Option<usize> {
+        self.channels.iter().position(|c| {
+            c.response_id == response.0
+                && c.response_dir.axis == response.1.axis
+                && c.reference_id == reference.0
+                && c.reference_dir.axis == reference.1.axis
+        })
+    }
+}
