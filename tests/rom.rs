@@ -283,3 +283,48 @@ fn uncertified_rom_is_refused_unless_asked_and_bad_input_is_reported() {
         .sweep(&[10.0, 21.0], &[C64::new(1e6, 0.0); 2], false)
         .is_err());
 }
+
+/// Timing in the test profile (opt-level 3, debug assertions on); the criterion bench in
+/// benches/rom.rs is the reference. Run with `cargo test --test rom -- --ignored --nocapture`.
+#[test]
+#[ignore]
+fn timing_pencil_sweep_4x500() {
+    let model = beam_model(60);
+    let (rom, _) = build_rom(&model, &[1], &RomParams::default()).unwrap();
+    let omega = lines_500();
+    let t = std::time::Instant::now();
+    let pencil = rom.prepare(&omega).unwrap();
+    let t_prep = t.elapsed().as_secs_f64();
+    let modulus: Vec<C64> = omega
+        .iter()
+        .map(|&w| {
+            C64::new(6.67e6, 0.944e6)
+                + C64::new(0.0, w * 4.181e3) * 3.1487e6 / (C64::new(3.1487e6, w * 4.181e3))
+        })
+        .collect();
+    let mut out = rfmlab::frf::Sweep::default();
+    let mut times = Vec::new();
+    for _ in 0..300 {
+        let t = std::time::Instant::now();
+        pencil.sweep_into(&omega, &modulus, true, &mut out).unwrap();
+        times.push(t.elapsed().as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    let mut lu_t = Vec::new();
+    for _ in 0..3 {
+        let t = std::time::Instant::now();
+        rom.lu_sweep(&omega, &modulus, true).unwrap();
+        lu_t.push(t.elapsed().as_secs_f64());
+    }
+    lu_t.sort_by(f64::total_cmp);
+    let (near, mom) = pencil.mean_terms();
+    eprintln!(
+        "n_r {} prepare {:.3} s; pencil sweep median {:.1} us (min {:.1}); LU sweep median {:.2} ms; flops/sweep {:.3e}; near {near:.1} moments {mom:.1}",
+        rom.basis_size(),
+        t_prep,
+        times[150] * 1e6,
+        times[0] * 1e6,
+        lu_t[1] * 1e3,
+        pencil.flops_per_sweep(true)
+    );
+}

@@ -30,7 +30,7 @@ struct KrylovState {
 /// Incrementally built M-orthonormal basis V (n x n_r) with MV = M V.
 pub struct BasisBuilder<'a> {
     pat: &'a ModelPattern<'a>,
-    chol: SymbolicCholesky<usize>,
+    chol: std::sync::Arc<SymbolicCholesky<usize>>,
     /// Unit loads at the observation points (n x n_out).
     pub b_all: Mat<f64>,
     v: Mat<f64>,
@@ -56,7 +56,7 @@ impl<'a> BasisBuilder<'a> {
                 b_all[(d, i)] += w;
             }
         }
-        let chol = SpdSolver::symbolic(pat)?;
+        let chol = std::sync::Arc::new(SpdSolver::symbolic(pat)?);
         Ok(BasisBuilder {
             pat,
             chol,
@@ -189,7 +189,8 @@ impl<'a> BasisBuilder<'a> {
         if self.states[idx].depth > 0 && self.states[idx].last.ncols() == 0 {
             return Ok(()); // exhausted
         }
-        let solver = SpdSolver::new(&self.chol, self.pat, e_ref)?;
+        let chol = self.chol.clone();
+        let solver = SpdSolver::new(&chol, self.pat, e_ref)?;
         while self.states[idx].depth < depth {
             let st = &self.states[idx];
             let mut x = if st.depth == 0 {

@@ -95,7 +95,7 @@ impl Line {
             self.nu_re[k] = self.nu[k].re;
             self.nu_im[k] = self.nu[k].im;
         }
-        let mut pk = |src: &[C64]| {
+        let pk = |src: &[C64]| {
             let mut re = vec![0.0; blk * n_pad];
             let mut im = vec![0.0; blk * n_pad];
             for k in 0..n {
@@ -275,7 +275,7 @@ impl ReducedModel {
                 g[(i, j)] = v;
             }
         }
-        let mut nu = faer::Diag::<C64>::zeros(n);
+        let mut nu = faer::diag::Diag::<C64>::zeros(n);
         let mut x = Mat::<C64>::zeros(n, n);
         {
             let req = evd_scratch::<C64>(
@@ -505,6 +505,7 @@ impl PencilSweep {
         e: C64,
         h: &mut [C64],
         mut dh: Option<(&mut [C64], &mut [C64])>,
+        acc: &mut Vec<[f64; LANES]>,
     ) -> Result<(), FrfError> {
         let line = &self.lines[l];
         let blk = h.len();
@@ -521,14 +522,8 @@ impl PencilSweep {
         let t = -d;
         let count = line.mh.len() / blk.max(1);
         let with_d = dh.is_some();
-        let mut acc = [[0.0f64; LANES]; 6 * 8];
-        let mut heap;
-        let acc: &mut [[f64; LANES]] = if 6 * blk <= acc.len() {
-            &mut acc[..6 * blk]
-        } else {
-            heap = vec![[0.0f64; LANES]; 6 * blk];
-            &mut heap[..]
-        };
+        acc.clear();
+        acc.resize(6 * blk, [0.0; LANES]);
         near_terms(line, blk, d, with_d, acc);
         let lanesum = |r: &[f64; LANES]| r.iter().fold(0.0, |a, b| a + b);
         for q in 0..blk {
@@ -585,10 +580,11 @@ impl PencilSweep {
                    dh: Option<(&mut [C64], &mut [C64])>|
          -> Result<(), FrfError> {
             let l0 = c * CHUNK;
+            let mut acc: Vec<[f64; LANES]> = Vec::with_capacity(6 * blk);
             match dh {
                 None => {
                     for (i, hl) in h.chunks_mut(blk).enumerate() {
-                        self.eval_line(l0 + i, modulus_pa[l0 + i], hl, None)?;
+                        self.eval_line(l0 + i, modulus_pa[l0 + i], hl, None, &mut acc)?;
                     }
                 }
                 Some((d, s)) => {
@@ -598,7 +594,7 @@ impl PencilSweep {
                         .zip(s.chunks_mut(blk))
                         .enumerate()
                     {
-                        self.eval_line(l0 + i, modulus_pa[l0 + i], hl, Some((dl, sl)))?;
+                        self.eval_line(l0 + i, modulus_pa[l0 + i], hl, Some((dl, sl)), &mut acc)?;
                     }
                 }
             }

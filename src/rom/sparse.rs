@@ -156,12 +156,12 @@ impl<'a> ModelPattern<'a> {
 }
 
 /// Sparse Cholesky of the real SPD matrix K_b + E_ref S; symbolic analysis shared.
-pub(crate) struct SpdSolver {
-    symbolic: SymbolicCholesky<usize>,
+pub(crate) struct SpdSolver<'s> {
+    symbolic: &'s SymbolicCholesky<usize>,
     values: Vec<f64>,
 }
 
-impl SpdSolver {
+impl<'s> SpdSolver<'s> {
     pub fn symbolic(pat: &ModelPattern<'_>) -> Result<SymbolicCholesky<usize>, RomError> {
         factorize_symbolic_cholesky(
             pat.pat.sym.as_ref(),
@@ -173,7 +173,7 @@ impl SpdSolver {
     }
 
     pub fn new(
-        symbolic: &SymbolicCholesky<usize>,
+        symbolic: &'s SymbolicCholesky<usize>,
         pat: &ModelPattern<'_>,
         e_ref: f64,
     ) -> Result<Self, RomError> {
@@ -199,10 +199,7 @@ impl SpdSolver {
                     "K_b + {e_ref:.4e} S is not positive definite ({e:?}): is the model constrained (no rigid-body modes)?"
                 ))
             })?;
-        Ok(SpdSolver {
-            symbolic: symbolic.clone(),
-            values,
-        })
+        Ok(SpdSolver { symbolic, values })
     }
 
     /// Solve (K_b + E_ref S) X = RHS in place (columns of a column-major n x k matrix).
