@@ -1,1 +1,168 @@
-//! (under construction)
+//! Certified reduced-order FRF engine and the pencil sweep (issue 3).
+//!
+//! The dynamic stiffness (method.md) is Z(w, E*) = -w^2 M + K_b + j w C_b + j D_b + E* S:
+//! the adhesive enters through one complex scalar per frequency line. The ROM projects Z
+//! on a real basis V (n x n_r, M-orthonormal):
+//!
+//! Z_r(w, E*) = V^T Z V = -w^2 M_r + K_r + j w C_r + j D_r + E* S_r,  B_r = V^T B,
+//!
+//! and H(w) ~ B_r^T Z_r^-1 B_r. V is spanned by block Krylov (load-dependent Ritz) vectors
+//! (K_b + E_ref S)^-1 (M (K_b + E_ref S)^-1)^k B at log-spaced real E_ref across the declared
+//! modulus range ([`basis`]); the Krylov sequence of (K, M) converges to the low modes seen
+//! by the observation points, so the modes below a cutoff are contained in it.
+//! The ROM is certified against full-model sparse LU solves on a validation grid of
+//! moduli x lines and enriched (more E_ref, deeper Krylov) until the error relative to the
+//! peak of each FRF is below the tolerance ([`certify`]).
+//! [`pencil::PencilSweep`] then evaluates a whole sweep in O(N_f n_terms n_out n_in) from a
+//! per-line eigen-decomposition of the reduced pencil prepared once per frequency grid.
+
+pub mod basis;
+pub mod certify;
+pub(crate) mod dense;
+pub mod pencil;
+pub mod reduced;
+pub(crate) mod sparse;
+
+pub use certify::build_rom;
+pub use pencil::{PencilParams, PencilSweep};
+pub use reduced::ReducedModel;
+
+/// Declared range of the adhesive's complex modulus E* = E' + j E'' (Pa).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ModulusRange {
+    /// (min, max) storage modulus E' (Pa).
+    pub e_storage_pa: (f64, f64),
+    /// (min, max) loss modulus E'' (Pa).
+    pub e_loss_pa: (f64, f64),
+}
+
+impl Default for ModulusRange {
+    /// Issue 3's acceptance range: E' in [0.5, 50] MPa, E'' in [0.01, 20] MPa.
+    fn default() -> Self {
+        ModulusRange {
+            e_storage_pa: (0.5e6, 50e6),
+            e_loss_pa: (0.01e6, 20e6),
+        }
+    }
+}
+
+impl ModulusRange {
+    /// Centre of the box in the complex plane (the pencil's expansion point e0).
+    pub fn centre(&self) -> crate::common::C64 {
+        crate::common::C64::new(
+            0.5 * (self.e_storage_pa.0 + self.e_storage_pa.1),
+            0.5 * (self.e_loss_pa.0 + self.e_loss_pa.1),
+        )
+    }
+    /// Largest |E* - centre| over the box (half its diagonal).
+    pub fn radius(&self) -> f64 {
+        0.5 * (self.e_storage_pa.1 - self.e_storage_pa.0).hypot(self.e_loss_pa.1 - self.e_loss_pa.0)
+    }
+    fn validate(&self) -> Result<(), RomError> {
+        let (a, b) = self.e_storage_pa;
+        let (c, d) = self.e_loss_pa;
+        if !(a > 0.0 && b >= a && c >= 0.0 && d >= c && b.is_finite() && d.is_finite()) {
+            return Err(RomError::Params(format!(
+                "modulus range must have 0 < E'min <= E'max and 0 <= E''min <= E''max (Pa); got E' {:?}, E'' {:?}",
+                self.e_storage_pa, self.e_loss_pa
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Settings of the ROM build and certificate.
+#[derive(Clone, Debug)]
+pub struct RomParams {
+    /// Frequency band (Hz) the ROM must cover. Default (1, 500).
+    pub band_hz: (f64, f64),
+    /// Declared modulus range. Default [`ModulusRange::default`].
+    pub range: ModulusRange,
+    /// Certificate tolerance: max |H_rom - H_full| / max_w |H_full| per FRF and modulus. Default 1e-6.
+    pub tolerance: f64,
+    /// Return an uncertified ROM (certificate.passed = false) instead of an error. Default false.
+    pub allow_uncertified: bool,
+    /// Number of log-spaced real E_ref at the first enrichment level (then 2x-1 per level). Default 3.
+    pub n_e_ref_initial: usize,
+    /// Krylov blocks per E_ref at the first level. Default 4.
+    pub krylov_depth_initial: usize,
+    /// Extra Krylov blocks per E_ref at each further level. Default 3.
+    pub krylov_depth_step: usize,
+    /// Maximum enrichment levels. Default 5.
+    pub max_levels: usize,
+    /// A new vector is dropped when its M-norm after orthogonalisation falls below this
+    /// fraction of its norm before. Default 1e-10.
+    pub deflation_tol: f64,
+    /// Validation moduli per axis (log-spaced incl. the corners). Default 3 (9 moduli).
+    pub n_cert_moduli_per_axis: usize,
+    /// Validation lines, linearly spaced across the band incl. its ends. Default 25.
+    pub n_cert_lines: usize,
+}
+
+impl Default for RomParams {
+    fn default() -> Self {
+        RomParams {
+            band_hz: (1.0, 500.0),
+            range: ModulusRange::default(),
+            tolerance: 1e-6,
+            allow_uncertified: false,
+            n_e_ref_initial: 3,
+            krylov_depth_initial: 4,
+            krylov_depth_step: 3,
+            max_levels: 5,
+            deflation_tol: 1e-10,
+            n_cert_moduli_per_axis: 3,
+            n_cert_lines: 25,
+        }
+    }
+}
+
+/// Outcome of the certificate (issue 3, "Error certificate").
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Certificate {
+    /// Largest error over the validation set, relative to the peak |H_full| of each FRF.
+    pub max_rel_error: f64,
+    /// Validation moduli.
+    pub n_moduli: usize,
+    /// Validation lines.
+    pub n_lines: usize,
+    /// n_r, the number of basis vectors.
+    pub basis_size: usize,
+    /// Time spent building the basis and the reduced matrices (s).
+    pub seconds_basis: f64,
+    /// Time spent on the full-model reference solves and the comparison (s).
+    pub seconds_certify: f64,
+    pub passed: bool,
+    /// Enrichment levels used.
+    pub levels: usize,
+    /// The E_ref (Pa) used by the basis.
+    pub e_ref_pa: Vec<f64>,
+    /// Largest error after each level (same measure as max_rel_error).
+    pub error_history: Vec<f64>,
+}
+
+/// Errors of the ROM build and sweeps.
+#[derive(Debug, thiserror::Error)]
+pub enum RomError {
+    #[error("invalid ROM parameters: {0}")]
+    Params(String),
+    #[error("invalid model: {0}")]
+    Model(String),
+    #[error("factorization failed: {0}")]
+    Factorization(String),
+    #[error("the ROM is not certified: max relative error {error:.3e} > tolerance {tolerance:.1e} with {basis_size} basis vectors after {levels} levels; raise max_levels / krylov_depth_step, or set allow_uncertified = true")]
+    Uncertified {
+        error: f64,
+        tolerance: f64,
+        basis_size: usize,
+        levels: usize,
+    },
+    #[error("pencil sweep: {0}")]
+    Pencil(String),
+}
+
+impl From<RomError> for crate::frf::FrfError {
+    fn from(e: RomError) -> Self {
+        crate::frf::FrfError::Other(e.to_string())
+    }
+}

@@ -1,0 +1,261 @@
+//! Reduced basis for the family Z(w, E*) (issue 3, "Reduced basis").
+//!
+//! For each real E_ref, with K = K_b + E_ref S (SPD, sparse Cholesky, symbolic analysis
+//! shared), the block Krylov (load-dependent Ritz) sequence
+//!
+//! X_0 = K^-1 B,  X_{k+1} = K^-1 M Q_k,
+//!
+//! where B holds unit loads at all observation points and Q_k the vectors of X_k kept after
+//! M-orthogonalisation. Each block is M-orthogonalised against the basis by block classical
+//! Gram-Schmidt applied twice (BLAS-3), then within itself by modified Gram-Schmidt twice;
+//! a vector whose M-norm falls below `deflation_tol` times its norm before is dropped.
+//! The span of the first k blocks is the span of K^-1 (M K^-1)^j B, j < k, which contains
+//! the modes of (K, M) seen by B to an accuracy that grows with k (Lanczos), so the basis
+//! holds both the static responses and the low modes at every E_ref.
+
+use super::sparse::{spmv_add, ModelPattern, SpdSolver};
+use super::RomError;
+use faer::linalg::matmul::matmul;
+use faer::sparse::linalg::cholesky::SymbolicCholesky;
+use faer::{Accum, Mat, Par};
+
+/// Per-E_ref Krylov state.
+struct KrylovState {
+    e_ref: f64,
+    depth: usize,
+    /// Last accepted block Q_k (n x k); empty when the sequence is exhausted.
+    last: Mat<f64>,
+}
+
+/// Incrementally built M-orthonormal basis V (n x n_r) with MV = M V.
+pub struct BasisBuilder<'a> {
+    pat: &'a ModelPattern<'a>,
+    chol: std::sync::Arc<SymbolicCholesky<usize>>,
+    /// Unit loads at the observation points (n x n_out).
+    pub b_all: Mat<f64>,
+    v: Mat<f64>,
+    mv: Mat<f64>,
+    tol: f64,
+    states: Vec<KrylovState>,
+}
+
+impl<'a> BasisBuilder<'a> {
+    pub(crate) fn new(pat: &'a ModelPattern<'a>, deflation_tol: f64) -> Result<Self, RomError> {
+        let model = pat.model;
+        let n = model.n_dof();
+        let n_out = model.points.len();
+        let mut b_all = Mat::<f64>::zeros(n, n_out);
+        for (i, p) in model.points.iter().enumerate() {
+            for &(d, w) in &p.dofs {
+                if d >= n {
+                    return Err(RomError::Model(format!(
+                        "observation point {} refers to DOF {d}, but the model has {n} free DOFs",
+                        p.id
+                    )));
+                }
+                b_all[(d, i)] += w;
+            }
+        }
+        let chol = std::sync::Arc::new(SpdSolver::symbolic(pat)?);
+        Ok(BasisBuilder {
+            pat,
+            chol,
+            b_all,
+            v: Mat::zeros(n, 0),
+            mv: Mat::zeros(n, 0),
+            tol: deflation_tol,
+            states: Vec::new(),
+        })
+    }
+
+    pub fn size(&self) -> usize {
+        self.v.ncols()
+    }
+    pub fn v(&self) -> &Mat<f64> {
+        &self.v
+    }
+    pub fn e_refs(&self) -> Vec<f64> {
+        self.states.iter().map(|s| s.e_ref).collect()
+    }
+
+    /// M x for a column.
+    fn m_times(&self, x: &[f64]) -> Vec<f64> {
+        let mut y = vec![0.0; x.len()];
+        spmv_add(&self.pat.model.m, x, 1.0, &mut y);
+        y
+    }
+
+    /// M-orthogonalise the columns of `x` against V and each other, deflate, append the kept
+    /// ones to V; returns them (n x kept).
+    fn absorb(&mut self, mut x: Mat<f64>) -> Mat<f64> {
+        let n = x.nrows();
+        let k = x.ncols();
+        // norms before
+        let norm0: Vec<f64> = (0..k)
+            .map(|j| {
+                let col: Vec<f64> = x.col(j).iter().copied().collect();
+                let mx = self.m_times(&col);
+                col.iter()
+                    .zip(&mx)
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+                    .max(0.0)
+                    .sqrt()
+            })
+            .collect();
+        let r = self.v.ncols();
+        if r > 0 {
+            for _ in 0..2 {
+                let mut c = Mat::<f64>::zeros(r, k);
+                matmul(
+                    c.as_mut(),
+                    Accum::Replace,
+                    self.mv.transpose(),
+                    x.as_ref(),
+                    1.0,
+                    Par::Seq,
+                );
+                matmul(
+                    x.as_mut(),
+                    Accum::Add,
+                    self.v.as_ref(),
+                    c.as_ref(),
+                    -1.0,
+                    Par::Seq,
+                );
+            }
+        }
+        let mut kept: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
+        for j in 0..k {
+            if !(norm0[j] > 0.0 && norm0[j].is_finite()) {
+                continue;
+            }
+            let mut col: Vec<f64> = x.col(j).iter().copied().collect();
+            for _ in 0..2 {
+                for (q, mq) in &kept {
+                    let c: f64 = mq.iter().zip(&col).map(|(a, b)| a * b).sum();
+                    for (ci, qi) in col.iter_mut().zip(q) {
+                        *ci -= c * qi;
+                    }
+                }
+            }
+            let mcol = self.m_times(&col);
+            let nrm = col
+                .iter()
+                .zip(&mcol)
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                .max(0.0)
+                .sqrt();
+            if nrm > self.tol * norm0[j] {
+                let inv = 1.0 / nrm;
+                kept.push((
+                    col.iter().map(|v| v * inv).collect(),
+                    mcol.iter().map(|v| v * inv).collect(),
+                ));
+            }
+        }
+        let kk = kept.len();
+        let mut out = Mat::<f64>::zeros(n, kk);
+        let r0 = self.v.ncols();
+        self.v.resize_with(n, r0 + kk, |_, _| 0.0);
+        self.mv.resize_with(n, r0 + kk, |_, _| 0.0);
+        for (j, (q, mq)) in kept.iter().enumerate() {
+            for i in 0..n {
+                out[(i, j)] = q[i];
+                self.v[(i, r0 + j)] = q[i];
+                self.mv[(i, r0 + j)] = mq[i];
+            }
+        }
+        out
+    }
+
+    /// Bring the Krylov sequence at `e_ref` to `depth` blocks (creating it if new).
+    pub fn extend(&mut self, e_ref: f64, depth: usize) -> Result<(), RomError> {
+        let idx = match self.states.iter().position(|s| s.e_ref == e_ref) {
+            Some(i) => i,
+            None => {
+                self.states.push(KrylovState {
+                    e_ref,
+                    depth: 0,
+                    last: Mat::zeros(0, 0),
+                });
+                self.states.len() - 1
+            }
+        };
+        if self.states[idx].depth >= depth {
+            return Ok(());
+        }
+        if self.states[idx].depth > 0 && self.states[idx].last.ncols() == 0 {
+            return Ok(()); // exhausted
+        }
+        let chol = self.chol.clone();
+        let solver = SpdSolver::new(&chol, self.pat, e_ref)?;
+        while self.states[idx].depth < depth {
+            let st = &self.states[idx];
+            let mut x = if st.depth == 0 {
+                self.b_all.clone()
+            } else {
+                let q = &st.last;
+                let mut mq = Mat::<f64>::zeros(q.nrows(), q.ncols());
+                for j in 0..q.ncols() {
+                    let col: Vec<f64> = q.col(j).iter().copied().collect();
+                    let y = self.m_times(&col);
+                    for (i, v) in y.into_iter().enumerate() {
+                        mq[(i, j)] = v;
+                    }
+                }
+                mq
+            };
+            solver.solve_in_place(x.as_mut());
+            let kept = self.absorb(x);
+            let st = &mut self.states[idx];
+            st.depth += 1;
+            let exhausted = kept.ncols() == 0;
+            st.last = kept;
+            if exhausted {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// V^T A V for a sparse A (symmetrised).
+    pub(crate) fn project(&self, a: &crate::fe::model::SpMat) -> Mat<f64> {
+        let n = self.v.nrows();
+        let r = self.v.ncols();
+        let mut av = Mat::<f64>::zeros(n, r);
+        for j in 0..r {
+            let col: Vec<f64> = self.v.col(j).iter().copied().collect();
+            let mut y = vec![0.0; n];
+            spmv_add(a, &col, 1.0, &mut y);
+            for (i, v) in y.into_iter().enumerate() {
+                av[(i, j)] = v;
+            }
+        }
+        let mut out = Mat::<f64>::zeros(r, r);
+        matmul(
+            out.as_mut(),
+            Accum::Replace,
+            self.v.transpose(),
+            av.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        Mat::from_fn(r, r, |i, j| 0.5 * (out[(i, j)] + out[(j, i)]))
+    }
+
+    /// V^T X for a dense X (n x k).
+    pub(crate) fn project_vecs(&self, x: &Mat<f64>) -> Mat<f64> {
+        let mut out = Mat::<f64>::zeros(self.v.ncols(), x.ncols());
+        matmul(
+            out.as_mut(),
+            Accum::Replace,
+            self.v.transpose(),
+            x.as_ref(),
+            1.0,
+            Par::Seq,
+        );
+        out
+    }
+}

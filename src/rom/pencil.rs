@@ -1,0 +1,650 @@
+//! Pencil sweep: a per-line decomposition of the reduced pencil, prepared once for a fixed
+//! frequency grid, after which a sweep for any E*(w) costs O(N_f n_terms n_out n_in).
+//!
+//! On line w, with A(w) = -w^2 M_r + K_r + j w C_r + j D_r and the centre e0 of the declared
+//! modulus box, F = A + e0 S_r and F^-1 S_r = X diag(nu) X^-1. With d = E* - e0,
+//!
+//!   A + E* S_r = F (I + d F^-1 S_r)  =>  (A + E* S_r)^-1 = X diag(1 / (1 + d nu_k)) X^-1 F^-1,
+//!
+//! so, with L = B^T X, Ls = (V^T S B)^T X and R = X^-1 F^-1 B_in,
+//!
+//!   H_ij     =  sum_k a_k,ij / (1 + d nu_k),            a_k,ij = L_ik R_kj,
+//!   dH_ij/dE' = -sum_k a_k,ij nu_k / (1 + d nu_k)^2,
+//!   sh_ij    =  sum_k s_k,ij / (1 + d nu_k),            s_k,ij = Ls_ik R_kj.
+//!
+//! Terms whose pole E = e0 - 1/nu_k lies far from the box (rho_k = |nu_k| r < rho_max, r the
+//! box's half diagonal) are summed once into Taylor moments m_p = sum_far a_k nu_k^p, so that
+//! their contribution is sum_p m_p (-d)^p, with the order P chosen per line so that the
+//! truncation bound sum_far |a_k| rho^(P+1) / (1 - rho) stays below `series_tol` times the
+//! line's |H(e0)|. The split between explicit terms and moments minimises the per-line cost.
+//! Where X is ill-conditioned (1-norm condition estimate above `cond_max`) the line falls
+//! back to a dense LU of the reduced system; such lines are counted.
+
+use super::dense::DenseLu;
+use super::reduced::ReducedModel;
+use super::RomError;
+use crate::common::C64;
+use crate::frf::{FrfEngine, FrfError, Sweep};
+use faer::linalg::evd::{evd_cplx, evd_scratch, ComputeEigenvectors};
+use faer::{Mat, Par};
+use rayon::prelude::*;
+
+/// Settings of the pencil decomposition.
+#[derive(Clone, Debug)]
+pub struct PencilParams {
+    /// Lines whose eigenvector matrix has a 1-norm condition estimate above this fall back
+    /// to dense LU. Default 1e8.
+    pub cond_max: f64,
+    /// Truncation tolerance of the far-pole Taylor series, relative to max |H(e0)| of the
+    /// line. Default 1e-13.
+    pub series_tol: f64,
+    /// Largest |nu_k| r for a term to be summed as a series. Default 0.7.
+    pub rho_max: f64,
+    /// Largest series order. Default 60.
+    pub max_order: usize,
+}
+
+impl Default for PencilParams {
+    fn default() -> Self {
+        PencilParams {
+            cond_max: 1e8,
+            series_tol: 1e-13,
+            rho_max: 0.7,
+            max_order: 60,
+        }
+    }
+}
+
+const Z0: C64 = C64::new(0.0, 0.0);
+
+/// The prepared decomposition of one line.
+#[derive(Clone, Debug, Default)]
+struct Line {
+    fallback: bool,
+    cond: f64,
+    nu: Vec<C64>,
+    /// n_near x blk residues for h and sh.
+    a: Vec<C64>,
+    s: Vec<C64>,
+    /// (P+1) x blk moments for h and sh.
+    mh: Vec<C64>,
+    ms: Vec<C64>,
+    /// The explicit terms packed for the lane kernel: n_pad = n_near rounded up to LANES,
+    /// padding terms have nu = 0 and zero residues (they add exactly 0).
+    n_pad: usize,
+    nu_re: Vec<f64>,
+    nu_im: Vec<f64>,
+    /// blk x n_pad each (residue q of term k at q * n_pad + k).
+    a_re: Vec<f64>,
+    a_im: Vec<f64>,
+    s_re: Vec<f64>,
+    s_im: Vec<f64>,
+}
+
+/// Lane width of the explicit-term kernel (one AVX-512 register of f64).
+const LANES: usize = 8;
+
+impl Line {
+    fn pack(&mut self, blk: usize) {
+        let n = self.nu.len();
+        let n_pad = n.div_ceil(LANES) * LANES;
+        self.n_pad = n_pad;
+        self.nu_re = vec![0.0; n_pad];
+        self.nu_im = vec![0.0; n_pad];
+        for k in 0..n {
+            self.nu_re[k] = self.nu[k].re;
+            self.nu_im[k] = self.nu[k].im;
+        }
+        let pk = |src: &[C64]| {
+            let mut re = vec![0.0; blk * n_pad];
+            let mut im = vec![0.0; blk * n_pad];
+            for k in 0..n {
+                for q in 0..blk {
+                    re[q * n_pad + k] = src[k * blk + q].re;
+                    im[q * n_pad + k] = src[k * blk + q].im;
+                }
+            }
+            (re, im)
+        };
+        (self.a_re, self.a_im) = pk(&self.a);
+        (self.s_re, self.s_im) = pk(&self.s);
+    }
+}
+
+/// Sum of the explicit terms for one line, lane-parallel over terms (fixed summation order:
+/// lanes accumulate terms k = lane mod LANES, then lanes are added 0..LANES), so the result
+/// does not depend on the instruction set used. acc: 6 blk rows of LANES (h, dh, sh; re, im).
+#[inline(always)]
+fn near_kernel(line: &Line, blk: usize, d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
+    let n_pad = line.n_pad;
+    for c in (0..n_pad).step_by(LANES) {
+        let mut wr = [0.0; LANES];
+        let mut wi = [0.0; LANES];
+        let mut vr = [0.0; LANES];
+        let mut vi = [0.0; LANES];
+        for t in 0..LANES {
+            let (nr, ni) = (line.nu_re[c + t], line.nu_im[c + t]);
+            let re = 1.0 + (d.re * nr - d.im * ni);
+            let im = d.re * ni + d.im * nr;
+            let inv = 1.0 / (re * re + im * im);
+            wr[t] = re * inv;
+            wi[t] = -im * inv;
+            let w2r = wr[t] * wr[t] - wi[t] * wi[t];
+            let w2i = 2.0 * wr[t] * wi[t];
+            vr[t] = nr * w2r - ni * w2i;
+            vi[t] = nr * w2i + ni * w2r;
+        }
+        for q in 0..blk {
+            let o = q * n_pad + c;
+            let ar = &line.a_re[o..o + LANES];
+            let ai = &line.a_im[o..o + LANES];
+            {
+                let (hr, rest) = acc[6 * q..6 * q + 6].split_at_mut(1);
+                let hi = &mut rest[0];
+                for t in 0..LANES {
+                    hr[0][t] += ar[t] * wr[t] - ai[t] * wi[t];
+                    hi[t] += ar[t] * wi[t] + ai[t] * wr[t];
+                }
+            }
+            if with_d {
+                let sr = &line.s_re[o..o + LANES];
+                let si = &line.s_im[o..o + LANES];
+                let rows = &mut acc[6 * q + 2..6 * q + 6];
+                for t in 0..LANES {
+                    rows[0][t] -= ar[t] * vr[t] - ai[t] * vi[t];
+                    rows[1][t] -= ar[t] * vi[t] + ai[t] * vr[t];
+                    rows[2][t] += sr[t] * wr[t] - si[t] * wi[t];
+                    rows[3][t] += sr[t] * wi[t] + si[t] * wr[t];
+                }
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512dq")]
+unsafe fn near_kernel_avx512(
+    line: &Line,
+    blk: usize,
+    d: C64,
+    with_d: bool,
+    acc: &mut [[f64; LANES]],
+) {
+    near_kernel(line, blk, d, with_d, acc)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn near_kernel_avx2(
+    line: &Line,
+    blk: usize,
+    d: C64,
+    with_d: bool,
+    acc: &mut [[f64; LANES]],
+) {
+    near_kernel(line, blk, d, with_d, acc)
+}
+
+/// Dispatch to the widest available instruction set (no FMA contraction is allowed in
+/// Rust, so every path rounds identically).
+fn near_terms(line: &Line, blk: usize, d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+        {
+            // SAFETY: the required CPU features were detected at run time.
+            unsafe { near_kernel_avx512(line, blk, d, with_d, acc) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: as above.
+            unsafe { near_kernel_avx2(line, blk, d, with_d, acc) };
+            return;
+        }
+    }
+    near_kernel(line, blk, d, with_d, acc)
+}
+
+/// A reduced model prepared for a fixed list of frequency lines.
+#[derive(Clone, Debug)]
+pub struct PencilSweep {
+    rom: ReducedModel,
+    omega: Vec<f64>,
+    e0: C64,
+    lines: Vec<Line>,
+}
+
+/// Dense complex n x n (row-major) times matrix helpers.
+fn cplx_from_real_col(m: &Mat<f64>, j: usize) -> Vec<C64> {
+    (0..m.nrows()).map(|i| C64::new(m[(i, j)], 0.0)).collect()
+}
+
+impl ReducedModel {
+    /// Decompose the reduced pencil on every line of `omega_rad_s` (in parallel; each line
+    /// with sequential kernels, so the result is independent of the thread count).
+    pub fn prepare(&self, omega_rad_s: &[f64]) -> Result<PencilSweep, RomError> {
+        self.prepare_with(omega_rad_s, &PencilParams::default())
+    }
+
+    /// [`ReducedModel::prepare`] with explicit settings.
+    pub fn prepare_with(
+        &self,
+        omega_rad_s: &[f64],
+        params: &PencilParams,
+    ) -> Result<PencilSweep, RomError> {
+        if let Some(w) = omega_rad_s.iter().find(|w| !w.is_finite() || **w < 0.0) {
+            return Err(RomError::Params(format!(
+                "frequency lines must be finite and >= 0 rad/s; got {w}"
+            )));
+        }
+        let e0 = self.range.centre();
+        let radius = self.range.radius();
+        let lines: Vec<Line> = omega_rad_s
+            .par_iter()
+            .map(|&w| self.prepare_line(w, e0, radius, params))
+            .collect();
+        Ok(PencilSweep {
+            rom: self.clone(),
+            omega: omega_rad_s.to_vec(),
+            e0,
+            lines,
+        })
+    }
+
+    fn prepare_line(&self, omega: f64, e0: C64, radius: f64, p: &PencilParams) -> Line {
+        let fallback = Line {
+            fallback: true,
+            cond: f64::INFINITY,
+            ..Default::default()
+        };
+        let n = self.n_r;
+        let no = self.n_out;
+        let ni = self.inputs.len();
+        let blk = no * ni;
+        let Some(flu) = DenseLu::factor(n, self.z_r(omega, e0)) else {
+            return fallback;
+        };
+        // G = F^-1 S_r
+        let mut g = Mat::<C64>::zeros(n, n);
+        for j in 0..n {
+            let mut c = cplx_from_real_col(&self.s_r, j);
+            flu.solve(&mut c);
+            for (i, v) in c.into_iter().enumerate() {
+                g[(i, j)] = v;
+            }
+        }
+        let mut nu = faer::diag::Diag::<C64>::zeros(n);
+        let mut x = Mat::<C64>::zeros(n, n);
+        {
+            let req = evd_scratch::<C64>(
+                n,
+                ComputeEigenvectors::No,
+                ComputeEigenvectors::Yes,
+                Par::Seq,
+                Default::default(),
+            );
+            let mut mem = faer::dyn_stack::MemBuffer::new(req);
+            if evd_cplx(
+                g.as_ref(),
+                nu.as_mut(),
+                None,
+                Some(x.as_mut()),
+                Par::Seq,
+                faer::dyn_stack::MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .is_err()
+            {
+                return fallback;
+            }
+        }
+        // unit columns, then X^-1 and a 1-norm condition estimate
+        let mut xr = vec![Z0; n * n];
+        for k in 0..n {
+            let nrm = (0..n).map(|i| x[(i, k)].norm_sqr()).sum::<f64>().sqrt();
+            if !(nrm > 0.0 && nrm.is_finite()) {
+                return fallback;
+            }
+            for i in 0..n {
+                x[(i, k)] /= nrm;
+                xr[i * n + k] = x[(i, k)];
+            }
+        }
+        let Some(xlu) = DenseLu::factor(n, xr) else {
+            return fallback;
+        };
+        let mut xinv = vec![Z0; n * n]; // row-major
+        for j in 0..n {
+            let mut e = vec![Z0; n];
+            e[j] = C64::new(1.0, 0.0);
+            xlu.solve(&mut e);
+            for i in 0..n {
+                xinv[i * n + j] = e[i];
+            }
+        }
+        let norm1 = |get: &dyn Fn(usize, usize) -> C64| {
+            (0..n)
+                .map(|j| (0..n).map(|i| get(i, j).norm()).sum::<f64>())
+                .fold(0.0, f64::max)
+        };
+        let cond = norm1(&|i, j| x[(i, j)]) * norm1(&|i, j| xinv[i * n + j]);
+        if !(cond <= p.cond_max) {
+            return Line { cond, ..fallback };
+        }
+        // R = X^-1 F^-1 B_in (n x ni)
+        let mut r = vec![Z0; n * ni];
+        for (jj, &j) in self.inputs.iter().enumerate() {
+            let mut y = cplx_from_real_col(&self.b_r, j);
+            flu.solve(&mut y);
+            for k in 0..n {
+                r[k * ni + jj] = (0..n).map(|a| xinv[k * n + a] * y[a]).sum();
+            }
+        }
+        // residues
+        let mut a = vec![Z0; n * blk];
+        let mut s = vec![Z0; n * blk];
+        for k in 0..n {
+            for i in 0..no {
+                let l: C64 = (0..n).map(|q| x[(q, k)] * self.b_r[(q, i)]).sum();
+                let ls: C64 = (0..n).map(|q| x[(q, k)] * self.sb_r[(q, i)]).sum();
+                for jj in 0..ni {
+                    a[k * blk + i * ni + jj] = l * r[k * ni + jj];
+                    s[k * blk + i * ni + jj] = ls * r[k * ni + jj];
+                }
+            }
+        }
+        let nu: Vec<C64> = (0..n).map(|k| nu.column_vector()[k]).collect();
+        // scale of this line
+        let mut h0 = vec![Z0; 2 * blk];
+        for k in 0..n {
+            for q in 0..blk {
+                h0[q] += a[k * blk + q];
+                h0[blk + q] += s[k * blk + q];
+            }
+        }
+        let scale_h = h0[..blk].iter().map(|v| v.norm()).fold(0.0, f64::max);
+        let scale_s = h0[blk..].iter().map(|v| v.norm()).fold(0.0, f64::max);
+        // order terms by |nu| descending (stable: ties by index)
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by(|&i, &j| nu[j].norm().total_cmp(&nu[i].norm()).then(i.cmp(&j)));
+        let amax = |v: &[C64], k: usize| {
+            v[k * blk..(k + 1) * blk]
+                .iter()
+                .map(|z| z.norm())
+                .fold(0.0, f64::max)
+        };
+        // suffix sums of residue sizes in sorted order
+        let mut suf_a = vec![0.0; n + 1];
+        let mut suf_s = vec![0.0; n + 1];
+        for t in (0..n).rev() {
+            suf_a[t] = suf_a[t + 1] + amax(&a, order[t]);
+            suf_s[t] = suf_s[t + 1] + amax(&s, order[t]);
+        }
+        let mut best = (n, 0usize, usize::MAX); // (n_near, order P+1 count, cost)
+        best.2 = 3 * n;
+        for n_near in 0..n {
+            let rho = nu[order[n_near]].norm() * radius;
+            if rho >= p.rho_max {
+                continue;
+            }
+            // smallest count c = P + 1 with bound * rho^c / (1 - rho) <= tol * scale
+            let need = |sum: f64, scale: f64| -> Option<usize> {
+                if sum == 0.0 {
+                    return Some(0);
+                }
+                let target = p.series_tol * scale * (1.0 - rho) / sum;
+                if rho == 0.0 {
+                    return Some(1);
+                }
+                if !(target > 0.0) {
+                    return None;
+                }
+                if target >= 1.0 {
+                    return Some(1);
+                }
+                Some((target.ln() / rho.ln()).ceil().max(1.0) as usize)
+            };
+            let (Some(ch), Some(cs)) = (need(suf_a[n_near], scale_h), need(suf_s[n_near], scale_s))
+            else {
+                continue;
+            };
+            let c = ch.max(cs);
+            if c > p.max_order + 1 {
+                continue;
+            }
+            let cost = 3 * n_near + 2 * c;
+            if cost < best.2 {
+                best = (n_near, c, cost);
+            }
+        }
+        let (n_near, count, _) = best;
+        let mut line = Line {
+            fallback: false,
+            cond,
+            ..Default::default()
+        };
+        for &k in &order[..n_near] {
+            line.nu.push(nu[k]);
+            line.a.extend_from_slice(&a[k * blk..(k + 1) * blk]);
+            line.s.extend_from_slice(&s[k * blk..(k + 1) * blk]);
+        }
+        line.mh = vec![Z0; count * blk];
+        line.ms = vec![Z0; count * blk];
+        for &k in &order[n_near..] {
+            let mut pw = C64::new(1.0, 0.0);
+            for pp in 0..count {
+                for q in 0..blk {
+                    line.mh[pp * blk + q] += a[k * blk + q] * pw;
+                    line.ms[pp * blk + q] += s[k * blk + q] * pw;
+                }
+                pw *= nu[k];
+            }
+        }
+        line.pack(blk);
+        line
+    }
+}
+
+impl PencilSweep {
+    /// Number of lines that fall back to dense LU (poorly conditioned eigenvectors).
+    pub fn n_fallback_lines(&self) -> usize {
+        self.lines.iter().filter(|l| l.fallback).count()
+    }
+    /// Largest condition estimate of X over the non-fallback lines.
+    pub fn max_condition(&self) -> f64 {
+        self.lines
+            .iter()
+            .filter(|l| !l.fallback)
+            .map(|l| l.cond)
+            .fold(0.0, f64::max)
+    }
+    /// Mean number of explicit (near-pole) terms and of series moments per line.
+    pub fn mean_terms(&self) -> (f64, f64) {
+        let blk = self.rom.n_out * self.rom.inputs.len();
+        let nl = self.lines.len().max(1) as f64;
+        let near = self.lines.iter().map(|l| l.nu.len()).sum::<usize>() as f64 / nl;
+        let mom = self
+            .lines
+            .iter()
+            .map(|l| l.mh.len() / blk.max(1))
+            .sum::<usize>() as f64
+            / nl;
+        (near, mom)
+    }
+    /// The prepared frequency grid (rad/s).
+    pub fn omega_rad_s(&self) -> &[f64] {
+        &self.omega
+    }
+    /// Floating-point operations of one sweep (with derivatives), counted from the kernel:
+    /// per explicit term 1 complex division-like reciprocal (~11 flops) + 2 complex products
+    /// (12) + 3 blk complex multiply-adds (8 each); per moment 3 blk complex multiply-adds.
+    pub fn flops_per_sweep(&self, with_derivatives: bool) -> f64 {
+        let blk = (self.rom.n_out * self.rom.inputs.len()) as f64;
+        let per_cmac = 8.0;
+        self.lines
+            .iter()
+            .map(|l| {
+                let near = l.nu.len() as f64;
+                let mom = (l.mh.len() as f64) / blk.max(1.0);
+                if with_derivatives {
+                    near * (11.0 + 12.0 + 3.0 * blk * per_cmac) + mom * 3.0 * blk * per_cmac
+                } else {
+                    near * (11.0 + blk * per_cmac) + mom * blk * per_cmac
+                }
+            })
+            .sum()
+    }
+
+    /// Evaluate one line into (h, dh, sh) slices of length blk.
+    #[inline]
+    fn eval_line(
+        &self,
+        l: usize,
+        e: C64,
+        h: &mut [C64],
+        mut dh: Option<(&mut [C64], &mut [C64])>,
+        acc: &mut Vec<[f64; LANES]>,
+    ) -> Result<(), FrfError> {
+        let line = &self.lines[l];
+        let blk = h.len();
+        if line.fallback {
+            let [hh, dd, ss] = self.rom.lu_line(self.omega[l], e, dh.is_some())?;
+            h.copy_from_slice(&hh);
+            if let Some((d, s)) = dh {
+                d.copy_from_slice(&dd);
+                s.copy_from_slice(&ss);
+            }
+            return Ok(());
+        }
+        let d = e - self.e0;
+        let t = -d;
+        let count = line.mh.len() / blk.max(1);
+        let with_d = dh.is_some();
+        acc.clear();
+        acc.resize(6 * blk, [0.0; LANES]);
+        near_terms(line, blk, d, with_d, acc);
+        let lanesum = |r: &[f64; LANES]| r.iter().fold(0.0, |a, b| a + b);
+        for q in 0..blk {
+            let (mut v, mut dv, mut vs) = (Z0, Z0, Z0);
+            for pp in (0..count).rev() {
+                if with_d {
+                    dv = dv * t + v;
+                    vs = vs * t + line.ms[pp * blk + q];
+                }
+                v = v * t + line.mh[pp * blk + q];
+            }
+            h[q] = C64::new(lanesum(&acc[6 * q]), lanesum(&acc[6 * q + 1])) + v;
+            if let Some((dd, ss)) = dh.as_mut() {
+                dd[q] = C64::new(lanesum(&acc[6 * q + 2]), lanesum(&acc[6 * q + 3])) - dv;
+                ss[q] = C64::new(lanesum(&acc[6 * q + 4]), lanesum(&acc[6 * q + 5])) + vs;
+            }
+        }
+        Ok(())
+    }
+
+    /// Sweep the prepared grid for the moduli E*(w_l) (one per line).
+    pub fn sweep_moduli_into(
+        &self,
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        let nl = self.omega.len();
+        if modulus_pa.len() != nl {
+            return Err(FrfError::Length {
+                what: "modulus_pa",
+                expected: nl,
+                got: modulus_pa.len(),
+            });
+        }
+        let no = self.rom.n_out;
+        let ni = self.rom.inputs.len();
+        let blk = no * ni;
+        if out.n_lines != nl
+            || out.n_out != no
+            || out.n_in != ni
+            || out.h.len() != nl * blk
+            || (with_derivatives && (out.dh_de.len() != nl * blk || out.sh.len() != nl * blk))
+        {
+            *out = Sweep::zeros(nl, no, ni, with_derivatives);
+        }
+        if !with_derivatives {
+            out.dh_de.clear();
+            out.sh.clear();
+        }
+        const CHUNK: usize = 64;
+        let run = |c: usize,
+                   h: &mut [C64],
+                   dh: Option<(&mut [C64], &mut [C64])>|
+         -> Result<(), FrfError> {
+            let l0 = c * CHUNK;
+            let mut acc: Vec<[f64; LANES]> = Vec::with_capacity(6 * blk);
+            match dh {
+                None => {
+                    for (i, hl) in h.chunks_mut(blk).enumerate() {
+                        self.eval_line(l0 + i, modulus_pa[l0 + i], hl, None, &mut acc)?;
+                    }
+                }
+                Some((d, s)) => {
+                    for (i, ((hl, dl), sl)) in h
+                        .chunks_mut(blk)
+                        .zip(d.chunks_mut(blk))
+                        .zip(s.chunks_mut(blk))
+                        .enumerate()
+                    {
+                        self.eval_line(l0 + i, modulus_pa[l0 + i], hl, Some((dl, sl)), &mut acc)?;
+                    }
+                }
+            }
+            Ok(())
+        };
+        if blk == 0 {
+            return Ok(());
+        }
+        if with_derivatives {
+            out.h
+                .par_chunks_mut(CHUNK * blk)
+                .zip(out.dh_de.par_chunks_mut(CHUNK * blk))
+                .zip(out.sh.par_chunks_mut(CHUNK * blk))
+                .enumerate()
+                .try_for_each(|(c, ((h, d), s))| run(c, h, Some((d, s))))
+        } else {
+            out.h
+                .par_chunks_mut(CHUNK * blk)
+                .enumerate()
+                .try_for_each(|(c, h)| run(c, h, None))
+        }
+    }
+}
+
+impl FrfEngine for PencilSweep {
+    fn n_out(&self) -> usize {
+        self.rom.n_out
+    }
+    fn inputs(&self) -> &[usize] {
+        &self.rom.inputs
+    }
+    /// Only the prepared grid is accepted (bitwise equal `omega_rad_s`).
+    fn sweep_into(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        if omega_rad_s.len() != self.omega.len()
+            || omega_rad_s
+                .iter()
+                .zip(&self.omega)
+                .any(|(a, b)| a.to_bits() != b.to_bits())
+        {
+            return Err(FrfError::Other(format!(
+                "this PencilSweep was prepared for a different frequency grid ({} lines); call ReducedModel::prepare with the new grid",
+                self.omega.len()
+            )));
+        }
+        self.sweep_moduli_into(modulus_pa, with_derivatives, out)
+    }
+}

@@ -1,0 +1,196 @@
+//! The reduced model Z_r(w, E*) = -w^2 M_r + K_r + j w C_r + j D_r + E* S_r (dense n_r x n_r)
+//! and its reference evaluation by a dense LU per line ([`ReducedModel::lu_sweep`]).
+//!
+//! With X = Z_r^-1 B_r (all outputs), H_ij = b_i^T x_j, dH_ij/dE' = -x_i^T S_r x_j
+//! (paper eq. 44-47 projected), and sh_ij = (V^T S b_i)^T x_j.
+
+use super::dense::DenseLu;
+use super::{ModulusRange, RomError};
+use crate::common::C64;
+use crate::frf::{FrfEngine, FrfError, Sweep};
+use faer::Mat;
+use rayon::prelude::*;
+
+/// A projected model; implements [`FrfEngine`] by dense LU per line.
+#[derive(Clone, Debug)]
+pub struct ReducedModel {
+    pub(crate) n_r: usize,
+    pub(crate) n_out: usize,
+    pub(crate) inputs: Vec<usize>,
+    pub(crate) m_r: Mat<f64>,
+    pub(crate) k_r: Mat<f64>,
+    pub(crate) s_r: Mat<f64>,
+    pub(crate) c_r: Option<Mat<f64>>,
+    pub(crate) d_r: Option<Mat<f64>>,
+    /// V^T b_i (n_r x n_out).
+    pub(crate) b_r: Mat<f64>,
+    /// V^T S b_i (n_r x n_out).
+    pub(crate) sb_r: Mat<f64>,
+    pub(crate) range: ModulusRange,
+}
+
+impl ReducedModel {
+    /// Basis size n_r.
+    pub fn basis_size(&self) -> usize {
+        self.n_r
+    }
+    /// The modulus range the ROM was built (and certified) for.
+    pub fn range(&self) -> ModulusRange {
+        self.range
+    }
+
+    /// A(w) + e S_r as a row-major complex matrix.
+    pub(crate) fn z_r(&self, omega: f64, e: C64) -> Vec<C64> {
+        let n = self.n_r;
+        let mut z = vec![C64::new(0.0, 0.0); n * n];
+        let w2 = omega * omega;
+        for i in 0..n {
+            for j in 0..n {
+                let mut re = -w2 * self.m_r[(i, j)] + self.k_r[(i, j)];
+                let mut im = 0.0;
+                if let Some(c) = &self.c_r {
+                    im += omega * c[(i, j)];
+                }
+                if let Some(d) = &self.d_r {
+                    im += d[(i, j)];
+                }
+                let s = self.s_r[(i, j)];
+                re += e.re * s;
+                im += e.im * s;
+                z[i * n + j] = C64::new(re, im);
+            }
+        }
+        z
+    }
+
+    /// Per-line results (h, dh, sh), each n_out x n_in row-major.
+    pub(crate) fn lu_line(
+        &self,
+        omega: f64,
+        e: C64,
+        with_derivatives: bool,
+    ) -> Result<[Vec<C64>; 3], FrfError> {
+        let n = self.n_r;
+        let no = self.n_out;
+        let ni = self.inputs.len();
+        let lu = DenseLu::factor(n, self.z_r(omega, e)).ok_or(FrfError::Singular {
+            freq_hz: omega / (2.0 * std::f64::consts::PI),
+            modulus: e,
+        })?;
+        // columns needed: the inputs, and all outputs when derivatives are requested
+        let cols: Vec<usize> = if with_derivatives {
+            (0..no).collect()
+        } else {
+            self.inputs.clone()
+        };
+        let mut x: Vec<Vec<C64>> = Vec::with_capacity(no);
+        let mut slot = vec![usize::MAX; no];
+        for &c in &cols {
+            let mut b: Vec<C64> = (0..n).map(|k| C64::new(self.b_r[(k, c)], 0.0)).collect();
+            lu.solve(&mut b);
+            slot[c] = x.len();
+            x.push(b);
+        }
+        let mut h = vec![C64::new(0.0, 0.0); no * ni];
+        let mut dh = Vec::new();
+        let mut sh = Vec::new();
+        for i in 0..no {
+            for (jj, &j) in self.inputs.iter().enumerate() {
+                let xj = &x[slot[j]];
+                h[i * ni + jj] = (0..n).map(|k| xj[k] * self.b_r[(k, i)]).sum();
+            }
+        }
+        if with_derivatives {
+            dh = vec![C64::new(0.0, 0.0); no * ni];
+            sh = vec![C64::new(0.0, 0.0); no * ni];
+            for (jj, &j) in self.inputs.iter().enumerate() {
+                let xj = &x[slot[j]];
+                // S_r x_j
+                let sx: Vec<C64> = (0..n)
+                    .map(|a| (0..n).map(|b| xj[b] * self.s_r[(a, b)]).sum())
+                    .collect();
+                for i in 0..no {
+                    let xi = &x[slot[i]];
+                    dh[i * ni + jj] = -(0..n).map(|k| xi[k] * sx[k]).sum::<C64>();
+                    sh[i * ni + jj] = (0..n).map(|k| xj[k] * self.sb_r[(k, i)]).sum();
+                }
+            }
+        }
+        Ok([h, dh, sh])
+    }
+
+    /// Reference sweep: a dense LU of the n_r x n_r reduced system on every line
+    /// (O(N_f n_r^3)); lines in parallel, results independent of the thread count.
+    pub fn lu_sweep(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+    ) -> Result<Sweep, FrfError> {
+        let mut s = Sweep::default();
+        self.lu_sweep_into(omega_rad_s, modulus_pa, with_derivatives, &mut s)?;
+        Ok(s)
+    }
+
+    fn lu_sweep_into(
+        &self,
+        omega: &[f64],
+        modulus: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        if modulus.len() != omega.len() {
+            return Err(FrfError::Length {
+                what: "modulus_pa",
+                expected: omega.len(),
+                got: modulus.len(),
+            });
+        }
+        let lines: Vec<[Vec<C64>; 3]> = omega
+            .par_iter()
+            .zip(modulus.par_iter())
+            .map(|(&w, &e)| self.lu_line(w, e, with_derivatives))
+            .collect::<Result<_, _>>()?;
+        *out = Sweep::zeros(omega.len(), self.n_out, self.inputs.len(), with_derivatives);
+        let blk = self.n_out * self.inputs.len();
+        for (l, [h, dh, sh]) in lines.into_iter().enumerate() {
+            out.h[l * blk..(l + 1) * blk].copy_from_slice(&h);
+            if with_derivatives {
+                out.dh_de[l * blk..(l + 1) * blk].copy_from_slice(&dh);
+                out.sh[l * blk..(l + 1) * blk].copy_from_slice(&sh);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl FrfEngine for ReducedModel {
+    fn n_out(&self) -> usize {
+        self.n_out
+    }
+    fn inputs(&self) -> &[usize] {
+        &self.inputs
+    }
+    fn sweep_into(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        self.lu_sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
+    }
+}
+
+/// Check that `inputs` index observation points.
+pub(crate) fn check_inputs(inputs: &[usize], n_out: usize) -> Result<(), RomError> {
+    if inputs.is_empty() {
+        return Err(RomError::Params("no input (excitation) point given".into()));
+    }
+    if let Some(&bad) = inputs.iter().find(|&&i| i >= n_out) {
+        return Err(RomError::Params(format!(
+            "input index {bad} is not an observation point (the model has {n_out})"
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,267 @@
+//! Full-model sparse kernels used by the ROM build: a union sparsity pattern shared by
+//! M, K_b, S, C_b, D_b (symbolic analysis once, values refilled per (w, E)), the real SPD
+//! Cholesky of K_b + E_ref S and the complex sparse LU of
+//! Z(w, E*) = -w^2 M + K_b + j w C_b + j D_b + E* S used as the certificate's reference.
+//!
+//! All faer calls use `Par::Seq` explicitly so that results do not depend on the number of
+//! threads (callers parallelise over independent frequency lines or moduli instead).
+
+use super::RomError;
+use crate::common::C64;
+use crate::fe::model::{SpMat, StructuralModel};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
+use faer::sparse::linalg::lu::{factorize_symbolic_lu, NumericLu, SymbolicLu};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
+use faer::{Conj, MatMut, Par, Side};
+
+/// y += alpha * A x for a real CSC matrix and a real vector.
+pub(crate) fn spmv_add(a: &SpMat, x: &[f64], alpha: f64, y: &mut [f64]) {
+    let sym = a.symbolic();
+    let rows = sym.row_idx();
+    let val = a.val();
+    for (j, &xj) in x.iter().enumerate().take(a.ncols()) {
+        if xj == 0.0 {
+            continue;
+        }
+        let s = alpha * xj;
+        for p in sym.col_range(j) {
+            y[rows[p]] += val[p] * s;
+        }
+    }
+}
+
+/// The union pattern of several square matrices, and for each matrix the map
+/// (source value index, destination value index).
+pub(crate) struct UnionPattern {
+    pub sym: SymbolicSparseColMat<usize>,
+    maps: Vec<Vec<(usize, usize)>>,
+}
+
+impl UnionPattern {
+    pub fn new(mats: &[&SpMat]) -> Result<Self, RomError> {
+        let n = mats[0].nrows();
+        for m in mats {
+            if m.nrows() != n || m.ncols() != n {
+                return Err(RomError::Model(format!(
+                    "all model matrices must be {n} x {n}; one is {} x {}",
+                    m.nrows(),
+                    m.ncols()
+                )));
+            }
+        }
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut row_idx: Vec<usize> = Vec::new();
+        col_ptr.push(0usize);
+        let mut buf: Vec<usize> = Vec::new();
+        for j in 0..n {
+            buf.clear();
+            for m in mats {
+                let s = m.symbolic();
+                buf.extend_from_slice(&s.row_idx()[s.col_range(j)]);
+            }
+            buf.sort_unstable();
+            buf.dedup();
+            row_idx.extend_from_slice(&buf);
+            col_ptr.push(row_idx.len());
+        }
+        let mut maps = Vec::with_capacity(mats.len());
+        for m in mats {
+            let s = m.symbolic();
+            let mut map = Vec::new();
+            for j in 0..n {
+                let dst = &row_idx[col_ptr[j]..col_ptr[j + 1]];
+                for p in s.col_range(j) {
+                    let i = s.row_idx()[p];
+                    let q = dst
+                        .binary_search(&i)
+                        .map_err(|_| RomError::Model("internal: pattern union failed".into()))?;
+                    map.push((p, col_ptr[j] + q));
+                }
+            }
+            maps.push(map);
+        }
+        let sym = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
+        Ok(UnionPattern { sym, maps })
+    }
+
+    pub fn nnz(&self) -> usize {
+        self.sym.row_idx().len()
+    }
+
+    /// vals += coef * mats[k] (real coefficient, real values).
+    pub fn add_real(&self, k: usize, mat: &SpMat, coef: f64, vals: &mut [f64]) {
+        let v = mat.val();
+        for &(p, q) in &self.maps[k] {
+            vals[q] += coef * v[p];
+        }
+    }
+
+    /// vals += coef * mats[k] (complex coefficient).
+    pub fn add_cplx(&self, k: usize, mat: &SpMat, coef: C64, vals: &mut [C64]) {
+        let v = mat.val();
+        for &(p, q) in &self.maps[k] {
+            vals[q] += coef * v[p];
+        }
+    }
+}
+
+/// Matrices of the model in a fixed order: 0 M, 1 K_b, 2 S, 3 C_b, 4 D_b (when present).
+pub(crate) struct ModelPattern<'a> {
+    pub model: &'a StructuralModel,
+    pub pat: UnionPattern,
+}
+
+impl<'a> ModelPattern<'a> {
+    pub fn new(model: &'a StructuralModel) -> Result<Self, RomError> {
+        let mut mats: Vec<&SpMat> = vec![&model.m, &model.k_b, &model.s];
+        if let Some(c) = &model.c_b {
+            mats.push(c);
+        }
+        if let Some(d) = &model.d_b {
+            mats.push(d);
+        }
+        Ok(ModelPattern {
+            model,
+            pat: UnionPattern::new(&mats)?,
+        })
+    }
+
+    /// Values of K_b + e S on the union pattern.
+    pub fn stiffness_values(&self, e: f64) -> Vec<f64> {
+        let mut v = vec![0.0; self.pat.nnz()];
+        self.pat.add_real(1, &self.model.k_b, 1.0, &mut v);
+        self.pat.add_real(2, &self.model.s, e, &mut v);
+        v
+    }
+
+    /// Values of Z(w, E*) on the union pattern.
+    pub fn dynamic_values(&self, omega: f64, e: C64) -> Vec<C64> {
+        let mut v = vec![C64::new(0.0, 0.0); self.pat.nnz()];
+        let m = self.model;
+        self.pat
+            .add_cplx(0, &m.m, C64::new(-omega * omega, 0.0), &mut v);
+        self.pat.add_cplx(1, &m.k_b, C64::new(1.0, 0.0), &mut v);
+        self.pat.add_cplx(2, &m.s, e, &mut v);
+        let mut k = 3;
+        if let Some(c) = &m.c_b {
+            self.pat.add_cplx(k, c, C64::new(0.0, omega), &mut v);
+            k += 1;
+        }
+        if let Some(d) = &m.d_b {
+            self.pat.add_cplx(k, d, C64::new(0.0, 1.0), &mut v);
+        }
+        v
+    }
+}
+
+/// Sparse Cholesky of the real SPD matrix K_b + E_ref S; symbolic analysis shared.
+pub(crate) struct SpdSolver<'s> {
+    symbolic: &'s SymbolicCholesky<usize>,
+    values: Vec<f64>,
+}
+
+impl<'s> SpdSolver<'s> {
+    pub fn symbolic(pat: &ModelPattern<'_>) -> Result<SymbolicCholesky<usize>, RomError> {
+        factorize_symbolic_cholesky(
+            pat.pat.sym.as_ref(),
+            Side::Lower,
+            Default::default(),
+            Default::default(),
+        )
+        .map_err(|e| RomError::Factorization(format!("symbolic Cholesky failed: {e:?}")))
+    }
+
+    pub fn new(
+        symbolic: &'s SymbolicCholesky<usize>,
+        pat: &ModelPattern<'_>,
+        e_ref: f64,
+    ) -> Result<Self, RomError> {
+        let a_vals = pat.stiffness_values(e_ref);
+        let a = SparseColMatRef::new(pat.pat.sym.as_ref(), &a_vals);
+        let mut values = vec![0.0f64; symbolic.len_val()];
+        let mut mem = MemBuffer::try_new(
+            symbolic.factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default()),
+        )
+        .map_err(|_| RomError::Factorization("out of memory for the Cholesky workspace".into()))?;
+        symbolic
+            .factorize_numeric_llt(
+                &mut values,
+                a,
+                Side::Lower,
+                Default::default(),
+                Par::Seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|e| {
+                RomError::Factorization(format!(
+                    "K_b + {e_ref:.4e} S is not positive definite ({e:?}): is the model constrained (no rigid-body modes)?"
+                ))
+            })?;
+        Ok(SpdSolver { symbolic, values })
+    }
+
+    /// Solve (K_b + E_ref S) X = RHS in place (columns of a column-major n x k matrix).
+    pub fn solve_in_place(&self, rhs: MatMut<'_, f64>) {
+        let k = rhs.ncols();
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(k, Par::Seq));
+        LltRef::new(&self.symbolic, &self.values).solve_in_place_with_conj(
+            Conj::No,
+            rhs,
+            Par::Seq,
+            MemStack::new(&mut mem),
+        );
+    }
+}
+
+/// Complex sparse LU of Z(w, E*) on the union pattern (reference full-model solve).
+pub(crate) struct FullSolver<'a> {
+    pat: &'a ModelPattern<'a>,
+    symbolic: SymbolicLu<usize>,
+}
+
+impl<'a> FullSolver<'a> {
+    pub fn new(pat: &'a ModelPattern<'a>) -> Result<Self, RomError> {
+        let symbolic = factorize_symbolic_lu(pat.pat.sym.as_ref(), Default::default())
+            .map_err(|e| RomError::Factorization(format!("symbolic LU failed: {e:?}")))?;
+        Ok(FullSolver { pat, symbolic })
+    }
+
+    /// X = Z(w, E*)^-1 RHS, RHS given as real columns (n x k, column-major).
+    pub fn solve(
+        &self,
+        omega: f64,
+        e: C64,
+        rhs: &faer::Mat<f64>,
+    ) -> Result<faer::Mat<C64>, RomError> {
+        let vals = self.pat.dynamic_values(omega, e);
+        let a = SparseColMatRef::new(self.pat.pat.sym.as_ref(), &vals);
+        let mut numeric = NumericLu::<usize, C64>::new();
+        let k = rhs.ncols();
+        let mut mem = MemBuffer::try_new(faer::dyn_stack::StackReq::any_of(&[
+            self.symbolic
+                .factorize_numeric_lu_scratch::<C64>(Par::Seq, Default::default()),
+            self.symbolic.solve_in_place_scratch::<C64>(k, Par::Seq),
+        ]))
+        .map_err(|_| RomError::Factorization("out of memory for the LU workspace".into()))?;
+        let lu = self
+            .symbolic
+            .factorize_numeric_lu(
+                &mut numeric,
+                a,
+                Par::Seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|err| {
+                RomError::Factorization(format!(
+                    "Z is singular at {:.3} Hz, E* = {e} Pa ({err:?})",
+                    omega / (2.0 * std::f64::consts::PI)
+                ))
+            })?;
+        let mut x = faer::Mat::<C64>::from_fn(rhs.nrows(), k, |i, j| C64::new(rhs[(i, j)], 0.0));
+        lu.solve_in_place_with_conj(Conj::No, x.as_mut(), Par::Seq, MemStack::new(&mut mem));
+        Ok(x)
+    }
+}
