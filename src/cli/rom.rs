@@ -1,8 +1,76 @@
-use super::common::Global;
+//! `rfmlab rom STUDY.toml [--band f0,f1] [--storage a,b] [--loss c,d] [--tolerance t] [--json]`:
+//! build and certify the reduced-order model of a study's structure.
+
+use super::common::{build_model, load_study, parse_pair, print_json, spinner, Global};
+use rfmlab::rom::{build_rom, ModulusRange, RomParams};
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-pub struct RomArgs {}
+pub struct RomArgs {
+    /// Study file (its [structure] section is used).
+    pub study: PathBuf,
+    /// Band in Hz.
+    #[arg(long, default_value = "1,500")]
+    pub band: String,
+    /// Storage modulus range E'min,E'max in Pa.
+    #[arg(long, default_value = "0.5e6,50e6")]
+    pub storage: String,
+    /// Loss modulus range E''min,E''max in Pa.
+    #[arg(long, default_value = "0.01e6,20e6")]
+    pub loss: String,
+    /// Certificate tolerance (max error relative to each FRF's peak).
+    #[arg(long, default_value_t = 1e-6)]
+    pub tolerance: f64,
+    #[arg(long)]
+    pub json: bool,
+}
 
-pub fn run(_a: &RomArgs, _g: &Global) -> anyhow::Result<()> {
-    anyhow::bail!("not implemented yet")
+pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
+    let band = parse_pair("--band", &a.band)?;
+    let storage = parse_pair("--storage", &a.storage)?;
+    let loss = parse_pair("--loss", &a.loss)?;
+    let study = load_study(&a.study)?;
+    let b = build_model(g, &study)?;
+    let inputs: Vec<usize> = (0..b.model.points.len()).collect();
+    let params = RomParams {
+        band_hz: band,
+        range: ModulusRange {
+            e_storage_pa: storage,
+            e_loss_pa: loss,
+        },
+        tolerance: a.tolerance,
+        ..RomParams::default()
+    };
+    let sp = spinner(g, "building and certifying the ROM");
+    let t = std::time::Instant::now();
+    let (_rom, cert) = build_rom(&b.model, &inputs, &params)?;
+    let secs = t.elapsed().as_secs_f64();
+    sp.finish_and_clear();
+    if a.json {
+        return print_json(&serde_json::json!({
+            "study": study.file.display().to_string(),
+            "n_dof": b.model.n_dof(),
+            "band_hz": band,
+            "range": params.range,
+            "tolerance": a.tolerance,
+            "seconds_total": secs,
+            "certificate": cert,
+        }));
+    }
+    println!(
+        "{}: {} DOFs -> {} basis vectors; max error {:.3e} (tolerance {:.0e}) on {} moduli x {} lines; {}",
+        study.file.display(),
+        b.model.n_dof(),
+        cert.basis_size,
+        cert.max_rel_error,
+        a.tolerance,
+        cert.n_moduli,
+        cert.n_lines,
+        if cert.passed { "CERTIFIED" } else { "NOT certified" }
+    );
+    println!(
+        "basis {:.2} s, certificate {:.2} s, total {secs:.2} s, {} enrichment level(s)",
+        cert.seconds_basis, cert.seconds_certify, cert.levels
+    );
+    Ok(())
 }

@@ -47,18 +47,22 @@ pub enum ModesError {
 #[derive(Clone, Debug)]
 pub struct ModesParams {
     /// Real eigensolver settings for the projection basis (default [`EigenParams::default`],
-    /// whose tolerance is then relaxed to 1e-8: the basis only needs to be good enough
+    /// whose tolerance is then relaxed to 1e-6: the basis only needs to be good enough
     /// for the refinement to start in the right basin).
     pub eigen: EigenParams,
     /// Size of the real basis: `extra_factor * n + extra` modes (defaults 2 and 8).
     pub extra_factor: usize,
     pub extra: usize,
-    /// Target relative residual of each complex mode (default 1e-10).
+    /// Target relative residual ||K phi - lambda M phi|| / ||K phi|| of each complex mode
+    /// (default 1e-6: this measure has a rounding floor of about eps cond(K), ~1e-7 for a steel
+    /// beam on a soft adhesive; the eigenvalue itself converges quadratically and is far more
+    /// accurate than the residual suggests).
     pub tol: f64,
     /// Maximum Rayleigh-quotient iterations per mode (default 10).
     pub max_refine: usize,
     /// A mode is flagged `y_dominant` when the y fraction of its kinetic energy exceeds this
-    /// (default 0.5).
+    /// (default 0.8: torsion modes carry 40-60 % of their energy in y but are invisible at centreline
+    /// sensors).
     pub y_dominant_threshold: f64,
 }
 
@@ -66,14 +70,14 @@ impl Default for ModesParams {
     fn default() -> Self {
         ModesParams {
             eigen: EigenParams {
-                tol: 1e-8,
+                tol: 1e-6,
                 ..EigenParams::default()
             },
             extra_factor: 2,
             extra: 8,
-            tol: 1e-10,
+            tol: 1e-6,
             max_refine: 10,
-            y_dominant_threshold: 0.5,
+            y_dominant_threshold: 0.8,
         }
     }
 }
