@@ -36,9 +36,11 @@ pub fn progress(g: &Global, len: u64, msg: &str) -> indicatif::ProgressBar {
     }
     let pb = indicatif::ProgressBar::new(len);
     pb.set_style(
-        indicatif::ProgressStyle::with_template("{msg:>28} [{bar:40}] {pos}/{len} {elapsed_precise}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template(
+            "{msg:>28} [{bar:40}] {pos}/{len} {elapsed_precise}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
     pb.set_message(msg.to_string());
     pb
@@ -69,7 +71,9 @@ pub fn parse_modulus(s: &str) -> Result<C64, InputError> {
     let re: f64 = parts[0].parse().map_err(|_| bad())?;
     let im: f64 = parts[1].parse().map_err(|_| bad())?;
     if !(re.is_finite() && re > 0.0 && im.is_finite() && im >= 0.0) {
-        return Err(InputError(format!("--modulus {s:?}: E' must be positive and E'' zero or positive (Pa)")));
+        return Err(InputError(format!(
+            "--modulus {s:?}: E' must be positive and E'' zero or positive (Pa)"
+        )));
     }
     Ok(C64::new(re, im))
 }
@@ -78,7 +82,9 @@ pub fn parse_modulus(s: &str) -> Result<C64, InputError> {
 pub fn parse_pair(flag: &str, s: &str) -> Result<(f64, f64), InputError> {
     let v: Vec<f64> = s.split(',').filter_map(|t| t.trim().parse().ok()).collect();
     if v.len() != 2 || !(v[0] >= 0.0 && v[1] > v[0]) {
-        return Err(InputError(format!("{flag} {s:?}: give two numbers low,high with 0 <= low < high")));
+        return Err(InputError(format!(
+            "{flag} {s:?}: give two numbers low,high with 0 <= low < high"
+        )));
     }
     Ok((v[0], v[1]))
 }
@@ -89,7 +95,10 @@ pub fn load_study(path: &Path) -> anyhow::Result<rfmlab::study::Study> {
 }
 
 /// Build the model of a study with a spinner.
-pub fn build_model(g: &Global, study: &rfmlab::study::Study) -> anyhow::Result<rfmlab::study::build::BuiltModel> {
+pub fn build_model(
+    g: &Global,
+    study: &rfmlab::study::Study,
+) -> anyhow::Result<rfmlab::study::build::BuiltModel> {
     let sp = spinner(g, "assembling the FE model");
     let b = rfmlab::study::build::build_model(&study.structure, &study.file.display().to_string())?;
     sp.finish_and_clear();
@@ -98,7 +107,10 @@ pub fn build_model(g: &Global, study: &rfmlab::study::Study) -> anyhow::Result<r
 
 /// Print a value as pretty JSON.
 pub fn print_json(v: &serde_json::Value) -> anyhow::Result<()> {
-    println!("{}", serde_json::to_string_pretty(v).context("JSON output")?);
+    println!(
+        "{}",
+        serde_json::to_string_pretty(v).context("JSON output")?
+    );
     Ok(())
 }
 

@@ -1,6 +1,8 @@
 //! `rfmlab convergence STUDY.toml [--sizes 0.01,0.005,0.0025] [--json]`: the paper's Table 1.
 
-use super::common::{load_study, parse_modulus, print_json, progress, Global, InputError, DEFAULT_MODULUS};
+use super::common::{
+    load_study, parse_modulus, print_json, progress, Global, InputError, DEFAULT_MODULUS,
+};
 use rfmlab::modes::{complex_modes, ModesParams};
 use rfmlab::study::{MeshSize, StructureSource};
 use serde_json::json;
@@ -33,9 +35,16 @@ pub fn run(a: &ConvergenceArgs, g: &Global) -> anyhow::Result<()> {
         .split(',')
         .map(|s| s.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|_| InputError(format!("--sizes {:?}: give element sizes in metres, e.g. 0.01,0.005,0.0025", a.sizes)))?;
+        .map_err(|_| {
+            InputError(format!(
+                "--sizes {:?}: give element sizes in metres, e.g. 0.01,0.005,0.0025",
+                a.sizes
+            ))
+        })?;
     if sizes.is_empty() || sizes.iter().any(|h| !(*h > 0.0)) {
-        return Err(InputError(format!("--sizes {:?}: sizes must be positive (m)", a.sizes)).into());
+        return Err(
+            InputError(format!("--sizes {:?}: sizes must be positive (m)", a.sizes)).into(),
+        );
     }
     let study = load_study(&a.study)?;
     let pb = progress(g, sizes.len() as u64, "mesh convergence");
@@ -45,15 +54,28 @@ pub fn run(a: &ConvergenceArgs, g: &Global) -> anyhow::Result<()> {
         match &mut s.source {
             StructureSource::Mesher(j) => j.mesh = MeshSize::ElementSize(h),
             StructureSource::MatrixMarket(_) => {
-                return Err(InputError("convergence needs a meshed structure (structure.source = \"mesher\")".into()).into())
+                return Err(InputError(
+                    "convergence needs a meshed structure (structure.source = \"mesher\")".into(),
+                )
+                .into())
             }
         }
         let t = std::time::Instant::now();
         let b = rfmlab::study::build::build_model(&s, &study.file.display().to_string())?;
         let t_asm = t.elapsed().as_secs_f64();
-        let modes = complex_modes(&b.model, e, a.count, b.dof_axes.as_deref(), &ModesParams::default())?;
+        let modes = complex_modes(
+            &b.model,
+            e,
+            a.count,
+            b.dof_axes.as_deref(),
+            &ModesParams::default(),
+        )?;
         let secs = t.elapsed().as_secs_f64();
-        let y: Vec<_> = modes.iter().filter(|m| m.y_dominant == Some(true)).take(2).collect();
+        let y: Vec<_> = modes
+            .iter()
+            .filter(|m| m.y_dominant == Some(true))
+            .take(2)
+            .collect();
         let info = b.mesh.as_ref();
         rows.push(json!({
             "element_size_m": h,
@@ -72,15 +94,33 @@ pub fn run(a: &ConvergenceArgs, g: &Global) -> anyhow::Result<()> {
     if a.json {
         return print_json(&json!({"modulus_pa": [e.re, e.im], "meshes": rows}));
     }
-    println!("Mesh convergence at E* = {:.4} + {:.4} j MPa (first two y-dominant modes)", e.re / 1e6, e.im / 1e6);
-    println!("{:>8} {:>9} {:>8} {:>11} {:>8} {:>11} {:>8} {:>8}", "size_mm", "elements", "dofs", "f1_hz", "eta1", "f2_hz", "eta2", "time_s");
+    println!(
+        "Mesh convergence at E* = {:.4} + {:.4} j MPa (first two y-dominant modes)",
+        e.re / 1e6,
+        e.im / 1e6
+    );
+    println!(
+        "{:>8} {:>9} {:>8} {:>11} {:>8} {:>11} {:>8} {:>8}",
+        "size_mm", "elements", "dofs", "f1_hz", "eta1", "f2_hz", "eta2", "time_s"
+    );
     for r in &rows {
-        let f = |k: &str| r[k].as_f64().map(|v| format!("{v:.3}")).unwrap_or("-".into());
-        let f5 = |k: &str| r[k].as_f64().map(|v| format!("{v:.4}")).unwrap_or("-".into());
+        let f = |k: &str| {
+            r[k].as_f64()
+                .map(|v| format!("{v:.3}"))
+                .unwrap_or("-".into())
+        };
+        let f5 = |k: &str| {
+            r[k].as_f64()
+                .map(|v| format!("{v:.4}"))
+                .unwrap_or("-".into())
+        };
         println!(
             "{:>8.2} {:>9} {:>8} {:>11} {:>8} {:>11} {:>8} {:>8.1}",
             r["element_size_m"].as_f64().unwrap_or(0.0) * 1e3,
-            r["elements"].as_u64().map(|v| v.to_string()).unwrap_or("-".into()),
+            r["elements"]
+                .as_u64()
+                .map(|v| v.to_string())
+                .unwrap_or("-".into()),
             r["dofs"],
             f("y_mode1_freq_hz"),
             f5("y_mode1_loss_factor"),

@@ -1,6 +1,9 @@
 //! `rfmlab frf STUDY.toml ... --out FILE.parquet` and `rfmlab export-mm STUDY.toml --dir DIR`.
 
-use super::common::{build_model, load_study, parse_modulus, parse_pair, print_json, progress, Global, InputError, DEFAULT_MODULUS};
+use super::common::{
+    build_model, load_study, parse_modulus, parse_pair, print_json, progress, Global, InputError,
+    DEFAULT_MODULUS,
+};
 use rfmlab::common::C64;
 use rfmlab::frf::full::{FullModel, FullParams};
 use rfmlab::frf::FrfEngine;
@@ -48,12 +51,19 @@ pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
     };
     let (f0, f1) = parse_pair("--band", &a.band)?;
     if !(a.step > 0.0 && a.step.is_finite()) {
-        return Err(InputError(format!("--step {}: give a positive line spacing in Hz", a.step)).into());
+        return Err(InputError(format!(
+            "--step {}: give a positive line spacing in Hz",
+            a.step
+        ))
+        .into());
     }
     let f0 = if f0 == 0.0 { a.step } else { f0 };
     let n = ((f1 - f0) / a.step + 1e-9).floor() as usize + 1;
     let freq: Vec<f64> = (0..n).map(|k| f0 + k as f64 * a.step).collect();
-    let omega: Vec<f64> = freq.iter().map(|f| 2.0 * std::f64::consts::PI * f).collect();
+    let omega: Vec<f64> = freq
+        .iter()
+        .map(|f| 2.0 * std::f64::consts::PI * f)
+        .collect();
     let study = load_study(&a.study)?;
     let b = build_model(g, &study)?;
     let engine = FullModel::new(&b.model, &[b.excitation], FullParams::default())?;
@@ -149,7 +159,10 @@ pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
             .max_by(|x, y| x.1.norm().total_cmp(&y.1.norm()))
             .map(|(k, v)| (k, v.norm()))
             .unwrap_or((0, 0.0));
-        println!("  point {:>3} {}: peak |H'| = {v:.4e} (m/s^2)/N at {:.2} Hz", p.id, p.direction, freq[k]);
+        println!(
+            "  point {:>3} {}: peak |H'| = {v:.4e} (m/s^2)/N at {:.2} Hz",
+            p.id, p.direction, freq[k]
+        );
     }
     if let Some(out) = &a.out {
         println!("wrote {}", out.display());
@@ -160,10 +173,15 @@ pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
 pub fn run_export(a: &ExportMmArgs, g: &Global) -> anyhow::Result<()> {
     let study = load_study(&a.study)?;
     let b = build_model(g, &study)?;
-    std::fs::create_dir_all(&a.dir).map_err(|e| InputError(format!("cannot create {}: {e}", a.dir.display())))?;
+    std::fs::create_dir_all(&a.dir)
+        .map_err(|e| InputError(format!("cannot create {}: {e}", a.dir.display())))?;
     rfmlab::fe::matrix_market::export_model(&b.model, &a.dir)?;
     if !g.quiet {
-        println!("wrote M.mtx, K_b.mtx, S.mtx and dofmap.csv ({} free DOFs) to {}", b.model.n_dof(), a.dir.display());
+        println!(
+            "wrote M.mtx, K_b.mtx, S.mtx and dofmap.csv ({} free DOFs) to {}",
+            b.model.n_dof(),
+            a.dir.display()
+        );
     }
     Ok(())
 }

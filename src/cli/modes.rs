@@ -1,6 +1,8 @@
 //! `rfmlab modes STUDY.toml [--modulus E',E''] [--count N] [--json]`
 
-use super::common::{build_model, load_study, parse_modulus, print_json, spinner, Global, DEFAULT_MODULUS};
+use super::common::{
+    build_model, load_study, parse_modulus, print_json, spinner, Global, DEFAULT_MODULUS,
+};
 use rfmlab::modes::{complex_modes, ModesParams};
 use serde_json::json;
 use std::path::PathBuf;
@@ -29,7 +31,13 @@ pub fn run(a: &ModesArgs, g: &Global) -> anyhow::Result<()> {
     let b = build_model(g, &study)?;
     let sp = spinner(g, "complex modes");
     let t = std::time::Instant::now();
-    let modes = complex_modes(&b.model, e, a.count, b.dof_axes.as_deref(), &ModesParams::default())?;
+    let modes = complex_modes(
+        &b.model,
+        e,
+        a.count,
+        b.dof_axes.as_deref(),
+        &ModesParams::default(),
+    )?;
     let secs = t.elapsed().as_secs_f64();
     sp.finish_and_clear();
     if a.json {
@@ -65,7 +73,10 @@ pub fn run(a: &ModesArgs, g: &Global) -> anyhow::Result<()> {
         e.re / 1e6,
         e.im / 1e6
     );
-    println!("{:>4} {:>12} {:>10} {:>24} {:>20} {:>6}", "mode", "freq_hz", "loss", "phi^T S phi (m/kg)", "energy x/y/z", "y?");
+    println!(
+        "{:>4} {:>12} {:>10} {:>24} {:>20} {:>6}",
+        "mode", "freq_hz", "loss", "phi^T S phi (m/kg)", "energy x/y/z", "y?"
+    );
     for (k, m) in modes.iter().enumerate() {
         let en = m
             .energy_fraction_xyz

@@ -32,12 +32,25 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
     let masses: Vec<(usize, f64)> = ex
         .sensors
         .iter()
-        .map(|(id, m)| (built.model.points.iter().position(|p| p.id == *id).unwrap_or(usize::MAX), *m))
+        .map(|(id, m)| {
+            (
+                built
+                    .model
+                    .points
+                    .iter()
+                    .position(|p| p.id == *id)
+                    .unwrap_or(usize::MAX),
+                *m,
+            )
+        })
         .collect();
     let model = if masses.is_empty() {
         built.model.clone()
     } else {
-        built.model.with_point_masses(&masses).map_err(anyhow::Error::msg)?
+        built
+            .model
+            .with_point_masses(&masses)
+            .map_err(anyhow::Error::msg)?
     };
     let sp = spinner(g, "preparing the FRF engine");
     let engine = super::engine::plant_engine(&model, built.excitation, &ex, g)?;
@@ -78,7 +91,12 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         if let Some(o) = tj.as_object_mut() {
             o.insert("level".into(), json!(lv.name));
             o.insert("law".into(), json!(lv.law));
-            let params: serde_json::Map<String, serde_json::Value> = lv.param_names.iter().zip(&lv.params).map(|(n, v)| (n.clone(), json!(v))).collect();
+            let params: serde_json::Map<String, serde_json::Value> = lv
+                .param_names
+                .iter()
+                .zip(&lv.params)
+                .map(|(n, v)| (n.clone(), json!(v)))
+                .collect();
             o.insert("params".into(), serde_json::Value::Object(params));
             o.insert("seconds".into(), json!(t.elapsed().as_secs_f64()));
         }
@@ -93,13 +111,21 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         }
     }
     // One file per level keeps levels separate for studies: <stem>_<level>.uff.
-    let stem = out.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "simulated".into());
-    let ext = out.extension().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "uff".into());
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "simulated".into());
+    let ext = out
+        .extension()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "uff".into());
     let dir = out.parent().map(|p| p.to_path_buf()).unwrap_or_default();
     let mut written = Vec::new();
     for lv in &set.levels {
         let p = dir.join(format!("{stem}_{}.{ext}", lv.name));
-        let one = FrfSet { levels: vec![lv.clone()] };
+        let one = FrfSet {
+            levels: vec![lv.clone()],
+        };
         rfmlab::data::uff_frf::frf_set_to_uff(&one, &p, ex.binary)?;
         written.push(p);
     }
@@ -119,7 +145,9 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
     let bytes = serde_json::to_vec_pretty(&doc)?;
     rfmlab::output::write_atomic_bytes(&sidecar, &bytes)?;
     if a.json {
-        return print_json(&json!({"files": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(), "truth": sidecar.display().to_string()}));
+        return print_json(
+            &json!({"files": written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(), "truth": sidecar.display().to_string()}),
+        );
     }
     if !g.quiet {
         for p in &written {

@@ -14,9 +14,9 @@
 //!
 //! Entry point: [`simulate_level`].
 
-pub mod plant;
 pub mod estimator;
 pub mod freqdomain;
+pub mod plant;
 pub mod signal;
 pub mod spec;
 pub mod timedomain;

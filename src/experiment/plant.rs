@@ -27,8 +27,14 @@ impl Plant for EnginePlant<'_> {
         self.drive_output
     }
     fn accelerance(&self, freq_hz: &[f64]) -> Result<Vec<Vec<C64>>, ExperimentError> {
-        let omega: Vec<f64> = freq_hz.iter().map(|f| 2.0 * std::f64::consts::PI * f).collect();
-        let modulus: Vec<C64> = omega.iter().map(|&w| self.law.modulus(&self.params, w)).collect();
+        let omega: Vec<f64> = freq_hz
+            .iter()
+            .map(|f| 2.0 * std::f64::consts::PI * f)
+            .collect();
+        let modulus: Vec<C64> = omega
+            .iter()
+            .map(|&w| self.law.modulus(&self.params, w))
+            .collect();
         let s = self
             .engine
             .sweep(&omega, &modulus, false)

@@ -15,8 +15,8 @@ pub mod element;
 pub mod error;
 pub mod geometry;
 pub mod joint;
-pub mod mesh;
 pub mod matrix_market;
+pub mod mesh;
 pub mod model;
 pub mod points;
 

@@ -74,17 +74,20 @@ impl StructuralModel {
             }
         }
         for &(k, mass) in masses {
-            let pt = self
-                .points
-                .get(k)
-                .ok_or_else(|| format!("point index {k} is out of range ({} points)", self.points.len()))?;
+            let pt = self.points.get(k).ok_or_else(|| {
+                format!(
+                    "point index {k} is out of range ({} points)",
+                    self.points.len()
+                )
+            })?;
             for &(a, wa) in &pt.dofs {
                 for &(b, wb) in &pt.dofs {
                     trip.push(Triplet::new(a, b, mass * wa * wb));
                 }
             }
         }
-        let m = SpMat::try_new_from_triplets(n, n, &trip).map_err(|e| format!("cannot add point masses: {e:?}"))?;
+        let m = SpMat::try_new_from_triplets(n, n, &trip)
+            .map_err(|e| format!("cannot add point masses: {e:?}"))?;
         let mut out = self.clone();
         out.m = m;
         out.description = format!("{} + point masses {:?}", self.description, masses);

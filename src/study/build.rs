@@ -122,17 +122,34 @@ pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> 
         .ok_or_else(|| StudyError {
             file: file.to_string(),
             key: "structure.excitation".into(),
-            message: format!("point {} is not in the model's observation points", s.excitation),
+            message: format!(
+                "point {} is not in the model's observation points",
+                s.excitation
+            ),
         })?;
     for p in &s.points {
-        if !model.points.iter().any(|q| q.id == p.id && q.direction == p.direction) {
+        if !model
+            .points
+            .iter()
+            .any(|q| q.id == p.id && q.direction == p.direction)
+        {
             return Err(StudyError {
                 file: file.to_string(),
                 key: "structure.points".into(),
-                message: format!("point {} ({}) is not in the imported DOF map: add it to the dof_map file", p.id, p.direction),
+                message: format!(
+                    "point {} ({}) is not in the imported DOF map: add it to the dof_map file",
+                    p.id, p.direction
+                ),
             });
         }
     }
-    let dof_axes = mesh.as_ref().map(|_| (0..model.n_dof()).map(|k| (k % 3) as u8).collect());
-    Ok(BuiltModel { model, mesh, excitation, dof_axes })
+    let dof_axes = mesh
+        .as_ref()
+        .map(|_| (0..model.n_dof()).map(|k| (k % 3) as u8).collect());
+    Ok(BuiltModel {
+        model,
+        mesh,
+        excitation,
+        dof_axes,
+    })
 }

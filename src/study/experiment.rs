@@ -149,19 +149,30 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
     let use_full_model = match e.engine.as_deref().unwrap_or("rom") {
         "rom" => false,
         "full" => true,
-        o => return Err(ctx.err("experiment.engine", format!("\"{o}\": use \"rom\" or \"full\""))),
+        o => {
+            return Err(ctx.err(
+                "experiment.engine",
+                format!("\"{o}\": use \"rom\" or \"full\""),
+            ))
+        }
     };
     let mut chain = ChainParams::default();
     let c = &raw.chain;
     if let Some(b) = &c.band_hz {
         if b.len() != 2 || !(b[0] >= 0.0 && b[1] > b[0]) {
-            return Err(ctx.err("chain.band_hz", "give [f_low, f_high] in Hz with 0 <= f_low < f_high"));
+            return Err(ctx.err(
+                "chain.band_hz",
+                "give [f_low, f_high] in Hz with 0 <= f_low < f_high",
+            ));
         }
         chain.band_hz = (b[0], b[1]);
     }
     if let Some(l) = &c.lines_hz {
         if l.len() != 3 || !(l[2] > 0.0 && l[1] >= l[0] && l[0] > 0.0) {
-            return Err(ctx.err("chain.lines_hz", "give [start, stop, step] in Hz with 0 < start <= stop and step > 0"));
+            return Err(ctx.err(
+                "chain.lines_hz",
+                "give [start, stop, step] in Hz with 0 < start <= stop and step > 0",
+            ));
         }
         let n = ((l[1] - l[0]) / l[2] + 1e-9).floor() as usize + 1;
         chain.lines_hz = (0..n).map(|k| l[0] + k as f64 * l[2]).collect();
@@ -174,7 +185,10 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
     }
     if let Some(v) = c.overlap {
         if !(0.0..1.0).contains(&v) {
-            return Err(ctx.err("chain.overlap", format!("{v}: the overlap is a fraction in [0, 1), e.g. 0.5")));
+            return Err(ctx.err(
+                "chain.overlap",
+                format!("{v}: the overlap is a fraction in [0, 1), e.g. 0.5"),
+            ));
         }
         chain.overlap = v;
     }
@@ -188,87 +202,175 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         chain.window = match w.as_str() {
             "hann" => Window::Hann,
             "rectangular" => Window::Rectangular,
-            o => return Err(ctx.err("chain.window", format!("\"{o}\": use \"hann\" or \"rectangular\""))),
+            o => {
+                return Err(ctx.err(
+                    "chain.window",
+                    format!("\"{o}\": use \"hann\" or \"rectangular\""),
+                ))
+            }
         };
     }
     match (c.force_noise_rms, c.force_noise_fraction) {
-        (Some(_), Some(_)) => return Err(ctx.err("chain.force_noise_rms", "give force_noise_rms or force_noise_fraction, not both")),
-        (Some(v), None) => chain.force_noise = NoiseLevel::Rms(ctx.non_negative("chain.force_noise_rms", v, "N")?),
-        (None, Some(v)) => chain.force_noise = NoiseLevel::FractionOfSignalRms(ctx.non_negative("chain.force_noise_fraction", v, "-")?),
+        (Some(_), Some(_)) => {
+            return Err(ctx.err(
+                "chain.force_noise_rms",
+                "give force_noise_rms or force_noise_fraction, not both",
+            ))
+        }
+        (Some(v), None) => {
+            chain.force_noise =
+                NoiseLevel::Rms(ctx.non_negative("chain.force_noise_rms", v, "N")?)
+        }
+        (None, Some(v)) => {
+            chain.force_noise = NoiseLevel::FractionOfSignalRms(ctx.non_negative(
+                "chain.force_noise_fraction",
+                v,
+                "-",
+            )?)
+        }
         (None, None) => {}
     }
     match (c.response_noise_rms, c.response_noise_fraction) {
-        (Some(_), Some(_)) => return Err(ctx.err("chain.response_noise_rms", "give response_noise_rms or response_noise_fraction, not both")),
-        (Some(v), None) => chain.response_noise = vec![NoiseLevel::Rms(ctx.non_negative("chain.response_noise_rms", v, "m/s^2")?)],
-        (None, Some(v)) => chain.response_noise = vec![NoiseLevel::FractionOfSignalRms(ctx.non_negative("chain.response_noise_fraction", v, "-")?)],
+        (Some(_), Some(_)) => {
+            return Err(ctx.err(
+                "chain.response_noise_rms",
+                "give response_noise_rms or response_noise_fraction, not both",
+            ))
+        }
+        (Some(v), None) => {
+            chain.response_noise = vec![NoiseLevel::Rms(ctx.non_negative(
+                "chain.response_noise_rms",
+                v,
+                "m/s^2",
+            )?)]
+        }
+        (None, Some(v)) => {
+            chain.response_noise = vec![NoiseLevel::FractionOfSignalRms(ctx.non_negative(
+                "chain.response_noise_fraction",
+                v,
+                "-",
+            )?)]
+        }
         (None, None) => {}
     }
     if let Some(s) = &raw.shaker {
         chain.shaker = Some(Shaker {
             armature_mass_kg: ctx.positive("shaker.armature_mass", s.armature_mass, "kg")?,
-            stinger_stiffness_n_m: ctx.positive("shaker.stinger_stiffness", s.stinger_stiffness, "N/m")?,
+            stinger_stiffness_n_m: ctx.positive(
+                "shaker.stinger_stiffness",
+                s.stinger_stiffness,
+                "N/m",
+            )?,
         });
     }
-    chain.mode = if frequency_domain { Mode::FrequencyDomain } else { Mode::TimeDomain };
+    chain.mode = if frequency_domain {
+        Mode::FrequencyDomain
+    } else {
+        Mode::TimeDomain
+    };
     let ids: Vec<u32> = structure.points.iter().map(|p| p.id).collect();
     let mut sensors = Vec::new();
     for (i, s) in raw.sensors.iter().enumerate() {
         if !ids.contains(&s.point) {
-            return Err(ctx.err(format!("sensors[{i}].point"), format!("point {} is not among structure.points {ids:?}", s.point)));
+            return Err(ctx.err(
+                format!("sensors[{i}].point"),
+                format!("point {} is not among structure.points {ids:?}", s.point),
+            ));
         }
-        sensors.push((s.point, ctx.non_negative(&format!("sensors[{i}].mass"), s.mass, "kg")?));
+        sensors.push((
+            s.point,
+            ctx.non_negative(&format!("sensors[{i}].mass"), s.mass, "kg")?,
+        ));
     }
     let mut gains = vec![C64::new(1.0, 0.0); ids.len()];
     let mut delays_s = vec![0.0; ids.len()];
     for (i, ch) in raw.channels.iter().enumerate() {
         let Some(k) = ids.iter().position(|&id| id == ch.point) else {
-            return Err(ctx.err(format!("channels[{i}].point"), format!("point {} is not among structure.points {ids:?}", ch.point)));
+            return Err(ctx.err(
+                format!("channels[{i}].point"),
+                format!("point {} is not among structure.points {ids:?}", ch.point),
+            ));
         };
         if let Some(g) = &ch.gain {
             gains[k] = match g {
                 toml::Value::Float(v) => C64::new(*v, 0.0),
                 toml::Value::Integer(v) => C64::new(*v as f64, 0.0),
                 toml::Value::Array(a) if a.len() == 2 => {
-                    let f = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+                    let f =
+                        |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
                     match (f(&a[0]), f(&a[1])) {
                         (Some(re), Some(im)) => C64::new(re, im),
-                        _ => return Err(ctx.err(format!("channels[{i}].gain"), "give a number or [re, im]")),
+                        _ => {
+                            return Err(
+                                ctx.err(format!("channels[{i}].gain"), "give a number or [re, im]")
+                            )
+                        }
                     }
                 }
-                _ => return Err(ctx.err(format!("channels[{i}].gain"), "give a number or [re, im]")),
+                _ => {
+                    return Err(ctx.err(format!("channels[{i}].gain"), "give a number or [re, im]"))
+                }
             };
         }
         if let Some(d) = ch.delay {
             if !d.is_finite() {
-                return Err(ctx.err(format!("channels[{i}].delay"), "must be a finite number of seconds"));
+                return Err(ctx.err(
+                    format!("channels[{i}].delay"),
+                    "must be a finite number of seconds",
+                ));
             }
             delays_s[k] = d;
         }
     }
     if raw.levels.is_empty() {
-        return Err(ctx.err("levels", "no levels: add [[levels]] with name, force_rms_n, law and params"));
+        return Err(ctx.err(
+            "levels",
+            "no levels: add [[levels]] with name, force_rms_n, law and params",
+        ));
     }
     let mut levels: Vec<TruthLevel> = Vec::new();
     for (i, l) in raw.levels.iter().enumerate() {
         let key = format!("levels[{i}]");
         if levels.iter().any(|o| o.name == l.name) || l.name.is_empty() {
-            return Err(ctx.err(format!("{key}.name"), format!("level name \"{}\" is empty or used twice", l.name)));
+            return Err(ctx.err(
+                format!("{key}.name"),
+                format!("level name \"{}\" is empty or used twice", l.name),
+            ));
         }
         let force = ctx.positive(&format!("{key}.force_rms_n"), l.force_rms_n, "N")?;
-        let law = crate::material::model_from_name(&l.law, l.branches).map_err(|e| ctx.err(format!("{key}.law"), e.to_string()))?;
+        let law = crate::material::model_from_name(&l.law, l.branches)
+            .map_err(|e| ctx.err(format!("{key}.law"), e.to_string()))?;
         let names = law.param_names();
         let bounds = law.bounds();
         let mut params = Vec::new();
         for (k, n) in names.iter().enumerate() {
-            let v = *l.params.get(n).ok_or_else(|| ctx.err(format!("{key}.params.{n}"), format!("missing parameter {n} ({}) of {}", law.param_units()[k], l.law)))?;
+            let v = *l.params.get(n).ok_or_else(|| {
+                ctx.err(
+                    format!("{key}.params.{n}"),
+                    format!(
+                        "missing parameter {n} ({}) of {}",
+                        law.param_units()[k],
+                        l.law
+                    ),
+                )
+            })?;
             if !(v.is_finite() && v > bounds[k].0 && v < bounds[k].1) {
-                return Err(ctx.err(format!("{key}.params.{n}"), format!("{v} is outside the admissible range {:?}", bounds[k])));
+                return Err(ctx.err(
+                    format!("{key}.params.{n}"),
+                    format!("{v} is outside the admissible range {:?}", bounds[k]),
+                ));
             }
             params.push(v);
         }
         for k in l.params.keys() {
             if !names.contains(k) {
-                return Err(ctx.err(format!("{key}.params.{k}"), format!("{} has no parameter {k}; its parameters are {names:?}", l.law)));
+                return Err(ctx.err(
+                    format!("{key}.params.{k}"),
+                    format!(
+                        "{} has no parameter {k}; its parameters are {names:?}",
+                        l.law
+                    ),
+                ));
             }
         }
         levels.push(TruthLevel {

@@ -71,7 +71,10 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
         .or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()))
         .unwrap_or_else(|| "study".into());
     if name.is_empty() || name.contains(['/', '\\']) {
-        return Err(ctx.err("study.name", "must be a non-empty name without path separators (it names the results folder)"));
+        return Err(ctx.err(
+            "study.name",
+            "must be a non-empty name without path separators (it names the results folder)",
+        ));
     }
     let structure = structure(&ctx, &raw.structure)?;
     let measurements = match &raw.measurements {
@@ -91,7 +94,10 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
     let sha256 = {
         let mut h = Sha256::new();
         h.update(text.as_bytes());
-        h.finalize().iter().map(|b| format!("{b:02x}")).collect::<String>()
+        h.finalize()
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect::<String>()
     };
     let output_dir = match &raw.study.output_dir {
         Some(d) => PathBuf::from(d),
@@ -147,10 +153,16 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
     let source = match source_name {
         "mesher" => {
             let beam = s.beam.as_ref().ok_or_else(|| {
-                ctx.err("structure.beam", "missing: give length, thickness, width (m) and [structure.beam.material]")
+                ctx.err(
+                    "structure.beam",
+                    "missing: give length, thickness, width (m) and [structure.beam.material]",
+                )
             })?;
             let ad = s.adhesive.as_ref().ok_or_else(|| {
-                ctx.err("structure.adhesive", "missing: give length, thickness, x_start (m), nu and rho")
+                ctx.err(
+                    "structure.adhesive",
+                    "missing: give length, thickness, x_start (m), nu and rho",
+                )
             })?;
             let j = joint(ctx, beam, ad, s.mesh.as_ref())?;
             StructureSource::Mesher(j)
@@ -164,22 +176,38 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
                 if r.is_file() {
                     Ok(r)
                 } else {
-                    Err(ctx.err(format!("structure.import.{key}"), format!("file {} not found: check the path (relative to the study file)", r.display())))
+                    Err(ctx.err(
+                        format!("structure.import.{key}"),
+                        format!(
+                            "file {} not found: check the path (relative to the study file)",
+                            r.display()
+                        ),
+                    ))
                 }
             };
             StructureSource::MatrixMarket(Import {
                 mass: f("mass", &im.mass)?,
                 stiffness: f("stiffness", &im.stiffness)?,
                 adhesive_sensitivity: f("adhesive_sensitivity", &im.adhesive_sensitivity)?,
-                viscous_damping: im.viscous_damping.as_deref().map(|p| f("viscous_damping", p)).transpose()?,
-                structural_damping: im.structural_damping.as_deref().map(|p| f("structural_damping", p)).transpose()?,
+                viscous_damping: im
+                    .viscous_damping
+                    .as_deref()
+                    .map(|p| f("viscous_damping", p))
+                    .transpose()?,
+                structural_damping: im
+                    .structural_damping
+                    .as_deref()
+                    .map(|p| f("structural_damping", p))
+                    .transpose()?,
                 dof_map: f("dof_map", &im.dof_map)?,
             })
         }
         other => {
             return Err(ctx.err(
                 "structure.source",
-                format!("unknown source \"{other}\": use \"mesher\" (default) or \"matrix_market\""),
+                format!(
+                    "unknown source \"{other}\": use \"mesher\" (default) or \"matrix_market\""
+                ),
             ))
         }
     };
@@ -187,13 +215,19 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
     for (i, p) in s.points.iter().enumerate() {
         let key = format!("structure.points[{i}]");
         if p.position.len() != 3 || p.position.iter().any(|v| !v.is_finite()) {
-            return Err(ctx.err(format!("{key}.position"), "must be [x, y, z] in metres (three finite numbers)"));
+            return Err(ctx.err(
+                format!("{key}.position"),
+                "must be [x, y, z] in metres (three finite numbers)",
+            ));
         }
         let direction = Direction::parse(&p.direction).ok_or_else(|| {
             ctx.err(format!("{key}.direction"), format!("\"{}\" is not a direction: use \"+x\", \"+y\", \"+z\", \"-x\", \"-y\" or \"-z\"", p.direction))
         })?;
         if points.iter().any(|q: &Point| q.id == p.id) {
-            return Err(ctx.err(format!("{key}.id"), format!("point id {} is used twice: ids must be unique", p.id)));
+            return Err(ctx.err(
+                format!("{key}.id"),
+                format!("point id {} is used twice: ids must be unique", p.id),
+            ));
         }
         points.push(Point {
             id: p.id,
@@ -209,7 +243,12 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
             check_point_on_beam(ctx, i, p, j)?;
         }
     }
-    let excitation = s.excitation.ok_or_else(|| ctx.err("structure.excitation", "missing: give the id of the point where the force is applied"))?;
+    let excitation = s.excitation.ok_or_else(|| {
+        ctx.err(
+            "structure.excitation",
+            "missing: give the id of the point where the force is applied",
+        )
+    })?;
     if !points.iter().any(|p| p.id == excitation) {
         return Err(ctx.err(
             "structure.excitation",
@@ -248,7 +287,12 @@ fn check_point_on_beam(ctx: &Ctx, i: usize, p: &Point, j: &Joint) -> Result<(), 
     Ok(())
 }
 
-fn joint(ctx: &Ctx, b: &RawBeam, a: &RawAdhesive, mesh: Option<&RawMesh>) -> Result<Joint, StudyError> {
+fn joint(
+    ctx: &Ctx,
+    b: &RawBeam,
+    a: &RawAdhesive,
+    mesh: Option<&RawMesh>,
+) -> Result<Joint, StudyError> {
     let bl = ctx.positive("structure.beam.length", b.length, "m")?;
     let bt = ctx.positive("structure.beam.thickness", b.thickness, "m")?;
     let bw = ctx.positive("structure.beam.width", b.width, "m")?;
@@ -257,9 +301,21 @@ fn joint(ctx: &Ctx, b: &RawBeam, a: &RawAdhesive, mesh: Option<&RawMesh>) -> Res
     let brho = ctx.positive("structure.beam.material.rho", b.material.rho, "kg/m^3")?;
     let d = b.damping.as_ref();
     let damping = Damping {
-        rayleigh_alpha_per_s: ctx.non_negative("structure.beam.damping.rayleigh_alpha", d.and_then(|d| d.rayleigh_alpha).unwrap_or(0.0), "1/s")?,
-        rayleigh_beta_s: ctx.non_negative("structure.beam.damping.rayleigh_beta", d.and_then(|d| d.rayleigh_beta).unwrap_or(0.0), "s")?,
-        structural_loss_factor: ctx.non_negative("structure.beam.damping.structural", d.and_then(|d| d.structural).unwrap_or(0.0), "-")?,
+        rayleigh_alpha_per_s: ctx.non_negative(
+            "structure.beam.damping.rayleigh_alpha",
+            d.and_then(|d| d.rayleigh_alpha).unwrap_or(0.0),
+            "1/s",
+        )?,
+        rayleigh_beta_s: ctx.non_negative(
+            "structure.beam.damping.rayleigh_beta",
+            d.and_then(|d| d.rayleigh_beta).unwrap_or(0.0),
+            "s",
+        )?,
+        structural_loss_factor: ctx.non_negative(
+            "structure.beam.damping.structural",
+            d.and_then(|d| d.structural).unwrap_or(0.0),
+            "-",
+        )?,
     };
     let al = ctx.positive("structure.adhesive.length", a.length, "m")?;
     let at = ctx.positive("structure.adhesive.thickness", a.thickness, "m")?;
@@ -272,10 +328,25 @@ fn joint(ctx: &Ctx, b: &RawBeam, a: &RawAdhesive, mesh: Option<&RawMesh>) -> Res
     }
     let anu = ctx.poisson("structure.adhesive.nu", a.nu)?;
     let arho = ctx.positive("structure.adhesive.rho", a.rho, "kg/m^3")?;
-    let m = mesh.ok_or_else(|| ctx.err("structure.mesh", "missing: give element_size (m) or divisions"))?;
+    let m = mesh.ok_or_else(|| {
+        ctx.err(
+            "structure.mesh",
+            "missing: give element_size (m) or divisions",
+        )
+    })?;
     let size = match (&m.element_size, &m.divisions) {
-        (Some(_), Some(_)) => return Err(ctx.err("structure.mesh", "give either element_size or divisions, not both")),
-        (None, None) => return Err(ctx.err("structure.mesh", "give element_size (m), e.g. 0.005, or divisions")),
+        (Some(_), Some(_)) => {
+            return Err(ctx.err(
+                "structure.mesh",
+                "give either element_size or divisions, not both",
+            ))
+        }
+        (None, None) => {
+            return Err(ctx.err(
+                "structure.mesh",
+                "give element_size (m), e.g. 0.005, or divisions",
+            ))
+        }
         (Some(h), None) => {
             let h = ctx.positive("structure.mesh.element_size", *h, "m")?;
             if h > bl.max(bt).max(bw) {
@@ -284,13 +355,24 @@ fn joint(ctx: &Ctx, b: &RawBeam, a: &RawAdhesive, mesh: Option<&RawMesh>) -> Res
             MeshSize::ElementSize(h)
         }
         (None, Some(dv)) => {
-            for (k, v) in [("x_adhesive", dv.x_adhesive), ("y_beam", dv.y_beam), ("y_adhesive", dv.y_adhesive), ("z", dv.z)] {
+            for (k, v) in [
+                ("x_adhesive", dv.x_adhesive),
+                ("y_beam", dv.y_beam),
+                ("y_adhesive", dv.y_adhesive),
+                ("z", dv.z),
+            ] {
                 if v == 0 {
-                    return Err(ctx.err(format!("structure.mesh.divisions.{k}"), "must be at least 1"));
+                    return Err(ctx.err(
+                        format!("structure.mesh.divisions.{k}"),
+                        "must be at least 1",
+                    ));
                 }
             }
             if dv.x_outside == 0 && al < bl * (1.0 - 1e-12) {
-                return Err(ctx.err("structure.mesh.divisions.x_outside", "must be at least 1: part of the beam lies outside the adhesive"));
+                return Err(ctx.err(
+                    "structure.mesh.divisions.x_outside",
+                    "must be at least 1: part of the beam lies outside the adhesive",
+                ));
             }
             MeshSize::Divisions {
                 x_adhesive: dv.x_adhesive,
@@ -304,12 +386,22 @@ fn joint(ctx: &Ctx, b: &RawBeam, a: &RawAdhesive, mesh: Option<&RawMesh>) -> Res
     let full_integration = match m.integration.as_deref().unwrap_or("full") {
         "full" => true,
         "reduced" => false,
-        o => return Err(ctx.err("structure.mesh.integration", format!("\"{o}\": use \"full\" (3x3x3 Gauss) or \"reduced\" (2x2x2)"))),
+        o => {
+            return Err(ctx.err(
+                "structure.mesh.integration",
+                format!("\"{o}\": use \"full\" (3x3x3 Gauss) or \"reduced\" (2x2x2)"),
+            ))
+        }
     };
     let snap_points = match m.point_mapping.as_deref().unwrap_or("interpolate") {
         "interpolate" => false,
         "snap" => true,
-        o => return Err(ctx.err("structure.mesh.point_mapping", format!("\"{o}\": use \"interpolate\" or \"snap\""))),
+        o => {
+            return Err(ctx.err(
+                "structure.mesh.point_mapping",
+                format!("\"{o}\": use \"interpolate\" or \"snap\""),
+            ))
+        }
     };
     Ok(Joint {
         beam_length_m: bl,
@@ -332,16 +424,25 @@ fn joint(ctx: &Ctx, b: &RawBeam, a: &RawAdhesive, mesh: Option<&RawMesh>) -> Res
 
 fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measurements, StudyError> {
     if m.levels.is_empty() {
-        return Err(ctx.err("measurements.levels", "no levels: add [[measurements.levels]] with name and files"));
+        return Err(ctx.err(
+            "measurements.levels",
+            "no levels: add [[measurements.levels]] with name and files",
+        ));
     }
     let mut levels: Vec<Level> = Vec::new();
     for (i, l) in m.levels.iter().enumerate() {
         let key = format!("measurements.levels[{i}]");
         if l.name.is_empty() || levels.iter().any(|o| o.name == l.name) {
-            return Err(ctx.err(format!("{key}.name"), format!("level name \"{}\" is empty or used twice", l.name)));
+            return Err(ctx.err(
+                format!("{key}.name"),
+                format!("level name \"{}\" is empty or used twice", l.name),
+            ));
         }
         if l.files.is_empty() {
-            return Err(ctx.err(format!("{key}.files"), "no files: list the UFF58 or CSV files of this level"));
+            return Err(ctx.err(
+                format!("{key}.files"),
+                "no files: list the UFF58 or CSV files of this level",
+            ));
         }
         let mut files = Vec::new();
         for (k, f) in l.files.iter().enumerate() {
@@ -365,13 +466,29 @@ fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measure
     }
     let band_hz = match &m.band_hz {
         None => None,
-        Some(b) if b.len() == 2 && b[0].is_finite() && b[1].is_finite() && b[0] >= 0.0 && b[1] > b[0] => Some((b[0], b[1])),
-        Some(b) => return Err(ctx.err("measurements.band_hz", format!("{b:?} is not a band: give [f_low, f_high] in Hz with 0 <= f_low < f_high"))),
+        Some(b)
+            if b.len() == 2
+                && b[0].is_finite()
+                && b[1].is_finite()
+                && b[0] >= 0.0
+                && b[1] > b[0] =>
+        {
+            Some((b[0], b[1]))
+        }
+        Some(b) => {
+            return Err(ctx.err(
+                "measurements.band_hz",
+                format!("{b:?} is not a band: give [f_low, f_high] in Hz with 0 <= f_low < f_high"),
+            ))
+        }
     };
     if let Some(ch) = &m.channels {
         for (k, id) in ch.iter().enumerate() {
             if !s.points.iter().any(|p| p.id == *id) {
-                return Err(ctx.err(format!("measurements.channels[{k}]"), format!("point {id} is not among structure.points")));
+                return Err(ctx.err(
+                    format!("measurements.channels[{k}]"),
+                    format!("point {id} is not among structure.points"),
+                ));
             }
         }
     }
@@ -389,7 +506,12 @@ fn solver(ctx: &Ctx, s: Option<&RawSolver>) -> Result<Solver, StudyError> {
         out.engine = match e.as_str() {
             "rom" => Engine::Rom,
             "full" => Engine::Full,
-            o => return Err(ctx.err("solver.engine", format!("\"{o}\": use \"rom\" (certified reduced model, default) or \"full\""))),
+            o => {
+                return Err(ctx.err(
+                    "solver.engine",
+                    format!("\"{o}\": use \"rom\" (certified reduced model, default) or \"full\""),
+                ))
+            }
         };
     }
     if let Some(n) = s.max_iterations {
@@ -409,7 +531,10 @@ fn solver(ctx: &Ctx, s: Option<&RawSolver>) -> Result<Solver, StudyError> {
     }
     if let Some(t) = s.threads {
         if t == 0 {
-            return Err(ctx.err("solver.threads", "must be at least 1 (or leave it out to use all cores)"));
+            return Err(ctx.err(
+                "solver.threads",
+                "must be at least 1 (or leave it out to use all cores)",
+            ));
         }
         out.threads = Some(t);
     }
@@ -422,10 +547,14 @@ fn analyses(ctx: &Ctx, a: Option<&RawAnalyses>) -> Result<Analyses, StudyError> 
     let band = |key: String, b: &RawBand| -> Result<Band, StudyError> {
         let c = ctx.positive(&format!("{key}.center_hz"), b.center_hz, "Hz")?;
         let w = ctx.positive(&format!("{key}.width_hz"), b.width_hz.unwrap_or(10.0), "Hz")?;
-        Ok(Band { center_hz: c, width_hz: w })
+        Ok(Band {
+            center_hz: c,
+            width_hz: w,
+        })
     };
     for (i, b) in a.band_constant.iter().enumerate() {
-        out.band_constant.push(band(format!("analyses.band_constant[{i}]"), b)?);
+        out.band_constant
+            .push(band(format!("analyses.band_constant[{i}]"), b)?);
     }
     for (i, b) in a.iem.iter().enumerate() {
         out.iem.push(band(format!("analyses.iem[{i}]"), b)?);
@@ -456,7 +585,11 @@ fn model(ctx: &Ctx, i: usize, m: &RawModel, levels: &[String]) -> Result<ModelSp
         let v = *m.initial.get(n).ok_or_else(|| {
             ctx.err(
                 format!("{key}.initial.{n}"),
-                format!("missing initial value of {n} ({}) for {}: add `{n} = <value>` to initial", law.param_units()[k], m.name),
+                format!(
+                    "missing initial value of {n} ({}) for {}: add `{n} = <value>` to initial",
+                    law.param_units()[k],
+                    m.name
+                ),
             )
         })?;
         let (lo, hi) = bounds[k];
@@ -470,7 +603,13 @@ fn model(ctx: &Ctx, i: usize, m: &RawModel, levels: &[String]) -> Result<ModelSp
     }
     for k in m.initial.keys() {
         if !names.contains(k) {
-            return Err(ctx.err(format!("{key}.initial.{k}"), format!("{} has no parameter {k}; its parameters are {names:?}", m.name)));
+            return Err(ctx.err(
+                format!("{key}.initial.{k}"),
+                format!(
+                    "{} has no parameter {k}; its parameters are {names:?}",
+                    m.name
+                ),
+            ));
         }
     }
     let lv = match &m.levels {
@@ -478,7 +617,10 @@ fn model(ctx: &Ctx, i: usize, m: &RawModel, levels: &[String]) -> Result<ModelSp
         Some(l) => {
             for (k, n) in l.iter().enumerate() {
                 if !levels.contains(n) {
-                    return Err(ctx.err(format!("{key}.levels[{k}]"), format!("level \"{n}\" is not among measurements.levels {levels:?}")));
+                    return Err(ctx.err(
+                        format!("{key}.levels[{k}]"),
+                        format!("level \"{n}\" is not among measurements.levels {levels:?}"),
+                    ));
                 }
             }
             l.clone()
