@@ -41,7 +41,7 @@ pub fn run(a: &ConvergenceArgs, g: &Global) -> anyhow::Result<()> {
                 a.sizes
             ))
         })?;
-    if sizes.is_empty() || sizes.iter().any(|h| !(*h > 0.0)) {
+    if sizes.is_empty() || sizes.iter().any(|h| h.is_nan() || *h <= 0.0) {
         return Err(
             InputError(format!("--sizes {:?}: sizes must be positive (m)", a.sizes)).into(),
         );
