@@ -37,4 +37,5 @@ pub mod output;
 pub mod plot;
 pub mod rfm;
 pub mod rom;
+pub mod runner;
 pub mod study;
