@@ -30,7 +30,8 @@ pub struct IemBandResult {
     /// Response id of the FRF the circle fit used (the drive point when measured).
     pub response_id: u32,
     pub circle: CircleFitResult,
-    pub iem: IemResult,
+    /// The IEM result, or why it failed (the circle fit is kept either way).
+    pub iem: Result<IemResult, String>,
 }
 
 /// One global RFM run with the FRFs and correlation before and after.
@@ -230,7 +231,7 @@ pub fn analyse_level(
             let modes = crate::modes::complex_modes(
                 model,
                 e,
-                12,
+                8,
                 axes,
                 &crate::modes::ModesParams::default(),
             )
@@ -245,7 +246,7 @@ pub fn analyse_level(
                 .collect())
         };
         let r = crate::iem::iem_mode(&provider, target, e0, &IemParams::default())
-            .map_err(|e| analysis(format!("IEM around {} Hz at level {lname}", b.center_hz), e))?;
+            .map_err(|e| format!("IEM around {} Hz at level {lname} failed: {e}", b.center_hz));
         iem.push(IemBandResult {
             center_hz: b.center_hz,
             width_hz: b.width_hz,

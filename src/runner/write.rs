@@ -276,7 +276,9 @@ fn build_tables(levels: &[LevelData], results: &[LevelResults]) -> Result<Tables
         for m in &r.iem {
             let nan = C64::new(f64::NAN, f64::NAN);
             push_modal("circle_fit", m.center_hz, m.width_hz, m.response_id as i64, m.circle.freq_hz, m.circle.loss_factor, nan, 0);
-            push_modal("iem", m.center_hz, m.width_hz, m.response_id as i64, m.iem.freq_hz, m.iem.loss_factor, m.iem.modulus, m.iem.iterations as i64);
+            if let Ok(iem) = &m.iem {
+                push_modal("iem", m.center_hz, m.width_hz, m.response_id as i64, iem.freq_hz, iem.loss_factor, iem.modulus, iem.iterations as i64);
+            }
         }
         for b in &r.band_constant {
             push_modal("rfm_model1_band", b.center_hz, b.width_hz, -1, f64::NAN, f64::NAN, b.result.modulus, b.result.run.iterations as i64);
@@ -316,7 +318,13 @@ fn f4(v: f64) -> String {
 }
 
 /// The report: Tables 2-5 of the paper with its values beside ours, and the figures.
-fn build_report(study: &Study, levels: &[LevelData], results: &[LevelResults], figures: &[(String, String)]) -> Report {
+fn build_report(
+    study: &Study,
+    levels: &[LevelData],
+    results: &[LevelResults],
+    figures: &[(String, String)],
+    engine_note: &str,
+) -> Report {
     let mut rep = Report::new();
     rep.heading(1, &format!("rfmlab study: {}", study.name));
     if !study.description.is_empty() {
@@ -327,6 +335,7 @@ fn build_report(study: &Study, levels: &[LevelData], results: &[LevelResults], f
         study.file.display(),
         study.sha256
     ));
+    rep.paragraph(&format!("FRF {engine_note}."));
     // Table 2.
     let mut t2 = Vec::new();
     let mut t3 = Vec::new();
@@ -349,8 +358,8 @@ fn build_report(study: &Study, levels: &[LevelData], results: &[LevelResults], f
             t3.push(vec![
                 r.level.clone(),
                 format!("{:.0}", m.center_hz),
-                f4(m.iem.modulus.re * 1e-6),
-                f4(m.iem.modulus.im * 1e-6),
+                m.iem.as_ref().map(|i| f4(i.modulus.re * 1e-6)).unwrap_or_else(|_| "failed".into()),
+                m.iem.as_ref().map(|i| f4(i.modulus.im * 1e-6)).unwrap_or_else(|_| "failed".into()),
                 band.map(|b| f4(b.result.modulus.re * 1e-6)).unwrap_or_else(|| "-".into()),
                 band.map(|b| f4(b.result.modulus.im * 1e-6)).unwrap_or_else(|| "-".into()),
                 p.map(|p| f4(p.2)).unwrap_or_else(|| "-".into()),
@@ -381,8 +390,15 @@ fn build_report(study: &Study, levels: &[LevelData], results: &[LevelResults], f
             &t2,
         );
     }
+    let failures: Vec<String> = results
+        .iter()
+        .flat_map(|r| r.iem.iter().filter_map(|m| m.iem.as_ref().err().cloned()))
+        .collect();
     if !t3.is_empty() {
         rep.heading(2, "Table 3: IEM and Model 1 RFM over 10 Hz bands (MPa)");
+        for f in &failures {
+            rep.paragraph(&format!("**Warning:** {f}"));
+        }
         rep.table(
             &["Level", "Band centre (Hz)", "IEM E'", "IEM E''", "RFM Model 1 E'", "RFM Model 1 E''", "paper IEM E'", "paper IEM E''"],
             &t3,
@@ -591,6 +607,7 @@ pub(super) fn write_results(
     results: &[LevelResults],
     figures: bool,
     timings: &[(String, f64)],
+    engine_note: &str,
     t0: Instant,
     progress: &dyn Fn(Event),
 ) -> Result<Vec<String>, RunError> {
@@ -633,13 +650,14 @@ pub(super) fn write_results(
         } else {
             Vec::new()
         };
-        let report = build_report(study, levels, results, &figs);
+        let report = build_report(study, levels, results, &figs, engine_note);
         dir.write_report(&report)?;
         let mut manifest = Manifest::new(&study.file, Some(study.seed));
         for (step, secs) in timings {
             manifest.add_timing(step.clone(), *secs);
         }
         manifest.add_timing("total", t0.elapsed().as_secs_f64());
+        manifest.add_note(engine_note.to_string());
         manifest.add_note(
             "results written into a temporary folder and swapped into place at the end".to_string(),
         );
