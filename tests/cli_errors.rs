@@ -92,6 +92,8 @@ fn bad_study_files_exit_2_naming_file_and_key_and_keep_earlier_results() {
     expect_input_error(&s, "band_outside", &g.replace("band_hz = [10, 100]", "band_hz = [10, 600]"), &["band"]);
     expect_input_error(&s, "missing_param", &g.replace("h = 1.5e6\n", ""), &["models[0].initial.h"]);
     expect_input_error(&s, "out_of_range", &g.replace("E0 = 8e6", "E0 = -8e6"), &["E0"]);
+    // Admissible (positive) but absurd: E0 = 1e30 Pa makes Z numerically singular.
+    expect_input_error(&s, "singular", &g.replace("E0 = 8e6", "E0 = 1e30"), &["models[0].initial", "singular"]);
     // The results of the good run are untouched by the failed runs.
     assert_eq!(snapshot(&s.out), before);
     // No stray temporary folders either.
