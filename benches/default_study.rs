@@ -15,10 +15,16 @@ fn main() {
     }
     let exe = root.join("target/release/rfmlab");
     if !exe.is_file() {
-        eprintln!("default_study: {} is missing; run `cargo build --release` first (skipped)", exe.display());
+        eprintln!(
+            "default_study: {} is missing; run `cargo build --release` first (skipped)",
+            exe.display()
+        );
         return;
     }
-    let runs: usize = std::env::var("RFMLAB_BENCH_RUNS").ok().and_then(|s| s.parse().ok()).unwrap_or(3);
+    let runs: usize = std::env::var("RFMLAB_BENCH_RUNS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(3);
     let mut times = Vec::new();
     for k in 0..runs {
         let t = Instant::now();

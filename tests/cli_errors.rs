@@ -32,15 +32,33 @@ fn setup() -> Setup {
     let root = dir.path().to_path_buf();
     let data = root.join("d.uff");
     let law = rfmlab::material::model_from_name("model1", None).unwrap();
-    write_data(&data, "L1", law.as_ref(), &[7e6, 1.5e6], &lines_hz(10.0, 100.0, 10.0));
+    write_data(
+        &data,
+        "L1",
+        law.as_ref(),
+        &[7e6, 1.5e6],
+        &lines_hz(10.0, 100.0, 10.0),
+    );
     let out = root.join("results");
-    Setup { _dir: dir, root, data, out }
+    Setup {
+        _dir: dir,
+        root,
+        data,
+        out,
+    }
 }
 
 const ANALYSES: &str = "[analyses]\nper_line = false\nsensitivity = false\nfigures = false\n";
 
 fn good(s: &Setup) -> String {
-    study_text("s", &s.out, &s.data, (10.0, 100.0), &[("model1", initial_of(1))], ANALYSES)
+    study_text(
+        "s",
+        &s.out,
+        &s.data,
+        (10.0, 100.0),
+        &[("model1", initial_of(1))],
+        ANALYSES,
+    )
 }
 
 /// Writes `text` as a study, runs `rfmlab run`, expects exit code 2 with the file and all
@@ -50,7 +68,10 @@ fn expect_input_error(s: &Setup, name: &str, text: &str, needles: &[&str]) {
     for cmd in ["run", "check"] {
         let (code, _, err) = rfmlab(&["--quiet", cmd, file.to_str().unwrap()]);
         assert_eq!(code, 2, "{name} ({cmd}): exit code {code}, stderr:\n{err}");
-        assert!(err.contains(&format!("{name}.toml")), "{name} ({cmd}): file not named:\n{err}");
+        assert!(
+            err.contains(&format!("{name}.toml")),
+            "{name} ({cmd}): file not named:\n{err}"
+        );
         for n in needles {
             assert!(err.contains(n), "{name} ({cmd}): {n:?} not in:\n{err}");
         }
@@ -61,7 +82,12 @@ fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
     let mut v: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read(&p).unwrap()))
+        .map(|p| {
+            (
+                p.file_name().unwrap().to_string_lossy().into_owned(),
+                std::fs::read(&p).unwrap(),
+            )
+        })
         .collect();
     v.sort();
     v
@@ -82,18 +108,46 @@ fn bad_study_files_exit_2_naming_file_and_key_and_keep_earlier_results() {
     assert!(before.iter().any(|(n, _)| n == "manifest.json"));
 
     let g = good(&s);
-    expect_input_error(&s, "unknown_key", &g.replace("[solver]\n", "[solver]\nmax_iteration = 3\n"), &["max_iteration"]);
+    expect_input_error(
+        &s,
+        "unknown_key",
+        &g.replace("[solver]\n", "[solver]\nmax_iteration = 3\n"),
+        &["max_iteration"],
+    );
     expect_input_error(
         &s,
         "missing_file",
-        &g.replace(&s.data.display().to_string(), &s.root.join("nope.uff").display().to_string()),
+        &g.replace(
+            &s.data.display().to_string(),
+            &s.root.join("nope.uff").display().to_string(),
+        ),
         &["nope.uff", "files"],
     );
-    expect_input_error(&s, "band_outside", &g.replace("band_hz = [10, 100]", "band_hz = [10, 600]"), &["band"]);
-    expect_input_error(&s, "missing_param", &g.replace("h = 1.5e6\n", ""), &["models[0].initial.h"]);
-    expect_input_error(&s, "out_of_range", &g.replace("E0 = 8e6", "E0 = -8e6"), &["E0"]);
+    expect_input_error(
+        &s,
+        "band_outside",
+        &g.replace("band_hz = [10, 100]", "band_hz = [10, 600]"),
+        &["band"],
+    );
+    expect_input_error(
+        &s,
+        "missing_param",
+        &g.replace("h = 1.5e6\n", ""),
+        &["models[0].initial.h"],
+    );
+    expect_input_error(
+        &s,
+        "out_of_range",
+        &g.replace("E0 = 8e6", "E0 = -8e6"),
+        &["E0"],
+    );
     // Admissible (positive) but absurd: E0 = 1e30 Pa makes Z numerically singular.
-    expect_input_error(&s, "singular", &g.replace("E0 = 8e6", "E0 = 1e30"), &["models[0].initial", "singular"]);
+    expect_input_error(
+        &s,
+        "singular",
+        &g.replace("E0 = 8e6", "E0 = 1e30"),
+        &["models[0].initial", "singular"],
+    );
     // The results of the good run are untouched by the failed runs.
     assert_eq!(snapshot(&s.out), before);
     // No stray temporary folders either.

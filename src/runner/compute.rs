@@ -182,13 +182,20 @@ pub fn analyse_level(
     // Model 1 over bands (case study 1).
     let mut band_constant = Vec::new();
     for b in &study.analyses.band_constant {
-        let band = (b.center_hz - b.width_hz / 2.0, b.center_hz + b.width_hz / 2.0);
-        let r = crate::rfm::rfm_band_constant(engine, col, band, model1_e0, &params).map_err(|e| {
-            analysis(
-                format!("Model 1 RFM over {:.1}..{:.1} Hz at level {lname}", band.0, band.1),
-                e,
-            )
-        })?;
+        let band = (
+            b.center_hz - b.width_hz / 2.0,
+            b.center_hz + b.width_hz / 2.0,
+        );
+        let r =
+            crate::rfm::rfm_band_constant(engine, col, band, model1_e0, &params).map_err(|e| {
+                analysis(
+                    format!(
+                        "Model 1 RFM over {:.1}..{:.1} Hz at level {lname}",
+                        band.0, band.1
+                    ),
+                    e,
+                )
+            })?;
         band_constant.push(BandConstantResult {
             center_hz: b.center_hz,
             width_hz: b.width_hz,
@@ -205,8 +212,15 @@ pub fn analyse_level(
         });
     }
     for b in &study.analyses.iem {
-        let band = (b.center_hz - b.width_hz / 2.0, b.center_hz + b.width_hz / 2.0);
-        let k = col.outputs.iter().position(|&o| o == col.input).unwrap_or(0);
+        let band = (
+            b.center_hz - b.width_hz / 2.0,
+            b.center_hz + b.width_hz / 2.0,
+        );
+        let k = col
+            .outputs
+            .iter()
+            .position(|&o| o == col.input)
+            .unwrap_or(0);
         let h = frf_of(&col.accelerance, n_out, k);
         let circle = circle_fit(
             &level.freq_hz,
@@ -215,7 +229,12 @@ pub fn analyse_level(
             band,
             &CircleFitParams::default(),
         )
-        .map_err(|e| analysis(format!("circle fit around {} Hz at level {lname}", b.center_hz), e))?;
+        .map_err(|e| {
+            analysis(
+                format!("circle fit around {} Hz at level {lname}", b.center_hz),
+                e,
+            )
+        })?;
         let target = ExperimentalMode {
             freq_hz: circle.freq_hz,
             loss_factor: circle.loss_factor,
@@ -337,13 +356,25 @@ pub fn analyse_level(
             let s: Vec<f64> = dk
                 .iter()
                 .zip(&modulus)
-                .map(|(d, e)| if peak > 0.0 { d.norm() * e.re / peak } else { 0.0 })
+                .map(|(d, e)| {
+                    if peak > 0.0 {
+                        d.norm() * e.re / peak
+                    } else {
+                        0.0
+                    }
+                })
                 .collect();
             // dH'/dE'' = j dH'/dE': same magnitude, scaled by E''.
             let l: Vec<f64> = dk
                 .iter()
                 .zip(&modulus)
-                .map(|(d, e)| if peak > 0.0 { (J * d).norm() * e.im / peak } else { 0.0 })
+                .map(|(d, e)| {
+                    if peak > 0.0 {
+                        (J * d).norm() * e.im / peak
+                    } else {
+                        0.0
+                    }
+                })
                 .collect();
             storage.push(s);
             loss.push(l);

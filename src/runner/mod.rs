@@ -179,28 +179,31 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
             .map(|f| (f.clone(), level.name.clone()))
             .collect();
         let set = crate::data::frf_set_from_uff(&files, &crate::data::UffImportOptions::default())?;
-        let lvl: &FrfLevel = set.levels.iter().find(|l| l.name == level.name).ok_or_else(|| {
-            study_err(
-                study,
-                format!("measurements.levels[{li}]"),
-                format!("the files of level {} hold no FRFs of that level", level.name),
-            )
-        })?;
-        crate::data::check_level(
-            lvl,
-            Some((exc_point.id, exc_point.direction)),
-            meas.band_hz,
-        )
-        .map_err(|e| {
-            RunError::Data(DataError {
-                message: format!(
-                    "{} (study {}: measurements.band_hz / structure.excitation)",
-                    e.message,
-                    study.file.display()
-                ),
-                ..e
-            })
-        })?;
+        let lvl: &FrfLevel = set
+            .levels
+            .iter()
+            .find(|l| l.name == level.name)
+            .ok_or_else(|| {
+                study_err(
+                    study,
+                    format!("measurements.levels[{li}]"),
+                    format!(
+                        "the files of level {} hold no FRFs of that level",
+                        level.name
+                    ),
+                )
+            })?;
+        crate::data::check_level(lvl, Some((exc_point.id, exc_point.direction)), meas.band_hz)
+            .map_err(|e| {
+                RunError::Data(DataError {
+                    message: format!(
+                        "{} (study {}: measurements.band_hz / structure.excitation)",
+                        e.message,
+                        study.file.display()
+                    ),
+                    ..e
+                })
+            })?;
         let (lo, hi) = meas.band_hz.unwrap_or((0.0, f64::INFINITY));
         let lines: Vec<usize> = (0..lvl.freq_hz.len())
             .filter(|&l| lvl.freq_hz[l] > 0.0 && lvl.freq_hz[l] >= lo && lvl.freq_hz[l] <= hi)
@@ -209,7 +212,10 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
             return Err(study_err(
                 study,
                 "measurements.band_hz",
-                format!("no positive frequency line of level {} in the band", level.name),
+                format!(
+                    "no positive frequency line of level {} in the band",
+                    level.name
+                ),
             ));
         }
         // Channels: reference = excitation point, response among the model's points.
@@ -260,7 +266,8 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
         let mut acc = vec![C64::new(0.0, 0.0); lines.len() * n_out];
         for (ll, &l) in lines.iter().enumerate() {
             for (k, (ch, sign)) in chans.iter().enumerate() {
-                acc[ll * n_out + k] = to_accelerance(ch.values[l], lvl.freq_hz[l], lvl.quantity) * *sign;
+                acc[ll * n_out + k] =
+                    to_accelerance(ch.values[l], lvl.freq_hz[l], lvl.quantity) * *sign;
             }
         }
         let freq_hz: Vec<f64> = lines.iter().map(|&l| lvl.freq_hz[l]).collect();
@@ -346,7 +353,12 @@ fn build_engine(
 ) -> Result<(Box<dyn FrfEngine>, String), RunError> {
     let mut inputs: Vec<usize> = Vec::new();
     for l in levels {
-        for &k in l.column.outputs.iter().chain(std::iter::once(&l.column.input)) {
+        for &k in l
+            .column
+            .outputs
+            .iter()
+            .chain(std::iter::once(&l.column.input))
+        {
             if !inputs.contains(&k) {
                 inputs.push(k);
             }
@@ -356,8 +368,12 @@ fn build_engine(
     match study.solver.engine {
         Engine::Full => Ok((
             Box::new(
-                crate::frf::FullModel::new(&built.model, &inputs, crate::frf::FullParams::default())
-                    .map_err(|e| RunError::Engine(e.to_string()))?,
+                crate::frf::FullModel::new(
+                    &built.model,
+                    &inputs,
+                    crate::frf::FullParams::default(),
+                )
+                .map_err(|e| RunError::Engine(e.to_string()))?,
             ),
             format!("engine: full model, {} DOFs", built.model.n_dof()),
         )),
@@ -413,9 +429,7 @@ fn build(study: &Study) -> Result<BuiltModel, RunError> {
 }
 
 /// Check every model spec: known name, parameters in range (the study validation does most).
-fn model_laws(
-    study: &Study,
-) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
+fn model_laws(study: &Study) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
     let mut laws = Vec::new();
     for (i, m) in study.models.iter().enumerate() {
         let law = crate::material::model_from_name(&m.name, m.branches)

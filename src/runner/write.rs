@@ -218,10 +218,7 @@ fn build_tables(levels: &[LevelData], results: &[LevelResults]) -> Result<Tables
             }
             let smax = res.singular_values.first().copied().unwrap_or(0.0);
             for (k, &sv) in res.singular_values.iter().enumerate() {
-                let weak = res
-                    .weak_directions
-                    .iter()
-                    .find(|w| w.singular_value == sv);
+                let weak = res.weak_directions.iter().find(|w| w.singular_value == sv);
                 svd.s("level", lv.clone());
                 svd.s("model", res.model_name.clone());
                 svd.s(
@@ -240,7 +237,11 @@ fn build_tables(levels: &[LevelData], results: &[LevelResults]) -> Result<Tables
                 svd.i("index", k as i64);
                 svd.i("rank", res.rank as i64);
                 svd.f("singular_value", "Pa", sv);
-                svd.f("relative_singular_value", "1", if smax > 0.0 { sv / smax } else { 0.0 });
+                svd.f(
+                    "relative_singular_value",
+                    "1",
+                    if smax > 0.0 { sv / smax } else { 0.0 },
+                );
                 svd.f("condition_number", "1", res.condition_number);
             }
         }
@@ -261,27 +262,55 @@ fn build_tables(levels: &[LevelData], results: &[LevelResults]) -> Result<Tables
                 }
             }
         }
-        let mut push_modal = |method: &str, c: f64, w: f64, id: i64, f: f64, eta: f64, e: C64, iters: i64| {
-            modal.s("level", lv.clone());
-            modal.s("method", s(method));
-            modal.i("response_id", id);
-            modal.i("iterations", iters);
-            modal.f("center_hz", "Hz", c);
-            modal.f("width_hz", "Hz", w);
-            modal.f("freq_hz", "Hz", f);
-            modal.f("loss_factor", "1", eta);
-            modal.f("storage_modulus", "Pa", e.re);
-            modal.f("loss_modulus", "Pa", e.im);
-        };
+        let mut push_modal =
+            |method: &str, c: f64, w: f64, id: i64, f: f64, eta: f64, e: C64, iters: i64| {
+                modal.s("level", lv.clone());
+                modal.s("method", s(method));
+                modal.i("response_id", id);
+                modal.i("iterations", iters);
+                modal.f("center_hz", "Hz", c);
+                modal.f("width_hz", "Hz", w);
+                modal.f("freq_hz", "Hz", f);
+                modal.f("loss_factor", "1", eta);
+                modal.f("storage_modulus", "Pa", e.re);
+                modal.f("loss_modulus", "Pa", e.im);
+            };
         for m in &r.iem {
             let nan = C64::new(f64::NAN, f64::NAN);
-            push_modal("circle_fit", m.center_hz, m.width_hz, m.response_id as i64, m.circle.freq_hz, m.circle.loss_factor, nan, 0);
+            push_modal(
+                "circle_fit",
+                m.center_hz,
+                m.width_hz,
+                m.response_id as i64,
+                m.circle.freq_hz,
+                m.circle.loss_factor,
+                nan,
+                0,
+            );
             if let Ok(iem) = &m.iem {
-                push_modal("iem", m.center_hz, m.width_hz, m.response_id as i64, iem.freq_hz, iem.loss_factor, iem.modulus, iem.iterations as i64);
+                push_modal(
+                    "iem",
+                    m.center_hz,
+                    m.width_hz,
+                    m.response_id as i64,
+                    iem.freq_hz,
+                    iem.loss_factor,
+                    iem.modulus,
+                    iem.iterations as i64,
+                );
             }
         }
         for b in &r.band_constant {
-            push_modal("rfm_model1_band", b.center_hz, b.width_hz, -1, f64::NAN, f64::NAN, b.result.modulus, b.result.run.iterations as i64);
+            push_modal(
+                "rfm_model1_band",
+                b.center_hz,
+                b.width_hz,
+                -1,
+                f64::NAN,
+                f64::NAN,
+                b.result.modulus,
+                b.result.run.iterations as i64,
+            );
         }
         if let Some(sc) = &r.sensitivity {
             for k in 0..n_out {
@@ -348,7 +377,8 @@ fn build_report(
                 format!("{}", m.response_id),
                 format!("{:.2}", m.circle.freq_hz),
                 f4(m.circle.loss_factor),
-                p.map(|p| format!("{:.2}", p.0)).unwrap_or_else(|| "-".into()),
+                p.map(|p| format!("{:.2}", p.0))
+                    .unwrap_or_else(|| "-".into()),
                 p.map(|p| f4(p.1)).unwrap_or_else(|| "-".into()),
             ]);
             let band = r
@@ -358,16 +388,27 @@ fn build_report(
             t3.push(vec![
                 r.level.clone(),
                 format!("{:.0}", m.center_hz),
-                m.iem.as_ref().map(|i| f4(i.modulus.re * 1e-6)).unwrap_or_else(|_| "failed".into()),
-                m.iem.as_ref().map(|i| f4(i.modulus.im * 1e-6)).unwrap_or_else(|_| "failed".into()),
-                band.map(|b| f4(b.result.modulus.re * 1e-6)).unwrap_or_else(|| "-".into()),
-                band.map(|b| f4(b.result.modulus.im * 1e-6)).unwrap_or_else(|| "-".into()),
+                m.iem
+                    .as_ref()
+                    .map(|i| f4(i.modulus.re * 1e-6))
+                    .unwrap_or_else(|_| "failed".into()),
+                m.iem
+                    .as_ref()
+                    .map(|i| f4(i.modulus.im * 1e-6))
+                    .unwrap_or_else(|_| "failed".into()),
+                band.map(|b| f4(b.result.modulus.re * 1e-6))
+                    .unwrap_or_else(|| "-".into()),
+                band.map(|b| f4(b.result.modulus.im * 1e-6))
+                    .unwrap_or_else(|| "-".into()),
                 p.map(|p| f4(p.2)).unwrap_or_else(|| "-".into()),
                 p.map(|p| f4(p.3)).unwrap_or_else(|| "-".into()),
             ]);
         }
         for b in &r.band_constant {
-            if r.iem.iter().any(|m| (b.center_hz - m.center_hz).abs() <= m.width_hz) {
+            if r.iem
+                .iter()
+                .any(|m| (b.center_hz - m.center_hz).abs() <= m.width_hz)
+            {
                 continue;
             }
             let p = paper_mode(&r.level, b.center_hz);
@@ -386,7 +427,15 @@ fn build_report(
     if !t2.is_empty() {
         rep.heading(2, "Table 2: circle-fit modal analysis");
         rep.table(
-            &["Level", "Band centre (Hz)", "FRF (response)", "f (Hz)", "eta", "paper f (Hz)", "paper eta"],
+            &[
+                "Level",
+                "Band centre (Hz)",
+                "FRF (response)",
+                "f (Hz)",
+                "eta",
+                "paper f (Hz)",
+                "paper eta",
+            ],
             &t2,
         );
     }
@@ -400,7 +449,16 @@ fn build_report(
             rep.paragraph(&format!("**Warning:** {f}"));
         }
         rep.table(
-            &["Level", "Band centre (Hz)", "IEM E'", "IEM E''", "RFM Model 1 E'", "RFM Model 1 E''", "paper IEM E'", "paper IEM E''"],
+            &[
+                "Level",
+                "Band centre (Hz)",
+                "IEM E'",
+                "IEM E''",
+                "RFM Model 1 E'",
+                "RFM Model 1 E''",
+                "paper IEM E'",
+                "paper IEM E''",
+            ],
             &t3,
         );
     }
@@ -416,7 +474,12 @@ fn build_report(
         };
         rep.heading(2, &title);
         let mut headers = vec![s("Model"), s("Row")];
-        let maxp = r.global.iter().map(|g| g.result.params.len()).max().unwrap_or(0);
+        let maxp = r
+            .global
+            .iter()
+            .map(|g| g.result.params.len())
+            .max()
+            .unwrap_or(0);
         for k in 0..maxp {
             headers.push(format!("p{}", k + 1));
         }
@@ -478,7 +541,10 @@ fn build_report(
             ]);
         }
         rep.paragraph("Singular values of U (log-parameters), condition number and rank:");
-        rep.table(&["Model", "singular values (Pa)", "condition", "rank"], &svd_rows);
+        rep.table(
+            &["Model", "singular values (Pa)", "condition", "rank"],
+            &svd_rows,
+        );
     }
     if !figures.is_empty() {
         rep.heading(2, "Figures");
@@ -532,15 +598,32 @@ fn draw_figures(
                 &ld.freq_hz,
                 &curves,
             )?;
-            out.push((format!("{stem}.png"), format!("FRF {id}{} level {lv}", ld.reference_id)));
+            out.push((
+                format!("{stem}.png"),
+                format!("FRF {id}{} level {lv}", ld.reference_id),
+            ));
         }
         if !r.global.is_empty() {
             let mut sc = Vec::new();
             let mut ac = Vec::new();
             for (c, g) in r.global.iter().enumerate() {
                 let col = palette[c % palette.len()];
-                sc.push(Curve::line(&g.result.model_name, ld.freq_hz.clone(), g.scc_updated.clone()).with_color(col));
-                ac.push(Curve::line(&g.result.model_name, ld.freq_hz.clone(), g.acc_updated.clone()).with_color(col));
+                sc.push(
+                    Curve::line(
+                        &g.result.model_name,
+                        ld.freq_hz.clone(),
+                        g.scc_updated.clone(),
+                    )
+                    .with_color(col),
+                );
+                ac.push(
+                    Curve::line(
+                        &g.result.model_name,
+                        ld.freq_hz.clone(),
+                        g.acc_updated.clone(),
+                    )
+                    .with_color(col),
+                );
             }
             for (name, cs) in [("scc", sc), ("acc", ac)] {
                 let stem = format!("fig_{name}_{lv}");
@@ -552,7 +635,10 @@ fn draw_figures(
                     &cs,
                     false,
                 )?;
-                out.push((format!("{stem}.png"), format!("{} level {lv}", name.to_uppercase())));
+                out.push((
+                    format!("{stem}.png"),
+                    format!("{} level {lv}", name.to_uppercase()),
+                ));
             }
             let mut conv = Vec::new();
             for (c, g) in r.global.iter().enumerate() {
@@ -561,7 +647,9 @@ fn draw_figures(
                     Curve::line(
                         &g.result.model_name,
                         h.iter().map(|x| x.iteration as f64).collect(),
-                        h.iter().map(|x| x.frf_relative_residual.max(1e-300)).collect(),
+                        h.iter()
+                            .map(|x| x.frf_relative_residual.max(1e-300))
+                            .collect(),
                     )
                     .with_color(palette[c % palette.len()]),
                 );
@@ -581,17 +669,50 @@ fn draw_figures(
         let mut lo = Vec::new();
         if let Some(pl) = &r.per_line {
             let f = ld.freq_hz.clone();
-            st.push(Curve::points("per-line RFM", f.clone(), pl.iter().map(|e| e.modulus_combined.re).collect()).with_color((0, 0, 0)));
-            lo.push(Curve::points("per-line RFM", f, pl.iter().map(|e| e.modulus_combined.im).collect()).with_color((0, 0, 0)));
+            st.push(
+                Curve::points(
+                    "per-line RFM",
+                    f.clone(),
+                    pl.iter().map(|e| e.modulus_combined.re).collect(),
+                )
+                .with_color((0, 0, 0)),
+            );
+            lo.push(
+                Curve::points(
+                    "per-line RFM",
+                    f,
+                    pl.iter().map(|e| e.modulus_combined.im).collect(),
+                )
+                .with_color((0, 0, 0)),
+            );
         }
         for (c, g) in r.global.iter().enumerate() {
             let col = palette[c % palette.len()];
-            st.push(Curve::line(&g.result.model_name, ld.freq_hz.clone(), g.result.modulus.iter().map(|z| z.re).collect()).with_color(col));
-            lo.push(Curve::line(&g.result.model_name, ld.freq_hz.clone(), g.result.modulus.iter().map(|z| z.im).collect()).with_color(col));
+            st.push(
+                Curve::line(
+                    &g.result.model_name,
+                    ld.freq_hz.clone(),
+                    g.result.modulus.iter().map(|z| z.re).collect(),
+                )
+                .with_color(col),
+            );
+            lo.push(
+                Curve::line(
+                    &g.result.model_name,
+                    ld.freq_hz.clone(),
+                    g.result.modulus.iter().map(|z| z.im).collect(),
+                )
+                .with_color(col),
+            );
         }
         if !st.is_empty() {
             let stem = format!("fig_modulus_{lv}");
-            crate::plot::modulus_figure(dir.join(&stem), &format!("Level {lv}: E' and E''"), &st, &lo)?;
+            crate::plot::modulus_figure(
+                dir.join(&stem),
+                &format!("Level {lv}: E' and E''"),
+                &st,
+                &lo,
+            )?;
             out.push((format!("{stem}.png"), format!("modulus level {lv}")));
         }
     }
@@ -613,7 +734,9 @@ pub(super) fn write_results(
 ) -> Result<Vec<String>, RunError> {
     let tmp = sibling(out_dir, &format!("tmp-{}", std::process::id()));
     if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(|e| crate::output::OutputError::io(&tmp, "remove stale temporary folder", e))?;
+        std::fs::remove_dir_all(&tmp).map_err(|e| {
+            crate::output::OutputError::io(&tmp, "remove stale temporary folder", e)
+        })?;
     }
     let parent = tmp.parent().map(Path::to_path_buf).unwrap_or_default();
     let tmp_name = tmp
@@ -676,9 +799,12 @@ pub(super) fn write_results(
     };
     // Swap: old -> .old-<pid>, tmp -> out_dir, delete old.
     let old = sibling(out_dir, &format!("old-{}", std::process::id()));
-    let io = |p: &Path, what: &'static str, e| RunError::Output(crate::output::OutputError::io(p, what, e));
+    let io = |p: &Path, what: &'static str, e| {
+        RunError::Output(crate::output::OutputError::io(p, what, e))
+    };
     if out_dir.exists() {
-        std::fs::rename(out_dir, &old).map_err(|e| io(out_dir, "move the previous results aside", e))?;
+        std::fs::rename(out_dir, &old)
+            .map_err(|e| io(out_dir, "move the previous results aside", e))?;
     }
     if let Err(e) = std::fs::rename(&tmp, out_dir) {
         let _ = std::fs::rename(&old, out_dir);

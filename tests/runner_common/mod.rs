@@ -58,20 +58,35 @@ pub fn lines_hz(lo: f64, hi: f64, step: f64) -> Vec<f64> {
 
 /// Noiseless accelerance H'_i2 of points 1-4 at the truth of `law` (full model), written as
 /// UFF58 level `level` to `path`.
-pub fn write_data(path: &Path, level: &str, law: &dyn ConstitutiveModel, truth: &[f64], freq_hz: &[f64]) {
+pub fn write_data(
+    path: &Path,
+    level: &str,
+    law: &dyn ConstitutiveModel,
+    truth: &[f64],
+    freq_hz: &[f64],
+) {
     let study = rfmlab::study::parse_str(
         &format!("[study]\nname = \"gen\"\n{STRUCTURE}"),
         Path::new("gen.toml"),
     )
     .expect("structure parses");
-    let built = rfmlab::study::build::build_model(&study.structure, "gen.toml").expect("model builds");
-    let engine = FullModel::new(&built.model, &[built.excitation], FullParams::default()).expect("engine");
-    let omega: Vec<f64> = freq_hz.iter().map(|f| 2.0 * std::f64::consts::PI * f).collect();
+    let built =
+        rfmlab::study::build::build_model(&study.structure, "gen.toml").expect("model builds");
+    let engine =
+        FullModel::new(&built.model, &[built.excitation], FullParams::default()).expect("engine");
+    let omega: Vec<f64> = freq_hz
+        .iter()
+        .map(|f| 2.0 * std::f64::consts::PI * f)
+        .collect();
     let moduli: Vec<C64> = omega.iter().map(|&w| law.modulus(truth, w)).collect();
     let sw = engine.sweep(&omega, &moduli, false).expect("sweep");
     let mut channels = Vec::new();
     for (k, p) in built.model.points.iter().enumerate() {
-        let values: Vec<C64> = omega.iter().enumerate().map(|(l, &w)| -w * w * sw.h[sw.idx(l, k, 0)]).collect();
+        let values: Vec<C64> = omega
+            .iter()
+            .enumerate()
+            .map(|(l, &w)| -w * w * sw.h[sw.idx(l, k, 0)])
+            .collect();
         channels.push(Channel {
             response_id: p.id,
             response_dir: p.direction,
@@ -96,12 +111,27 @@ pub fn write_data(path: &Path, level: &str, law: &dyn ConstitutiveModel, truth: 
 }
 
 /// A study file text: structure + one level + models (name, [(param, initial)]) + settings.
-pub fn study_text(name: &str, out: &Path, data: &Path, band: (f64, f64), models: &[(&str, Vec<(String, f64)>)], analyses: &str) -> String {
+pub fn study_text(
+    name: &str,
+    out: &Path,
+    data: &Path,
+    band: (f64, f64),
+    models: &[(&str, Vec<(String, f64)>)],
+    analyses: &str,
+) -> String {
     study_text_engine(name, out, data, band, models, analyses, "full")
 }
 
 /// [`study_text`] with the engine ("full" or "rom").
-pub fn study_text_engine(name: &str, out: &Path, data: &Path, band: (f64, f64), models: &[(&str, Vec<(String, f64)>)], analyses: &str, engine: &str) -> String {
+pub fn study_text_engine(
+    name: &str,
+    out: &Path,
+    data: &Path,
+    band: (f64, f64),
+    models: &[(&str, Vec<(String, f64)>)],
+    analyses: &str,
+    engine: &str,
+) -> String {
     let mut s = format!(
         "[study]\nname = \"{name}\"\noutput_dir = \"{}\"\n{STRUCTURE}\n[measurements]\nband_hz = [{}, {}]\n[[measurements.levels]]\nname = \"L1\"\nfiles = [\"{}\"]\n",
         out.display(),
@@ -115,7 +145,9 @@ pub fn study_text_engine(name: &str, out: &Path, data: &Path, band: (f64, f64), 
             s.push_str(&format!("{p} = {v:e}\n"));
         }
     }
-    s.push_str(&format!("[solver]\nengine = \"{engine}\"\nmax_iterations = 60\ntolerance = 1e-9\n"));
+    s.push_str(&format!(
+        "[solver]\nengine = \"{engine}\"\nmax_iterations = 60\ntolerance = 1e-9\n"
+    ));
     s.push_str(analyses);
     s
 }
