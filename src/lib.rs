@@ -43,4 +43,5 @@ pub mod plot;
 pub mod rfm;
 #[allow(clippy::needless_borrow)]
 pub mod rom;
+pub mod runner;
 pub mod study;

@@ -1,13 +1,110 @@
-use super::common::Global;
+//! `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (the study runner, [`rfmlab::runner`]).
+
+use super::common::{print_json, Global, InputError};
+use rfmlab::runner::{Event, RunError, RunOptions};
+use std::cell::RefCell;
+use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
-pub struct RunArgs {}
-#[derive(clap::Args, Debug)]
-pub struct CheckArgs {}
-
-pub fn run(_a: &RunArgs, _g: &Global) -> anyhow::Result<()> {
-    anyhow::bail!("not implemented yet")
+pub struct RunArgs {
+    /// The study file (TOML).
+    pub study: PathBuf,
+    /// Print a JSON summary (identified parameters, FRACs, files) on stdout.
+    #[arg(long)]
+    pub json: bool,
+    /// Do not draw figures (faster).
+    #[arg(long)]
+    pub no_figures: bool,
 }
-pub fn check(_a: &CheckArgs, _g: &Global) -> anyhow::Result<()> {
-    anyhow::bail!("not implemented yet")
+
+#[derive(clap::Args, Debug)]
+pub struct CheckArgs {
+    /// The study file (TOML).
+    pub study: PathBuf,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Input errors (study file, data) become [`InputError`] so that the exit code is 2.
+fn wrap(e: RunError) -> anyhow::Error {
+    if e.is_input() {
+        anyhow::Error::new(InputError(e.to_string()))
+    } else {
+        anyhow::Error::new(e)
+    }
+}
+
+pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
+    let study = super::common::load_study(&a.study)?;
+    let bar: RefCell<Option<indicatif::ProgressBar>> = RefCell::new(None);
+    let progress = |ev: Event| match ev {
+        Event::Start { step, total } => {
+            let pb = if total > 0 {
+                super::common::progress(g, total, &step)
+            } else {
+                super::common::spinner(g, &step)
+            };
+            if let Some(old) = bar.replace(Some(pb)) {
+                old.finish_and_clear();
+            }
+        }
+        Event::Advance => {
+            if let Some(pb) = bar.borrow().as_ref() {
+                pb.inc(1);
+            }
+        }
+        Event::Finish => {
+            if let Some(pb) = bar.replace(None) {
+                pb.finish_and_clear();
+            }
+        }
+    };
+    let opts = RunOptions {
+        no_figures: a.no_figures,
+        output_dir: None,
+    };
+    let summary = rfmlab::runner::run_study(&study, &opts, &progress).map_err(wrap)?;
+    if let Some(pb) = bar.replace(None) {
+        pb.finish_and_clear();
+    }
+    if a.json {
+        print_json(&serde_json::to_value(&summary)?)?;
+    } else if !g.quiet {
+        for m in &summary.models {
+            let fr: Vec<String> = m.frac.iter().map(|f| format!("{f:.4}")).collect();
+            eprintln!(
+                "{} {}: {} iterations, {}; FRAC {}",
+                m.level,
+                m.model,
+                m.iterations,
+                m.stop_reason,
+                fr.join(" ")
+            );
+        }
+        eprintln!(
+            "results in {} ({:.1} s); see report.md",
+            summary.output_dir.display(),
+            summary.seconds
+        );
+    }
+    Ok(())
+}
+
+pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
+    let study = super::common::load_study(&a.study)?;
+    let summary = rfmlab::runner::check_study(&study).map_err(wrap)?;
+    if a.json {
+        print_json(&serde_json::to_value(&summary)?)?;
+    } else if !g.quiet {
+        eprintln!(
+            "{}: OK ({} DOFs, {} levels, {} models, initial values evaluated at {} lines)",
+            a.study.display(),
+            summary.n_dof,
+            summary.levels.len(),
+            summary.models.len(),
+            summary.lines_checked
+        );
+    }
+    Ok(())
 }

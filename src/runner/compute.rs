@@ -1,0 +1,400 @@
+//! The analyses of one level (no I/O): per-line RFM, Model 1 over bands, circle fit + IEM,
+//! global RFM per model, correlation and sensitivity.
+
+use super::{Event, LevelData, RunError};
+use crate::common::{C64, J};
+use crate::frf::FrfEngine;
+use crate::iem::{AnalyticalMode, ExperimentalMode, IemParams, IemResult};
+use crate::material::ConstitutiveModel;
+use crate::modal::circle_fit::{circle_fit, CircleFitParams, CircleFitResult};
+use crate::rfm::{BandResult, MeasuredColumn, PerLineEstimate, RfmParams, RfmResult};
+use crate::study::build::BuiltModel;
+use crate::study::Study;
+
+/// Default initial modulus where a study gives none (Pa): the paper's IEM value, Level 1 mode 1.
+pub const DEFAULT_E0: C64 = C64::new(6.974e6, 1.4827e6);
+
+/// Model 1 (constant E*) over one band (case study 1).
+#[derive(Clone, Debug)]
+pub struct BandConstantResult {
+    pub center_hz: f64,
+    pub width_hz: f64,
+    pub result: BandResult,
+}
+
+/// Circle fit (Table 2) and IEM (Table 3) around one resonance.
+#[derive(Clone, Debug)]
+pub struct IemBandResult {
+    pub center_hz: f64,
+    pub width_hz: f64,
+    /// Response id of the FRF the circle fit used (the drive point when measured).
+    pub response_id: u32,
+    pub circle: CircleFitResult,
+    /// The IEM result, or why it failed (the circle fit is kept either way).
+    pub iem: Result<IemResult, String>,
+}
+
+/// One global RFM run with the FRFs and correlation before and after.
+#[derive(Clone, Debug)]
+pub struct GlobalResult {
+    pub result: RfmResult,
+    /// Analytical accelerance at the initial and updated parameters, `[line][k]` flattened
+    /// like [`MeasuredColumn::accelerance`].
+    pub initial_frf: Vec<C64>,
+    pub updated_frf: Vec<C64>,
+    /// E*(w) at the initial parameters (Pa), one per line.
+    pub initial_modulus: Vec<C64>,
+    pub frac_initial: Vec<f64>,
+    pub frac_updated: Vec<f64>,
+    pub scc_initial: Vec<f64>,
+    pub acc_initial: Vec<f64>,
+    pub scc_updated: Vec<f64>,
+    pub acc_updated: Vec<f64>,
+}
+
+/// Normalised sensitivities |dH'_ij/dE'| E' / max|H'_ij| and |dH'_ij/dE''| E'' / max|H'_ij|
+/// per FRF and line (the paper's Fig. 9), at the modulus `modulus` (Pa, per line).
+#[derive(Clone, Debug)]
+pub struct SensitivityCurves {
+    /// Where the modulus came from, e.g. "model4 updated".
+    pub at: String,
+    pub modulus: Vec<C64>,
+    /// `[k][line]`.
+    pub storage: Vec<Vec<f64>>,
+    pub loss: Vec<Vec<f64>>,
+}
+
+/// Everything computed for one level.
+#[derive(Clone, Debug)]
+pub struct LevelResults {
+    pub level: String,
+    pub per_line: Option<Vec<PerLineEstimate>>,
+    pub band_constant: Vec<BandConstantResult>,
+    pub iem: Vec<IemBandResult>,
+    pub global: Vec<GlobalResult>,
+    pub sensitivity: Option<SensitivityCurves>,
+}
+
+fn analysis(name: impl Into<String>, e: impl std::fmt::Display) -> RunError {
+    RunError::Analysis {
+        analysis: name.into(),
+        message: e.to_string(),
+    }
+}
+
+/// The RFM settings of a study.
+pub fn rfm_params(study: &Study) -> RfmParams {
+    RfmParams {
+        tol_rel_change: study.solver.tolerance,
+        max_iterations: study.solver.max_iterations,
+        rcond: study.solver.svd_rtol,
+        ..RfmParams::default()
+    }
+}
+
+/// Analytical accelerance -w^2 H_ij on the column's lines and outputs at `moduli` (one per
+/// line), `[line][k]` flattened; with `derivs`, also -w^2 dH_ij/dE'.
+pub fn analytical_column(
+    engine: &dyn FrfEngine,
+    col: &MeasuredColumn,
+    moduli: &[C64],
+    derivs: bool,
+) -> Result<(Vec<C64>, Vec<C64>), crate::frf::FrfError> {
+    let sw = engine.sweep(&col.omega_rad_s, moduli, derivs)?;
+    let jpos = engine
+        .inputs()
+        .iter()
+        .position(|&j| j == col.input)
+        .ok_or(crate::frf::FrfError::BadInput(col.input))?;
+    let n_out = col.outputs.len();
+    let mut h = Vec::with_capacity(col.n_lines() * n_out);
+    let mut dh = Vec::new();
+    for (l, &w) in col.omega_rad_s.iter().enumerate() {
+        for &i in &col.outputs {
+            let idx = sw.idx(l, i, jpos);
+            h.push(-w * w * sw.h[idx]);
+            if derivs {
+                dh.push(-w * w * sw.dh_de[idx]);
+            }
+        }
+    }
+    Ok((h, dh))
+}
+
+/// Rows `[line][k]` of a flattened column.
+fn rows(v: &[C64], n_out: usize) -> Vec<&[C64]> {
+    v.chunks(n_out).collect()
+}
+
+/// FRF k of a flattened `[line][k]` array.
+pub fn frf_of(v: &[C64], n_out: usize, k: usize) -> Vec<C64> {
+    v.iter().skip(k).step_by(n_out).copied().collect()
+}
+
+/// Run every analysis the study asks for on one level.
+pub fn analyse_level(
+    study: &Study,
+    built: &BuiltModel,
+    engine: &dyn FrfEngine,
+    level: &LevelData,
+    laws: &[Box<dyn ConstitutiveModel>],
+    progress: &dyn Fn(Event),
+) -> Result<LevelResults, RunError> {
+    let params = rfm_params(study);
+    let col = &level.column;
+    let n_out = col.outputs.len();
+    let lname = &level.name;
+    // A starting modulus per line: the first model's initial E*(w), else the default.
+    let first_model = study
+        .models
+        .iter()
+        .zip(laws)
+        .find(|(m, _)| m.levels.contains(lname));
+    let e_start: Vec<C64> = match first_model {
+        Some((m, law)) => col
+            .omega_rad_s
+            .iter()
+            .map(|&w| law.modulus(&m.initial, w))
+            .collect(),
+        None => vec![DEFAULT_E0; col.n_lines()],
+    };
+    let model1_e0 = study
+        .models
+        .iter()
+        .find(|m| m.name.eq_ignore_ascii_case("model1"))
+        .map(|m| C64::new(m.initial[0], m.initial[1]))
+        .unwrap_or(DEFAULT_E0);
+
+    // Per-line RFM (Fig. 13 / 18).
+    let per_line = if study.analyses.per_line {
+        progress(Event::Start {
+            step: format!("{lname}: per-line RFM"),
+            total: 0,
+        });
+        let r = crate::rfm::rfm_per_line(engine, col, &e_start, &params)
+            .map_err(|e| analysis(format!("per-line RFM at level {lname}"), e))?;
+        progress(Event::Finish);
+        Some(r)
+    } else {
+        None
+    };
+
+    // Model 1 over bands (case study 1).
+    let mut band_constant = Vec::new();
+    for b in &study.analyses.band_constant {
+        let band = (
+            b.center_hz - b.width_hz / 2.0,
+            b.center_hz + b.width_hz / 2.0,
+        );
+        let r =
+            crate::rfm::rfm_band_constant(engine, col, band, model1_e0, &params).map_err(|e| {
+                analysis(
+                    format!(
+                        "Model 1 RFM over {:.1}..{:.1} Hz at level {lname}",
+                        band.0, band.1
+                    ),
+                    e,
+                )
+            })?;
+        band_constant.push(BandConstantResult {
+            center_hz: b.center_hz,
+            width_hz: b.width_hz,
+            result: r,
+        });
+    }
+
+    // Circle fit + IEM (Tables 2 and 3).
+    let mut iem = Vec::new();
+    if !study.analyses.iem.is_empty() {
+        progress(Event::Start {
+            step: format!("{lname}: circle fit + IEM"),
+            total: study.analyses.iem.len() as u64,
+        });
+    }
+    for b in &study.analyses.iem {
+        let band = (
+            b.center_hz - b.width_hz / 2.0,
+            b.center_hz + b.width_hz / 2.0,
+        );
+        let k = col
+            .outputs
+            .iter()
+            .position(|&o| o == col.input)
+            .unwrap_or(0);
+        let h = frf_of(&col.accelerance, n_out, k);
+        let circle = circle_fit(
+            &level.freq_hz,
+            &h,
+            crate::data::Quantity::Accelerance,
+            band,
+            &CircleFitParams::default(),
+        )
+        .map_err(|e| {
+            analysis(
+                format!("circle fit around {} Hz at level {lname}", b.center_hz),
+                e,
+            )
+        })?;
+        let target = ExperimentalMode {
+            freq_hz: circle.freq_hz,
+            loss_factor: circle.loss_factor,
+        };
+        let e0 = band_constant
+            .iter()
+            .find(|bc| (bc.center_hz - b.center_hz).abs() <= b.width_hz)
+            .map(|bc| bc.result.modulus)
+            .unwrap_or(model1_e0);
+        let model = &built.model;
+        let axes = built.dof_axes.as_deref();
+        let provider = move |e: C64| -> Result<Vec<AnalyticalMode>, String> {
+            let modes = crate::modes::complex_modes(
+                model,
+                e,
+                8,
+                axes,
+                &crate::modes::ModesParams::default(),
+            )
+            .map_err(|e| e.to_string())?;
+            Ok(modes
+                .iter()
+                .map(|m| AnalyticalMode {
+                    lambda: m.lambda,
+                    phi_s_phi: m.phi_s_phi,
+                    y_dominant: m.y_dominant.unwrap_or(true),
+                })
+                .collect())
+        };
+        let r = crate::iem::iem_mode(&provider, target, e0, &IemParams::default())
+            .map_err(|e| format!("IEM around {} Hz at level {lname} failed: {e}", b.center_hz));
+        iem.push(IemBandResult {
+            center_hz: b.center_hz,
+            width_hz: b.width_hz,
+            response_id: level.response_ids[k],
+            circle,
+            iem: r,
+        });
+        progress(Event::Advance);
+    }
+    if !study.analyses.iem.is_empty() {
+        progress(Event::Finish);
+    }
+
+    // Global RFM per model (Tables 4 and 5).
+    let mut global = Vec::new();
+    let specs: Vec<_> = study
+        .models
+        .iter()
+        .zip(laws)
+        .enumerate()
+        .filter(|(_, (m, _))| m.levels.contains(lname))
+        .collect();
+    if !specs.is_empty() {
+        progress(Event::Start {
+            step: format!("{lname}: global RFM"),
+            total: specs.len() as u64,
+        });
+    }
+    let x_rows = rows(&col.accelerance, n_out);
+    for (i, (m, law)) in specs {
+        let r = crate::rfm::rfm_global(engine, col, law.as_ref(), &m.initial, &params).map_err(
+            |e| match e {
+                crate::rfm::RfmError::SingularInitial { .. }
+                | crate::rfm::RfmError::InadmissibleInitial { .. }
+                | crate::rfm::RfmError::ParamCount { .. } => super::study_err(
+                    study,
+                    format!("models[{i}].initial"),
+                    format!("{} at level {lname}: {e}", m.name),
+                ),
+                e => analysis(format!("global RFM of {} at level {lname}", m.name), e),
+            },
+        )?;
+        let initial_modulus: Vec<C64> = col
+            .omega_rad_s
+            .iter()
+            .map(|&w| law.modulus(&m.initial, w))
+            .collect();
+        let (initial_frf, _) = analytical_column(engine, col, &initial_modulus, false)
+            .map_err(|e| analysis(format!("FRFs of {} initial", m.name), e))?;
+        let (updated_frf, _) = analytical_column(engine, col, &r.modulus, false)
+            .map_err(|e| analysis(format!("FRFs of {} updated", m.name), e))?;
+        let (ri, ru) = (rows(&initial_frf, n_out), rows(&updated_frf, n_out));
+        global.push(GlobalResult {
+            frac_initial: crate::correlation::frac_per_frf(&x_rows, &ri),
+            frac_updated: crate::correlation::frac_per_frf(&x_rows, &ru),
+            scc_initial: crate::correlation::scc_curve(&x_rows, &ri),
+            acc_initial: crate::correlation::acc_curve(&x_rows, &ri),
+            scc_updated: crate::correlation::scc_curve(&x_rows, &ru),
+            acc_updated: crate::correlation::acc_curve(&x_rows, &ru),
+            result: r,
+            initial_frf,
+            updated_frf,
+            initial_modulus,
+        });
+        progress(Event::Advance);
+    }
+    if !global.is_empty() {
+        progress(Event::Finish);
+    }
+
+    // Sensitivity (Fig. 9) at the first updated model, else the starting modulus.
+    let sensitivity = if study.analyses.sensitivity {
+        let (at, modulus) = match global.first() {
+            Some(g) => (
+                format!("{} updated", g.result.model_name),
+                g.result.modulus.clone(),
+            ),
+            None => ("initial modulus".to_string(), e_start.clone()),
+        };
+        let (h, dh) = analytical_column(engine, col, &modulus, true)
+            .map_err(|e| analysis(format!("sensitivities at level {lname}"), e))?;
+        let mut storage = Vec::new();
+        let mut loss = Vec::new();
+        for k in 0..n_out {
+            let hk = frf_of(&h, n_out, k);
+            let peak = hk.iter().map(|z| z.norm()).fold(0.0, f64::max);
+            let dk = frf_of(&dh, n_out, k);
+            let s: Vec<f64> = dk
+                .iter()
+                .zip(&modulus)
+                .map(|(d, e)| {
+                    if peak > 0.0 {
+                        d.norm() * e.re / peak
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            // dH'/dE'' = j dH'/dE': same magnitude, scaled by E''.
+            let l: Vec<f64> = dk
+                .iter()
+                .zip(&modulus)
+                .map(|(d, e)| {
+                    if peak > 0.0 {
+                        (J * d).norm() * e.im / peak
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            storage.push(s);
+            loss.push(l);
+        }
+        Some(SensitivityCurves {
+            at,
+            modulus,
+            storage,
+            loss,
+        })
+    } else {
+        None
+    };
+
+    Ok(LevelResults {
+        level: lname.clone(),
+        per_line,
+        band_constant,
+        iem,
+        global,
+        sensitivity,
+    })
+}

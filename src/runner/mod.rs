@@ -1,0 +1,606 @@
+//! The study runner: `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (issue 4, items 5-6).
+//! It sits outside the numerical core (like `study`, `output`, `plot`) and wires them together:
+//!
+//! 1. load the measured data of every level (UFF58, [`crate::data::frf_set_from_uff`]) and check
+//!    it ([`crate::data::check_level`]: excitation channel present, band covered);
+//! 2. build the structural model ([`crate::study::build::build_model`]) and the FRF engine: the
+//!    certified ROM ([`crate::rom::build_rom`], over the band and a modulus range covering every
+//!    model's initial E*(w) and plausible results, prepared for the band's lines) or the full
+//!    model ([`crate::frf::FullModel`]) when `solver.engine = "full"`; its inputs are all measured
+//!    points (the RFM needs a square engine, see [`crate::rfm`]);
+//! 3. per level, the measured accelerance column H'_X,ij (i = channels, j = the excitation point)
+//!    and the analyses: per-line RFM (paper eq. 10-11, Fig. 13/18), Model 1 over bands (case
+//!    study 1), circle fit (Table 2) and IEM (eq. 20, Table 3), global RFM per model (eq. 37,
+//!    Tables 4-5), correlation (FRAC eq. 38, SCC eq. 39, ACC eq. 40) and sensitivities (Fig. 9);
+//! 4. results in `study.output_dir` (see [`write`] for the tables, their columns and units).
+//!
+//! # Atomicity
+//! Everything is written into a fresh temporary sibling folder `<output_dir>.tmp-<pid>`; only when
+//! every file (manifest last) is written is the old folder renamed away and the new one renamed
+//! into place (then the old one is deleted). A failed or interrupted run therefore leaves the
+//! earlier results untouched (at worst a stray `.tmp-*` folder).
+
+mod compute;
+pub mod write;
+
+pub use compute::{
+    BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,
+};
+
+use crate::common::C64;
+use crate::data::{DataError, FrfLevel, Quantity};
+use crate::frf::{FrfEngine, FrfError, Sweep};
+use crate::study::build::BuiltModel;
+use crate::study::{Engine, Study, StudyError};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options of a run (beyond the study file).
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Skip figures even when the study asks for them (tests, benchmarks). Default false.
+    pub no_figures: bool,
+    /// Override the study's output folder. Default None (use `study.output_dir`).
+    pub output_dir: Option<PathBuf>,
+}
+
+/// Progress of a run, for progress bars.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// A step started; `total` units of work follow (0 = unknown length).
+    Start { step: String, total: u64 },
+    /// One unit of the current step is done.
+    Advance,
+    /// The current step finished.
+    Finish,
+}
+
+/// Errors of a run. [`RunError::is_input`] tells bad input (exit code 2) from other failures.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Study(#[from] StudyError),
+    #[error(transparent)]
+    Data(#[from] DataError),
+    #[error("building the FRF engine failed: {0}")]
+    Engine(String),
+    #[error("{analysis} failed: {message}")]
+    Analysis { analysis: String, message: String },
+    #[error(transparent)]
+    Output(#[from] crate::output::OutputError),
+    #[error("figure: {0}")]
+    Plot(#[from] crate::plot::PlotError),
+}
+
+impl RunError {
+    /// True for errors caused by the study file or the data (the CLI exits with code 2).
+    pub fn is_input(&self) -> bool {
+        matches!(self, RunError::Study(_) | RunError::Data(_))
+    }
+}
+
+/// What a run produced (also printed by `rfmlab run --json`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunSummary {
+    pub study: String,
+    pub output_dir: PathBuf,
+    pub files: Vec<String>,
+    /// Per level and model: identified parameters (SI), stop reason and FRAC per FRF.
+    pub models: Vec<ModelSummary>,
+    pub seconds: f64,
+}
+
+/// One global RFM run in the summary.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ModelSummary {
+    pub level: String,
+    pub model: String,
+    pub param_names: Vec<String>,
+    pub initial: Vec<f64>,
+    pub identified: Vec<f64>,
+    pub iterations: usize,
+    pub stop_reason: String,
+    pub frac: Vec<f64>,
+}
+
+/// What `rfmlab check` found.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CheckSummary {
+    pub study: String,
+    pub n_dof: usize,
+    /// Per level: name, number of lines in the band, channel (response) ids used.
+    pub levels: Vec<(String, usize, Vec<u32>)>,
+    /// Models checked (name and levels).
+    pub models: Vec<(String, Vec<String>)>,
+    /// Lines at which each model's initial values were evaluated on the full model.
+    pub lines_checked: usize,
+}
+
+/// Measured data of one level, reduced to what the identification uses.
+#[derive(Clone, Debug)]
+pub struct LevelData {
+    pub name: String,
+    /// Lines (Hz) inside the band.
+    pub freq_hz: Vec<f64>,
+    /// Response point ids, in the order of the column's outputs.
+    pub response_ids: Vec<u32>,
+    pub reference_id: u32,
+    /// The measured accelerance column ((m/s^2)/N) on the band's lines.
+    pub column: crate::rfm::MeasuredColumn,
+}
+
+fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) -> RunError {
+    RunError::Study(StudyError {
+        file: study.file.display().to_string(),
+        key: key.into(),
+        message: message.into(),
+    })
+}
+
+const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
+
+/// Convert an FRF value of `q` to accelerance at `freq_hz` (H' = -w^2 H = j w Y).
+fn to_accelerance(h: C64, freq_hz: f64, q: Quantity) -> C64 {
+    let w = TWO_PI * freq_hz;
+    match q {
+        Quantity::Accelerance => h,
+        Quantity::Mobility => C64::new(0.0, w) * h,
+        Quantity::Receptance => -w * w * h,
+    }
+}
+
+/// Load and check the measured data of every level; returns one [`LevelData`] per level.
+pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, RunError> {
+    let meas = study.measurements.as_ref().ok_or_else(|| {
+        study_err(
+            study,
+            "measurements",
+            "no [measurements] section: add [[measurements.levels]] with name and files",
+        )
+    })?;
+    let exc_point = &built.model.points[built.excitation];
+    let mut out = Vec::new();
+    for (li, level) in meas.levels.iter().enumerate() {
+        for (fi, f) in level.files.iter().enumerate() {
+            if !f.is_file() {
+                return Err(study_err(
+                    study,
+                    format!("measurements.levels[{li}].files[{fi}]"),
+                    format!(
+                        "data file {} does not exist; check the path (relative paths are relative to the study file's folder)",
+                        f.display()
+                    ),
+                ));
+            }
+        }
+        let files: Vec<(PathBuf, String)> = level
+            .files
+            .iter()
+            .map(|f| (f.clone(), level.name.clone()))
+            .collect();
+        let set = crate::data::frf_set_from_uff(&files, &crate::data::UffImportOptions::default())?;
+        let lvl: &FrfLevel = set
+            .levels
+            .iter()
+            .find(|l| l.name == level.name)
+            .ok_or_else(|| {
+                study_err(
+                    study,
+                    format!("measurements.levels[{li}]"),
+                    format!(
+                        "the files of level {} hold no FRFs of that level",
+                        level.name
+                    ),
+                )
+            })?;
+        crate::data::check_level(lvl, Some((exc_point.id, exc_point.direction)), meas.band_hz)
+            .map_err(|e| {
+                RunError::Data(DataError {
+                    message: format!(
+                        "{} (study {}: measurements.band_hz / structure.excitation)",
+                        e.message,
+                        study.file.display()
+                    ),
+                    ..e
+                })
+            })?;
+        let (lo, hi) = meas.band_hz.unwrap_or((0.0, f64::INFINITY));
+        let lines: Vec<usize> = (0..lvl.freq_hz.len())
+            .filter(|&l| lvl.freq_hz[l] > 0.0 && lvl.freq_hz[l] >= lo && lvl.freq_hz[l] <= hi)
+            .collect();
+        if lines.is_empty() {
+            return Err(study_err(
+                study,
+                "measurements.band_hz",
+                format!(
+                    "no positive frequency line of level {} in the band",
+                    level.name
+                ),
+            ));
+        }
+        // Channels: reference = excitation point, response among the model's points.
+        let mut outputs = Vec::new();
+        let mut ids = Vec::new();
+        let mut chans = Vec::new();
+        for ch in &lvl.channels {
+            if ch.reference_id != exc_point.id {
+                continue;
+            }
+            if let Some(sel) = &meas.channels {
+                if !sel.contains(&ch.response_id) {
+                    continue;
+                }
+            }
+            let Some(k) = built
+                .model
+                .points
+                .iter()
+                .position(|p| p.id == ch.response_id)
+            else {
+                continue;
+            };
+            if outputs.contains(&k) {
+                continue;
+            }
+            // Sign: a channel measured in the opposite direction of the model's point flips.
+            let sign = if ch.response_dir == built.model.points[k].direction {
+                1.0
+            } else {
+                -1.0
+            };
+            outputs.push(k);
+            ids.push(ch.response_id);
+            chans.push((ch, sign));
+        }
+        if outputs.is_empty() {
+            return Err(study_err(
+                study,
+                "measurements.channels",
+                format!(
+                    "level {}: no channel with reference point {} and a response at one of the structure's points",
+                    level.name, exc_point.id
+                ),
+            ));
+        }
+        let n_out = outputs.len();
+        let mut acc = vec![C64::new(0.0, 0.0); lines.len() * n_out];
+        for (ll, &l) in lines.iter().enumerate() {
+            for (k, (ch, sign)) in chans.iter().enumerate() {
+                acc[ll * n_out + k] =
+                    to_accelerance(ch.values[l], lvl.freq_hz[l], lvl.quantity) * *sign;
+            }
+        }
+        let freq_hz: Vec<f64> = lines.iter().map(|&l| lvl.freq_hz[l]).collect();
+        out.push(LevelData {
+            name: level.name.clone(),
+            column: crate::rfm::MeasuredColumn {
+                omega_rad_s: freq_hz.iter().map(|f| TWO_PI * f).collect(),
+                input: built.excitation,
+                outputs,
+                accelerance: acc,
+            },
+            freq_hz,
+            response_ids: ids,
+            reference_id: exc_point.id,
+        });
+    }
+    Ok(out)
+}
+
+/// The ROM with a prepared pencil for the band's lines; other grids fall back to the reduced
+/// model's LU sweep (both are certified over the same range).
+struct RomEngine {
+    rom: crate::rom::ReducedModel,
+    pencil: crate::rom::PencilSweep,
+}
+
+impl FrfEngine for RomEngine {
+    fn n_out(&self) -> usize {
+        self.rom.n_out()
+    }
+    fn inputs(&self) -> &[usize] {
+        self.rom.inputs()
+    }
+    fn sweep_into(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        let same = omega_rad_s.len() == self.pencil.omega_rad_s().len()
+            && omega_rad_s
+                .iter()
+                .zip(self.pencil.omega_rad_s())
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        if same {
+            self.pencil
+                .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
+        } else {
+            self.rom
+                .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
+        }
+    }
+}
+
+/// The modulus range the ROM must cover: every model's initial E*(w) over the band, the
+/// default identification range of the ROM, widened by a factor 2 either way.
+fn modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange {
+    let mut r = crate::rom::ModulusRange::default();
+    for m in &study.models {
+        let Ok(law) = crate::material::model_from_name(&m.name, m.branches) else {
+            continue;
+        };
+        for k in 0..=20 {
+            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / 20.0;
+            let e = law.modulus(&m.initial, TWO_PI * f.max(1e-3));
+            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 {
+                r.e_storage_pa.0 = r.e_storage_pa.0.min(e.re / 2.0);
+                r.e_storage_pa.1 = r.e_storage_pa.1.max(e.re * 2.0);
+                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im.max(0.0) / 2.0);
+                r.e_loss_pa.1 = r.e_loss_pa.1.max(e.im * 2.0);
+            }
+        }
+    }
+    r
+}
+
+/// Build the FRF engine with inputs = all measured points of every level.
+fn build_engine(
+    study: &Study,
+    built: &BuiltModel,
+    levels: &[LevelData],
+) -> Result<(Box<dyn FrfEngine>, String), RunError> {
+    let mut inputs: Vec<usize> = Vec::new();
+    for l in levels {
+        for &k in l
+            .column
+            .outputs
+            .iter()
+            .chain(std::iter::once(&l.column.input))
+        {
+            if !inputs.contains(&k) {
+                inputs.push(k);
+            }
+        }
+    }
+    inputs.sort_unstable();
+    match study.solver.engine {
+        Engine::Full => Ok((
+            Box::new(
+                crate::frf::FullModel::new(
+                    &built.model,
+                    &inputs,
+                    crate::frf::FullParams::default(),
+                )
+                .map_err(|e| RunError::Engine(e.to_string()))?,
+            ),
+            format!("engine: full model, {} DOFs", built.model.n_dof()),
+        )),
+        Engine::Rom => {
+            let lo = levels
+                .iter()
+                .flat_map(|l| l.freq_hz.first().copied())
+                .fold(f64::INFINITY, f64::min);
+            let hi = levels
+                .iter()
+                .flat_map(|l| l.freq_hz.last().copied())
+                .fold(0.0, f64::max);
+            let params = crate::rom::RomParams {
+                band_hz: (lo, hi),
+                range: modulus_range(study, (lo, hi)),
+                tolerance: study.solver.rom_tolerance,
+                // An uncertified ROM is used with a warning in the manifest and report (its
+                // measured error is stated) rather than failing the run.
+                allow_uncertified: true,
+                ..Default::default()
+            };
+            let (rom, cert) = crate::rom::build_rom(&built.model, &inputs, &params)
+                .map_err(|e| RunError::Engine(e.to_string()))?;
+            // Prepare the pencil for the first level's grid (all levels normally share it).
+            let omega = &levels[0].column.omega_rad_s;
+            let pencil = rom
+                .prepare(omega)
+                .map_err(|e| RunError::Engine(e.to_string()))?;
+            let note = format!(
+                "engine: ROM with {} basis vectors over {:.1}..{:.1} Hz, E' {:.3e}..{:.3e} Pa, E'' {:.3e}..{:.3e} Pa; certificate max relative error {:.2e} (tolerance {:.1e}){}",
+                cert.basis_size,
+                lo,
+                hi,
+                params.range.e_storage_pa.0,
+                params.range.e_storage_pa.1,
+                params.range.e_loss_pa.0,
+                params.range.e_loss_pa.1,
+                cert.max_rel_error,
+                params.tolerance,
+                if cert.passed { "" } else { ": WARNING, NOT CERTIFIED" }
+            );
+            Ok((Box::new(RomEngine { rom, pencil }), note))
+        }
+    }
+}
+
+/// Build the model of a study (errors name the study file).
+fn build(study: &Study) -> Result<BuiltModel, RunError> {
+    Ok(crate::study::build::build_model(
+        &study.structure,
+        &study.file.display().to_string(),
+    )?)
+}
+
+/// Check every model spec: known name, parameters in range (the study validation does most).
+fn model_laws(study: &Study) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
+    let mut laws = Vec::new();
+    for (i, m) in study.models.iter().enumerate() {
+        let law = crate::material::model_from_name(&m.name, m.branches)
+            .map_err(|e| study_err(study, format!("models[{i}].name"), e.to_string()))?;
+        crate::material::check_params(law.as_ref(), &m.initial)
+            .map_err(|e| study_err(study, format!("models[{i}].initial"), e.to_string()))?;
+        laws.push(law);
+    }
+    Ok(laws)
+}
+
+/// Evaluate the full model at every model's initial E*(w) on up to 16 lines of each level
+/// (both band ends included): a singular or ill-conditioned Z is an input error naming the model.
+fn check_initial_values(
+    study: &Study,
+    built: &BuiltModel,
+    levels: &[LevelData],
+    laws: &[Box<dyn crate::material::ConstitutiveModel>],
+) -> Result<usize, RunError> {
+    let full = crate::frf::FullModel::new(
+        &built.model,
+        &[built.excitation],
+        crate::frf::FullParams::default(),
+    )
+    .map_err(|e| RunError::Engine(e.to_string()))?;
+    let mut n_checked = 0;
+    for level in levels {
+        let n = level.freq_hz.len();
+        let picks: Vec<usize> = if n <= 16 {
+            (0..n).collect()
+        } else {
+            (0..16).map(|k| k * (n - 1) / 15).collect()
+        };
+        let omega: Vec<f64> = picks.iter().map(|&l| level.column.omega_rad_s[l]).collect();
+        for (i, (m, law)) in study.models.iter().zip(laws).enumerate() {
+            if !m.levels.contains(&level.name) {
+                continue;
+            }
+            let moduli: Vec<C64> = omega.iter().map(|&w| law.modulus(&m.initial, w)).collect();
+            let sw = full.sweep(&omega, &moduli, false).map_err(|e| {
+                study_err(
+                    study,
+                    format!("models[{i}].initial"),
+                    format!(
+                        "the initial values of {} make the system singular at level {}: {e}; choose different initial values",
+                        m.name, level.name
+                    ),
+                )
+            })?;
+            if sw.h.iter().any(|z| !(z.re.is_finite() && z.im.is_finite())) {
+                return Err(study_err(
+                    study,
+                    format!("models[{i}].initial"),
+                    format!(
+                        "the initial values of {} give non-finite FRFs at level {}; choose different initial values",
+                        m.name, level.name
+                    ),
+                ));
+            }
+        }
+        n_checked += omega.len();
+    }
+    Ok(n_checked)
+}
+
+/// Validate a study without running it: data files, channels, excitation channel, band,
+/// model parameters, and the full model evaluated at every model's initial values.
+pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
+    let laws = model_laws(study)?;
+    let built = build(study)?;
+    let levels = load_levels(study, &built)?;
+    let lines_checked = check_initial_values(study, &built, &levels, &laws)?;
+    Ok(CheckSummary {
+        study: study.name.clone(),
+        n_dof: built.model.n_dof(),
+        levels: levels
+            .iter()
+            .map(|l| (l.name.clone(), l.freq_hz.len(), l.response_ids.clone()))
+            .collect(),
+        models: study
+            .models
+            .iter()
+            .map(|m| (m.name.clone(), m.levels.clone()))
+            .collect(),
+        lines_checked,
+    })
+}
+
+/// Run a study: identification, correlation, tables, figures, report and manifest in
+/// `study.output_dir` (or `opts.output_dir`), replaced atomically as a whole (module doc).
+pub fn run_study(
+    study: &Study,
+    opts: &RunOptions,
+    progress: &dyn Fn(Event),
+) -> Result<RunSummary, RunError> {
+    let t0 = Instant::now();
+    let mut timings: Vec<(String, f64)> = Vec::new();
+    let mut lap = |name: &str, t: &mut Instant| {
+        timings.push((name.to_string(), t.elapsed().as_secs_f64()));
+        *t = Instant::now();
+    };
+    let mut t = Instant::now();
+    let laws = model_laws(study)?;
+    progress(Event::Start {
+        step: "assembling the FE model".into(),
+        total: 0,
+    });
+    let built = build(study)?;
+    progress(Event::Finish);
+    lap("build model", &mut t);
+    let levels = load_levels(study, &built)?;
+    check_initial_values(study, &built, &levels, &laws)?;
+    lap("load and check data", &mut t);
+    progress(Event::Start {
+        step: "building the FRF engine".into(),
+        total: 0,
+    });
+    let (engine, engine_note) = build_engine(study, &built, &levels)?;
+    progress(Event::Finish);
+    lap("engine", &mut t);
+    let mut results = Vec::new();
+    for level in &levels {
+        let r = compute::analyse_level(study, &built, engine.as_ref(), level, &laws, progress)?;
+        results.push(r);
+        lap(&format!("analyses {}", level.name), &mut t);
+    }
+    let out_dir = opts
+        .output_dir
+        .clone()
+        .unwrap_or_else(|| study.output_dir.clone());
+    let figures = study.analyses.figures && !opts.no_figures;
+    let files = write::write_results(
+        study,
+        &out_dir,
+        &levels,
+        &results,
+        figures,
+        &timings,
+        &engine_note,
+        t0,
+        progress,
+    )?;
+    let models = results
+        .iter()
+        .flat_map(|r| {
+            r.global.iter().map(move |g| ModelSummary {
+                level: r.level.clone(),
+                model: g.result.model_name.clone(),
+                param_names: g.result.param_names.clone(),
+                initial: g.result.initial.clone(),
+                identified: g.result.params.clone(),
+                iterations: g.result.iterations,
+                stop_reason: g.result.stop_reason.to_string(),
+                frac: g.result.frac.clone(),
+            })
+        })
+        .collect();
+    Ok(RunSummary {
+        study: study.name.clone(),
+        output_dir: out_dir,
+        files,
+        models,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+/// Path helper: `<dir>.<suffix>` next to `dir`.
+pub(crate) fn sibling(dir: &Path, suffix: &str) -> PathBuf {
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "results".into());
+    dir.with_file_name(format!("{name}.{suffix}"))
+}

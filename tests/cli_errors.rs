@@ -1,0 +1,160 @@
+//! Bad study files give an error naming the file and key, exit code 2, and leave earlier
+//! results intact (the binary is run as a user would).
+
+mod runner_common;
+use runner_common::*;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn rfmlab(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_rfmlab"))
+        .args(args)
+        .env("CI", "1")
+        .output()
+        .expect("run rfmlab");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+struct Setup {
+    _dir: tempfile::TempDir,
+    root: PathBuf,
+    data: PathBuf,
+    out: PathBuf,
+}
+
+fn setup() -> Setup {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().to_path_buf();
+    let data = root.join("d.uff");
+    let law = rfmlab::material::model_from_name("model1", None).unwrap();
+    write_data(
+        &data,
+        "L1",
+        law.as_ref(),
+        &[7e6, 1.5e6],
+        &lines_hz(10.0, 100.0, 10.0),
+    );
+    let out = root.join("results");
+    Setup {
+        _dir: dir,
+        root,
+        data,
+        out,
+    }
+}
+
+const ANALYSES: &str = "[analyses]\nper_line = false\nsensitivity = false\nfigures = false\n";
+
+fn good(s: &Setup) -> String {
+    study_text(
+        "s",
+        &s.out,
+        &s.data,
+        (10.0, 100.0),
+        &[("model1", initial_of(1))],
+        ANALYSES,
+    )
+}
+
+/// Writes `text` as a study, runs `rfmlab run`, expects exit code 2 with the file and all
+/// `needles` in the message.
+fn expect_input_error(s: &Setup, name: &str, text: &str, needles: &[&str]) {
+    let file = write(&s.root.join(format!("{name}.toml")), text);
+    for cmd in ["run", "check"] {
+        let (code, _, err) = rfmlab(&["--quiet", cmd, file.to_str().unwrap()]);
+        assert_eq!(code, 2, "{name} ({cmd}): exit code {code}, stderr:\n{err}");
+        assert!(
+            err.contains(&format!("{name}.toml")),
+            "{name} ({cmd}): file not named:\n{err}"
+        );
+        for n in needles {
+            assert!(err.contains(n), "{name} ({cmd}): {n:?} not in:\n{err}");
+        }
+    }
+}
+
+fn snapshot(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut v: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .map(|p| {
+            (
+                p.file_name().unwrap().to_string_lossy().into_owned(),
+                std::fs::read(&p).unwrap(),
+            )
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn bad_study_files_exit_2_naming_file_and_key_and_keep_earlier_results() {
+    let s = setup();
+    // A good run first.
+    let file = write(&s.root.join("good.toml"), &good(&s));
+    let (code, _, err) = rfmlab(&["--quiet", "run", file.to_str().unwrap()]);
+    assert_eq!(code, 0, "good run failed:\n{err}");
+    let (code, out, err) = rfmlab(&["check", file.to_str().unwrap(), "--json"]);
+    assert_eq!(code, 0, "check failed:\n{err}");
+    assert!(out.contains("\"n_dof\""), "{out}");
+    let before = snapshot(&s.out);
+    assert!(before.iter().any(|(n, _)| n == "parameters.parquet"));
+    assert!(before.iter().any(|(n, _)| n == "manifest.json"));
+
+    let g = good(&s);
+    expect_input_error(
+        &s,
+        "unknown_key",
+        &g.replace("[solver]\n", "[solver]\nmax_iteration = 3\n"),
+        &["max_iteration"],
+    );
+    expect_input_error(
+        &s,
+        "missing_file",
+        &g.replace(
+            &s.data.display().to_string(),
+            &s.root.join("nope.uff").display().to_string(),
+        ),
+        &["nope.uff", "files"],
+    );
+    expect_input_error(
+        &s,
+        "band_outside",
+        &g.replace("band_hz = [10, 100]", "band_hz = [10, 600]"),
+        &["band"],
+    );
+    expect_input_error(
+        &s,
+        "missing_param",
+        &g.replace("h = 1.5e6\n", ""),
+        &["models[0].initial.h"],
+    );
+    expect_input_error(
+        &s,
+        "out_of_range",
+        &g.replace("E0 = 8e6", "E0 = -8e6"),
+        &["E0"],
+    );
+    // Admissible (positive) but absurd: E0 = 1e30 Pa makes Z numerically singular.
+    expect_input_error(
+        &s,
+        "singular",
+        &g.replace("E0 = 8e6", "E0 = 1e30"),
+        &["models[0].initial", "singular"],
+    );
+    // The results of the good run are untouched by the failed runs.
+    assert_eq!(snapshot(&s.out), before);
+    // No stray temporary folders either.
+    let stray: Vec<_> = std::fs::read_dir(&s.root)
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
+        .collect();
+    assert!(stray.is_empty());
+}

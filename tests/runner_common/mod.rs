@@ -1,0 +1,165 @@
+//! Shared helpers of tests/runner.rs and tests/cli_errors.rs: noiseless simulated data written
+//! as UFF58 and study files in a temporary folder.
+#![allow(dead_code)]
+
+use rfmlab::common::C64;
+use rfmlab::data::{Channel, FrfLevel, FrfSet, Quantity};
+use rfmlab::frf::{FrfEngine, FullModel, FullParams};
+use rfmlab::material::ConstitutiveModel;
+use std::path::{Path, PathBuf};
+
+/// The paper's structure on a 10 mm mesh (fast; unconverged like the paper's Mesh 1).
+pub const STRUCTURE: &str = r#"
+[structure]
+name = "paper bonded joint, 10 mm mesh"
+source = "mesher"
+excitation = 2
+[structure.beam]
+length = 0.300
+thickness = 0.010
+width = 0.020
+[structure.beam.material]
+E = 198e9
+nu = 0.3
+rho = 7800.0
+[structure.adhesive]
+length = 0.050
+thickness = 0.010
+x_start = 0.0
+nu = 0.44
+rho = 1160.0
+[structure.mesh]
+element_size = 0.010
+integration = "full"
+point_mapping = "interpolate"
+[[structure.points]]
+id = 1
+position = [0.100, 0.010, 0.010]
+direction = "+y"
+[[structure.points]]
+id = 2
+position = [0.150, 0.010, 0.010]
+direction = "+y"
+[[structure.points]]
+id = 3
+position = [0.200, 0.010, 0.010]
+direction = "+y"
+[[structure.points]]
+id = 4
+position = [0.250, 0.010, 0.010]
+direction = "+y"
+"#;
+
+/// Frequency lines of the test data (Hz).
+pub fn lines_hz(lo: f64, hi: f64, step: f64) -> Vec<f64> {
+    let n = ((hi - lo) / step).round() as usize;
+    (0..=n).map(|k| lo + step * k as f64).collect()
+}
+
+/// Noiseless accelerance H'_i2 of points 1-4 at the truth of `law` (full model), written as
+/// UFF58 level `level` to `path`.
+pub fn write_data(
+    path: &Path,
+    level: &str,
+    law: &dyn ConstitutiveModel,
+    truth: &[f64],
+    freq_hz: &[f64],
+) {
+    let study = rfmlab::study::parse_str(
+        &format!("[study]\nname = \"gen\"\n{STRUCTURE}"),
+        Path::new("gen.toml"),
+    )
+    .expect("structure parses");
+    let built =
+        rfmlab::study::build::build_model(&study.structure, "gen.toml").expect("model builds");
+    let engine =
+        FullModel::new(&built.model, &[built.excitation], FullParams::default()).expect("engine");
+    let omega: Vec<f64> = freq_hz
+        .iter()
+        .map(|f| 2.0 * std::f64::consts::PI * f)
+        .collect();
+    let moduli: Vec<C64> = omega.iter().map(|&w| law.modulus(truth, w)).collect();
+    let sw = engine.sweep(&omega, &moduli, false).expect("sweep");
+    let mut channels = Vec::new();
+    for (k, p) in built.model.points.iter().enumerate() {
+        let values: Vec<C64> = omega
+            .iter()
+            .enumerate()
+            .map(|(l, &w)| -w * w * sw.h[sw.idx(l, k, 0)])
+            .collect();
+        channels.push(Channel {
+            response_id: p.id,
+            response_dir: p.direction,
+            reference_id: 2,
+            reference_dir: p.direction,
+            values,
+            coherence: None,
+            source: None,
+        });
+    }
+    let set = FrfSet {
+        levels: vec![FrfLevel {
+            name: level.to_string(),
+            force_rms_n: None,
+            n_averages: None,
+            quantity: Quantity::Accelerance,
+            freq_hz: freq_hz.to_vec(),
+            channels,
+        }],
+    };
+    rfmlab::data::frf_set_to_uff(&set, path, false).expect("write UFF");
+}
+
+/// A study file text: structure + one level + models (name, [(param, initial)]) + settings.
+pub fn study_text(
+    name: &str,
+    out: &Path,
+    data: &Path,
+    band: (f64, f64),
+    models: &[(&str, Vec<(String, f64)>)],
+    analyses: &str,
+) -> String {
+    study_text_engine(name, out, data, band, models, analyses, "full")
+}
+
+/// [`study_text`] with the engine ("full" or "rom").
+pub fn study_text_engine(
+    name: &str,
+    out: &Path,
+    data: &Path,
+    band: (f64, f64),
+    models: &[(&str, Vec<(String, f64)>)],
+    analyses: &str,
+    engine: &str,
+) -> String {
+    let mut s = format!(
+        "[study]\nname = \"{name}\"\noutput_dir = \"{}\"\n{STRUCTURE}\n[measurements]\nband_hz = [{}, {}]\n[[measurements.levels]]\nname = \"L1\"\nfiles = [\"{}\"]\n",
+        out.display(),
+        band.0,
+        band.1,
+        data.display()
+    );
+    for (m, init) in models {
+        s.push_str(&format!("[[models]]\nname = \"{m}\"\n[models.initial]\n"));
+        for (p, v) in init {
+            s.push_str(&format!("{p} = {v:e}\n"));
+        }
+    }
+    s.push_str(&format!(
+        "[solver]\nengine = \"{engine}\"\nmax_iterations = 60\ntolerance = 1e-9\n"
+    ));
+    s.push_str(analyses);
+    s
+}
+
+/// Initial values of Table 4's model k by parameter name.
+pub fn initial_of(k: usize) -> Vec<(String, f64)> {
+    let law = rfmlab::material::model_from_name(&format!("model{k}"), None).unwrap();
+    let (_, init) = rfmlab::material::paper_table4(k);
+    law.param_names().into_iter().zip(init).collect()
+}
+
+pub fn write(path: &Path, text: &str) -> PathBuf {
+    std::fs::write(path, text).expect("write study");
+    path.to_path_buf()
+}
