@@ -317,6 +317,16 @@ fn joint(
             "-",
         )?,
     };
+    // The adhesive's fixed lower face is the structure's only support: without adhesive the
+    // model is unconstrained (free-free), so say so rather than only "must be positive".
+    for (key, v) in [("structure.adhesive.length", a.length), ("structure.adhesive.thickness", a.thickness)] {
+        if v == 0.0 {
+            return Err(ctx.err(
+                key,
+                "is 0: the model would be unconstrained (the adhesive's fixed lower face is its only support); give the adhesive a positive size in m",
+            ));
+        }
+    }
     let al = ctx.positive("structure.adhesive.length", a.length, "m")?;
     let at = ctx.positive("structure.adhesive.thickness", a.thickness, "m")?;
     let ax = ctx.non_negative("structure.adhesive.x_start", a.x_start.unwrap_or(0.0), "m")?;
