@@ -35,20 +35,44 @@ fn regenerating_the_default_data_reproduces_the_committed_files() {
         assert_eq!(la.freq_hz.len(), 500, "{level}: 1-500 Hz at 1 Hz");
         assert_eq!(la.channels.len(), 4, "{level}: points 1-4");
         for (ca, cb) in la.channels.iter().zip(&lb.channels) {
-            assert_eq!((ca.response_id, ca.reference_id), (cb.response_id, cb.reference_id));
+            assert_eq!(
+                (ca.response_id, ca.reference_id),
+                (cb.response_id, cb.reference_id)
+            );
             let peak = ca.values.iter().map(|v| v.norm()).fold(0.0, f64::max);
-            let worst = ca.values.iter().zip(&cb.values).map(|(x, y)| (x - y).norm()).fold(0.0, f64::max);
-            assert!(worst <= 1e-8 * peak, "{level} point {}: max difference {worst:e} vs peak {peak:e}", ca.response_id);
-            let (ga, gb) = (ca.coherence.as_ref().unwrap(), cb.coherence.as_ref().unwrap());
-            let wc = ga.iter().zip(gb).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
-            assert!(wc <= 1e-8, "{level} point {}: coherence differs by {wc:e}", ca.response_id);
+            let worst = ca
+                .values
+                .iter()
+                .zip(&cb.values)
+                .map(|(x, y)| (x - y).norm())
+                .fold(0.0, f64::max);
+            assert!(
+                worst <= 1e-8 * peak,
+                "{level} point {}: max difference {worst:e} vs peak {peak:e}",
+                ca.response_id
+            );
+            let (ga, gb) = (
+                ca.coherence.as_ref().unwrap(),
+                cb.coherence.as_ref().unwrap(),
+            );
+            let wc = ga
+                .iter()
+                .zip(gb)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                wc <= 1e-8,
+                "{level} point {}: coherence differs by {wc:e}",
+                ca.response_id
+            );
         }
     }
 }
 
 #[test]
 fn default_data_is_labelled_as_simulated_and_states_its_truth() {
-    let text = std::fs::read_to_string(root().join("studies/data/paper_virtual.truth.json")).unwrap();
+    let text =
+        std::fs::read_to_string(root().join("studies/data/paper_virtual.truth.json")).unwrap();
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert_eq!(v["simulated"], serde_json::json!(true));
     let levels = v["levels"].as_array().unwrap();
@@ -56,5 +80,8 @@ fn default_data_is_labelled_as_simulated_and_states_its_truth() {
     assert_eq!(levels[0]["law"], "model4");
     assert!((levels[0]["params"]["E0"].as_f64().unwrap() - 6.67e6).abs() < 1.0);
     let uff = std::fs::read_to_string(root().join("studies/data/paper_virtual_L1.uff")).unwrap();
-    assert!(uff.to_ascii_uppercase().contains("SIMULATED"), "the UFF id lines must say the data are simulated");
+    assert!(
+        uff.to_ascii_uppercase().contains("SIMULATED"),
+        "the UFF id lines must say the data are simulated"
+    );
 }

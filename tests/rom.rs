@@ -181,15 +181,15 @@ fn pencil_sweep_agrees_with_reduced_lu_to_1e_10_and_derivatives_check() {
     let e = C64::new(3e6, 1e6);
     let idx = [5usize, 150, 390];
     let om: Vec<f64> = idx.iter().map(|&i| omega[i]).collect();
-    let base = rom.lu_sweep(&om, &vec![e; 3], true).unwrap();
+    let base = rom.lu_sweep(&om, &[e; 3], true).unwrap();
     let step = 1e-4 * e.norm();
-    let hp = rom.lu_sweep(&om, &vec![e + step; 3], false).unwrap();
-    let hm = rom.lu_sweep(&om, &vec![e - step; 3], false).unwrap();
+    let hp = rom.lu_sweep(&om, &[e + step; 3], false).unwrap();
+    let hm = rom.lu_sweep(&om, &[e - step; 3], false).unwrap();
     let hpi = rom
-        .lu_sweep(&om, &vec![e + C64::new(0.0, step); 3], false)
+        .lu_sweep(&om, &[e + C64::new(0.0, step); 3], false)
         .unwrap();
     let hmi = rom
-        .lu_sweep(&om, &vec![e - C64::new(0.0, step); 3], false)
+        .lu_sweep(&om, &[e - C64::new(0.0, step); 3], false)
         .unwrap();
     for q in 0..12 {
         let fd = (hp.h[q] - hm.h[q]) / (2.0 * step);

@@ -129,7 +129,10 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         let mut datasets = rfmlab::data::uff_frf::frf_set_datasets(&one);
         for d in &mut datasets {
             // ID line 2 says what these data are, so no reader mistakes them for a measurement.
-            d.ids[1] = format!("SIMULATED by rfmlab simulate ({}, seed {})", ex.name, ex.seed);
+            d.ids[1] = format!(
+                "SIMULATED by rfmlab simulate ({}, seed {})",
+                ex.name, ex.seed
+            );
         }
         rfmlab::data::uff58::write_uff(&p, &datasets, ex.binary)?;
         written.push(p);

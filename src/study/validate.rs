@@ -319,7 +319,10 @@ fn joint(
     };
     // The adhesive's fixed lower face is the structure's only support: without adhesive the
     // model is unconstrained (free-free), so say so rather than only "must be positive".
-    for (key, v) in [("structure.adhesive.length", a.length), ("structure.adhesive.thickness", a.thickness)] {
+    for (key, v) in [
+        ("structure.adhesive.length", a.length),
+        ("structure.adhesive.thickness", a.thickness),
+    ] {
         if v == 0.0 {
             return Err(ctx.err(
                 key,
