@@ -6,8 +6,10 @@ C_b.mtx / D_b.mtx, dofmap.csv), forms Z(w) = -w^2 M + K_b + j w C_b + j D_b + E*
 each line and solves Z x = b_in with scipy.sparse.linalg.splu; reads H at the observation
 DOFs. Prints JSON with the median wall time of a full sweep (and per line).
 
-dofmap.csv: the observation DOFs. Accepted columns (header required): a column named
-`dof` (0-based free-DOF index) or `dof1` (1-based), optional `weight`, optional `point`.
+dofmap.csv: the observation DOFs as written by `rfmlab export-mm` (src/fe/matrix_market.rs):
+columns id,direction,dof,weight with a 1-based free-DOF index `dof` (one row per DOF of a
+point; rows with the same id and direction belong to one point). A column `dof0` (0-based)
+is also accepted.
 Without such a file, --obs gives 0-based DOF indices directly.
 
 Usage: scipy_sweep.py FOLDER [--lines 500] [--repeats 3] [--input 1] [--obs 12,40,...]
@@ -46,13 +48,15 @@ def observation(folder, n, obs_arg):
     with open(path) as f:
         for row in csv.DictReader(f):
             if "dof" in row:
-                d = int(row["dof"])
-            elif "dof1" in row:
-                d = int(row["dof1"]) - 1
+                d = int(row["dof"]) - 1
+            elif "dof0" in row:
+                d = int(row["dof0"])
             else:
-                sys.exit("dofmap.csv needs a 'dof' (0-based) or 'dof1' (1-based) column")
+                sys.exit("dofmap.csv needs a 'dof' (1-based) or 'dof0' (0-based) column")
+            if not 0 <= d < n:
+                sys.exit(f"dofmap.csv: DOF {d + 1} outside 1..{n}")
             w = float(row.get("weight", 1.0) or 1.0)
-            key = row.get("point", str(len(pts)))
+            key = (row.get("id", str(len(pts))), row.get("direction", ""))
             pts.setdefault(key, []).append((d, w))
     if not pts:
         sys.exit("dofmap.csv lists no DOFs")

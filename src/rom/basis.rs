@@ -23,8 +23,12 @@ use faer::{Accum, Mat, Par};
 struct KrylovState {
     e_ref: f64,
     depth: usize,
-    /// Last accepted block Q_k (n x k); empty when the sequence is exhausted.
-    last: Mat<f64>,
+    /// This sequence's own M-orthonormal blocks Q_0..Q_k (n x sum k), kept independently of
+    /// the global deflation so that the Krylov recurrence keeps converging to higher modes
+    /// even when its new directions are already (nearly) in V.
+    q: Mat<f64>,
+    /// Columns of the last block Q_k inside `q`; empty when the sequence is exhausted.
+    last: std::ops::Range<usize>,
 }
 
 /// Incrementally built M-orthonormal basis V (n x n_r) with MV = M V.
@@ -83,6 +87,59 @@ impl<'a> BasisBuilder<'a> {
         let mut y = vec![0.0; x.len()];
         spmv_add(&self.pat.model.m, x, 1.0, &mut y);
         y
+    }
+
+    /// M-orthonormalise the columns of `x` against the M-orthonormal columns of `q` and each
+    /// other (classical Gram-Schmidt twice against q, modified twice within); columns whose
+    /// M-norm falls below `tol` times their norm before are dropped.
+    fn orthonormalise(&self, q: &Mat<f64>, mut x: Mat<f64>, tol: f64) -> Mat<f64> {
+        let n = x.nrows();
+        let k = x.ncols();
+        let r = q.ncols();
+        let mnorm = |c: &[f64]| {
+            let mc = self.m_times(c);
+            (c.iter().zip(&mc).map(|(a, b)| a * b).sum::<f64>().max(0.0).sqrt(), mc)
+        };
+        let norm0: Vec<f64> = (0..k)
+            .map(|j| mnorm(&x.col(j).iter().copied().collect::<Vec<_>>()).0)
+            .collect();
+        let mut kept: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
+        let qcols: Vec<(Vec<f64>, Vec<f64>)> = (0..r)
+            .map(|j| {
+                let c: Vec<f64> = q.col(j).iter().copied().collect();
+                let mc = self.m_times(&c);
+                (c, mc)
+            })
+            .collect();
+        for j in 0..k {
+            if !(norm0[j] > 0.0 && norm0[j].is_finite()) {
+                continue;
+            }
+            let mut col: Vec<f64> = x.col(j).iter().copied().collect();
+            for _ in 0..2 {
+                for (qq, mq) in qcols.iter().chain(kept.iter()) {
+                    let c: f64 = mq.iter().zip(&col).map(|(a, b)| a * b).sum();
+                    for (ci, qi) in col.iter_mut().zip(qq) {
+                        *ci -= c * qi;
+                    }
+                }
+            }
+            let (nrm, mcol) = mnorm(&col);
+            if nrm > tol * norm0[j] {
+                let inv = 1.0 / nrm;
+                kept.push((
+                    col.iter().map(|v| v * inv).collect(),
+                    mcol.iter().map(|v| v * inv).collect(),
+                ));
+            }
+        }
+        x = Mat::zeros(n, kept.len());
+        for (j, (c, _)) in kept.iter().enumerate() {
+            for i in 0..n {
+                x[(i, j)] = c[i];
+            }
+        }
+        x
     }
 
     /// M-orthogonalise the columns of `x` against V and each other, deflate, append the kept
@@ -178,7 +235,8 @@ impl<'a> BasisBuilder<'a> {
                 self.states.push(KrylovState {
                     e_ref,
                     depth: 0,
-                    last: Mat::zeros(0, 0),
+                    q: Mat::zeros(self.pat.model.n_dof(), 0),
+                    last: 0..0,
                 });
                 self.states.len() - 1
             }
@@ -186,7 +244,7 @@ impl<'a> BasisBuilder<'a> {
         if self.states[idx].depth >= depth {
             return Ok(());
         }
-        if self.states[idx].depth > 0 && self.states[idx].last.ncols() == 0 {
+        if self.states[idx].depth > 0 && self.states[idx].last.is_empty() {
             return Ok(()); // exhausted
         }
         let chol = self.chol.clone();
@@ -196,24 +254,29 @@ impl<'a> BasisBuilder<'a> {
             let mut x = if st.depth == 0 {
                 self.b_all.clone()
             } else {
-                let q = &st.last;
-                let mut mq = Mat::<f64>::zeros(q.nrows(), q.ncols());
-                for j in 0..q.ncols() {
-                    let col: Vec<f64> = q.col(j).iter().copied().collect();
+                let mut mq = Mat::<f64>::zeros(st.q.nrows(), st.last.len());
+                for (jj, j) in st.last.clone().enumerate() {
+                    let col: Vec<f64> = st.q.col(j).iter().copied().collect();
                     let y = self.m_times(&col);
                     for (i, v) in y.into_iter().enumerate() {
-                        mq[(i, j)] = v;
+                        mq[(i, jj)] = v;
                     }
                 }
                 mq
             };
             solver.solve_in_place(x.as_mut());
-            let kept = self.absorb(x);
+            // the sequence's own block: M-orthonormal against its previous blocks, relative
+            // deflation at rounding level only (1e-13)
+            let own = self.orthonormalise(&self.states[idx].q, x.clone(), 1e-13);
+            self.absorb(x);
             let st = &mut self.states[idx];
             st.depth += 1;
-            let exhausted = kept.ncols() == 0;
-            st.last = kept;
-            if exhausted {
+            let r0 = st.q.ncols();
+            let k = own.ncols();
+            let n = st.q.nrows();
+            st.q.resize_with(n, r0 + k, |i, j| own[(i, j - r0)]);
+            st.last = r0..r0 + k;
+            if k == 0 {
                 break;
             }
         }
