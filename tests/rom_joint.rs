@@ -31,7 +31,12 @@ fn certify_report(element_size_m: f64) {
     let model = joint(element_size_m);
     let t_asm = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let envf = |k: &str, d: f64| std::env::var(k).ok().and_then(|v| v.parse().ok()).unwrap_or(d);
+    let envf = |k: &str, d: f64| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
     let d = RomParams::default();
     let params = RomParams {
         allow_uncertified: true,

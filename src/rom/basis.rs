@@ -98,7 +98,15 @@ impl<'a> BasisBuilder<'a> {
         let r = q.ncols();
         let mnorm = |c: &[f64]| {
             let mc = self.m_times(c);
-            (c.iter().zip(&mc).map(|(a, b)| a * b).sum::<f64>().max(0.0).sqrt(), mc)
+            (
+                c.iter()
+                    .zip(&mc)
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+                    .max(0.0)
+                    .sqrt(),
+                mc,
+            )
         };
         let norm0: Vec<f64> = (0..k)
             .map(|j| mnorm(&x.col(j).iter().copied().collect::<Vec<_>>()).0)
