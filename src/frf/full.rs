@@ -450,13 +450,7 @@ impl FrfEngine for FullModel {
         with_derivatives: bool,
         out: &mut Sweep,
     ) -> Result<(), FrfError> {
-        if modulus_pa.len() != omega_rad_s.len() {
-            return Err(FrfError::Length {
-                what: "modulus_pa (one complex modulus per frequency line)",
-                expected: omega_rad_s.len(),
-                got: modulus_pa.len(),
-            });
-        }
+        crate::frf::check_line_lengths(omega_rad_s, modulus_pa)?;
         let n_lines = omega_rad_s.len();
         let n_out = self.obs.len();
         let n_in = self.inputs.len();

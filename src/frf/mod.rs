@@ -71,6 +71,18 @@ pub enum FrfError {
     Other(String),
 }
 
+/// Check that a sweep got one modulus per frequency line (every engine's first check).
+pub fn check_line_lengths(omega_rad_s: &[f64], modulus_pa: &[C64]) -> Result<(), FrfError> {
+    if modulus_pa.len() != omega_rad_s.len() {
+        return Err(FrfError::Length {
+            what: "modulus_pa (one complex modulus per frequency line)",
+            expected: omega_rad_s.len(),
+            got: modulus_pa.len(),
+        });
+    }
+    Ok(())
+}
+
 /// One interface for full and reduced FRF evaluation.
 pub trait FrfEngine: Send + Sync {
     /// Number of observation points (outputs).

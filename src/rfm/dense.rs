@@ -192,13 +192,7 @@ impl FrfEngine for DenseEngine {
         with_derivatives: bool,
         out: &mut Sweep,
     ) -> Result<(), FrfError> {
-        if modulus_pa.len() != omega_rad_s.len() {
-            return Err(FrfError::Length {
-                what: "modulus_pa (one per frequency line)",
-                expected: omega_rad_s.len(),
-                got: modulus_pa.len(),
-            });
-        }
+        crate::frf::check_line_lengths(omega_rad_s, modulus_pa)?;
         let n = self.n_dof();
         let n_out = self.points.len();
         let n_in = self.inputs.len();
