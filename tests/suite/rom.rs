@@ -2,12 +2,11 @@
 //! 300 mm steel, resting on a layer of adhesive springs with their own mass under the first
 //! 50 mm, fixed below), with a dense complex reference solve of the full model.
 
-mod rom_model;
+use crate::rom_model::beam_model;
 use rfmlab::common::C64;
 use rfmlab::fe::model::{SpMat, StructuralModel};
 use rfmlab::frf::FrfEngine;
 use rfmlab::rom::{build_rom, ModulusRange, RomError, RomParams};
-use rom_model::beam_model;
 use std::f64::consts::PI;
 
 fn dense(a: &SpMat) -> Vec<Vec<f64>> {
@@ -285,7 +284,7 @@ fn uncertified_rom_is_refused_unless_asked_and_bad_input_is_reported() {
 }
 
 /// Timing in the test profile (opt-level 3, debug assertions on); the criterion bench in
-/// benches/rom.rs is the reference. Run with `cargo test --test rom -- --ignored --nocapture`.
+/// benches/rom.rs is the reference. Run with `cargo test --test suite rom:: -- --ignored --nocapture`.
 #[test]
 #[ignore]
 fn timing_pencil_sweep_4x500() {

@@ -3,8 +3,7 @@
 //! values) to 1e-6 relative; tables read back with their units; the report has the paper's
 //! table layouts; IEM and Model 1 bands on Model 4 data.
 
-mod runner_common;
-use runner_common::*;
+use crate::runner_common::*;
 
 use rfmlab::output::Table;
 use rfmlab::runner::{run_study, RunOptions};

@@ -1,8 +1,7 @@
 //! Bad study files give an error naming the file and key, exit code 2, and leave earlier
 //! results intact (the binary is run as a user would).
 
-mod runner_common;
-use runner_common::*;
+use crate::runner_common::*;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -1,8 +1,7 @@
 //! Write -> read round trips of all eight record-12 layouts (ASCII and 58b), byte-exact
 //! agreement with pyuff's ASCII output, and interop both ways with pyuff.
 
-mod common_data;
-use common_data::*;
+use crate::common_data::*;
 
 use rfmlab::common::C64;
 use rfmlab::data::uff58::{

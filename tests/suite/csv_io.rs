@@ -1,7 +1,6 @@
 //! CSV read/write: exact round trip, the bundled wide-layout files, errors with line numbers.
 
-mod common_data;
-use common_data::*;
+use crate::common_data::*;
 
 use rfmlab::common::Direction;
 use rfmlab::data::csv::{parse_csv, read_csv, write_csv, CsvOptions};

@@ -65,14 +65,14 @@ fn certify_report(element_size_m: f64) {
 }
 
 /// 5 mm mesh (10248 DOFs), E' in [0.5, 50] MPa, E'' in [0.01, 20] MPa, 1-500 Hz, 1e-6.
-/// `cargo test --test rom_joint -- --ignored --nocapture certify_5mm`
+/// `cargo test --test suite rom_joint:: -- --ignored --nocapture certify_5mm`
 #[test]
 #[ignore]
 fn certify_5mm() {
     certify_report(0.005);
 }
 
-/// 2.5 mm mesh (67224 DOFs). Release: `cargo test --release --test rom_joint -- --ignored --nocapture certify_2p5mm`
+/// 2.5 mm mesh (67224 DOFs). Release: `cargo test --release --test suite rom_joint:: -- --ignored --nocapture certify_2p5mm`
 #[test]
 #[ignore]
 fn certify_2p5mm() {

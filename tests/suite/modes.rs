@@ -191,7 +191,7 @@ fn bad_inputs_are_errors_not_panics() {
     .is_err());
 }
 
-/// Timing on a ~50k-DOF lattice (run with `cargo test --test modes -- --ignored --nocapture`).
+/// Timing on a ~50k-DOF lattice (run with `cargo test --test suite modes:: -- --ignored --nocapture`).
 #[test]
 #[ignore]
 fn timing_large_lattice() {

@@ -270,7 +270,7 @@ fn bad_inputs_are_errors() {
 }
 
 /// Timing of the bench's sweep (4 FRFs x 500 lines, 9,600 DOFs) in the test profile
-/// (run with `cargo test --test frf_full -- --ignored --nocapture`).
+/// (run with `cargo test --test suite frf_full:: -- --ignored --nocapture`).
 #[test]
 #[ignore]
 fn timing_sweep_9600_dofs() {

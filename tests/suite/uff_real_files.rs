@@ -6,8 +6,7 @@
 //! no functions. `pyuff_testdata/dataset_milestone_in_header.uff` is an error on purpose: it
 //! is truncated (num_pts 2 508 876, 42 values present).
 
-mod common_data;
-use common_data::*;
+use crate::common_data::*;
 
 use rfmlab::common::Direction;
 use rfmlab::data::uff58::{read_uff, Ordinate, Precision, Uff58Dataset};

@@ -1,9 +1,8 @@
 //! Fuzz the UFF reader with mutated real files (byte flips, truncations, inserted garbage):
 //! parsing never panics. Cases: RFMLAB_FUZZ_CASES (default 2000), e.g.
-//! `RFMLAB_FUZZ_CASES=200000 cargo test --release --test uff_fuzz`.
+//! `RFMLAB_FUZZ_CASES=200000 cargo test --release --test suite uff_fuzz::`.
 
-mod common_data;
-use common_data::*;
+use crate::common_data::*;
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};

@@ -1,0 +1,35 @@
+//! The integration suite: one test binary (one link of the library and its dependencies instead of
+//! one per file, which kept CI within its disk). Filter by module: `cargo test --test suite rom_joint::`.
+
+// Shared fixtures.
+mod common_data;
+mod rom_model;
+mod runner_common;
+
+mod circle_fit;
+mod cli_errors;
+mod cli_structure_errors;
+mod correlation;
+mod csv_io;
+mod data_checks;
+mod default_data;
+mod experiment;
+mod fe_cantilever;
+mod fe_element;
+mod fe_joint;
+mod frf_full;
+mod iem;
+mod material;
+mod matrix_market;
+mod modes;
+mod output;
+mod paper_joint;
+mod plot;
+mod rfm;
+mod rfm_gauss_newton;
+mod rom;
+mod rom_joint;
+mod runner;
+mod uff_fuzz;
+mod uff_real_files;
+mod uff_roundtrip;
