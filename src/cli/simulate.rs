@@ -71,10 +71,10 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
     let mut truths = Vec::new();
     for (k, lv) in ex.levels.iter().enumerate() {
         let law = rfmlab::material::model_from_name(&lv.law, lv.branches)?;
+        let modulus = |w: f64| law.modulus(&lv.params, w);
         let plant = EnginePlant {
             engine: engine.as_ref(),
-            law: law.as_ref(),
-            params: lv.params.clone(),
+            modulus: &modulus,
             input_col: 0,
             drive_output: built.excitation,
         };

@@ -210,6 +210,36 @@ pub(crate) fn band_model_fine(
     BandModel::build(plant, chain, n)
 }
 
+/// The H1 estimator's systematic (leakage) error for `plant`, as the identification's model of
+/// its own measurement chain: `[channel][line]` of `K_i(f_k) - H_i(f_k)` on `chain.lines_hz`,
+/// the window-kernel average `int H S_F |W|^2 / int S_F |W|^2` of the exact accelerance minus
+/// the accelerance itself ([`estimator::BandModel::expected`]). The force spectrum is flat over
+/// `chain.band_hz`, coloured by `chain.shaker` when given. Noise, gains and delays are not part
+/// of it (they are random or calibration errors, not leakage).
+pub fn leakage_bias(
+    plant: &dyn Plant,
+    chain: &ChainParams,
+) -> Result<Vec<Vec<C64>>, ExperimentError> {
+    let layout = chain.layout(plant.n_channels())?;
+    let band = band_model_fine(plant, chain)?;
+    let exact = plant_eval(plant, &chain.lines_hz)?;
+    let df = 1.0 / chain.block_s;
+    let mut out: Vec<Vec<C64>> = vec![Vec::with_capacity(chain.lines_hz.len()); exact.len()];
+    for (li, &k) in layout.line_bins.iter().enumerate() {
+        let (_, kernel) = band.expected(
+            k as f64 * df,
+            chain.window,
+            layout.n_block,
+            chain.block_s,
+            chain.kernel.half_width_hz,
+        );
+        for (i, o) in out.iter_mut().enumerate() {
+            o.push(kernel[i] - exact[i][li]);
+        }
+    }
+    Ok(out)
+}
+
 /// Simulate one excitation level of the measurement chain on `plant`.
 ///
 /// Returns H1 and coherence per channel on `chain.lines_hz` plus the truth record.

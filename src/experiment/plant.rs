@@ -1,18 +1,17 @@
-//! The FE structure as the rig sees it: a [`Plant`] from any [`FrfEngine`] and a
-//! constitutive law, so `rfmlab simulate` can drive the virtual experiment with the full model
-//! or the certified ROM.
+//! The FE structure as the rig sees it: a [`Plant`] from any [`FrfEngine`] and an adhesive
+//! modulus curve E*(w), so `rfmlab simulate` can drive the virtual experiment with the full
+//! model or the certified ROM, and the identification can model its own measurement chain.
 
 use super::{ExperimentError, Plant};
 use crate::common::C64;
 use crate::frf::FrfEngine;
-use crate::material::ConstitutiveModel;
 
 /// Accelerance of every engine output for a unit force at one engine input, with the adhesive
-/// modulus E*(w) of a constitutive law.
+/// modulus E*(w) (Pa, w in rad/s) given as a curve: a constitutive law at fixed parameters,
+/// `|w| law.modulus(&p, w)`, or a constant.
 pub struct EnginePlant<'a> {
     pub engine: &'a dyn FrfEngine,
-    pub law: &'a dyn ConstitutiveModel,
-    pub params: Vec<f64>,
+    pub modulus: &'a (dyn Fn(f64) -> C64 + Sync),
     /// Column of the engine's inputs that is the drive point.
     pub input_col: usize,
     /// Output index of the drive point.
@@ -31,10 +30,7 @@ impl Plant for EnginePlant<'_> {
             .iter()
             .map(|f| 2.0 * std::f64::consts::PI * f)
             .collect();
-        let modulus: Vec<C64> = omega
-            .iter()
-            .map(|&w| self.law.modulus(&self.params, w))
-            .collect();
+        let modulus: Vec<C64> = omega.iter().map(|&w| (self.modulus)(w)).collect();
         let s = self
             .engine
             .sweep(&omega, &modulus, false)

@@ -13,6 +13,18 @@ pub enum Window {
     Rectangular,
 }
 
+impl std::str::FromStr for Window {
+    type Err = String;
+    /// `"hann"` or `"rectangular"`; the error says which names exist.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "hann" => Ok(Window::Hann),
+            "rectangular" => Ok(Window::Rectangular),
+            o => Err(format!("\"{o}\": use \"hann\" or \"rectangular\"")),
+        }
+    }
+}
+
 /// How the chain is simulated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Mode {

@@ -1,6 +1,7 @@
 //! The analyses of one level (no I/O): per-line RFM, Model 1 over bands, circle fit + IEM,
 //! global RFM per model, correlation and sensitivity.
 
+use super::leakage::{fixed_point, Leakage};
 use super::{Event, LevelData, RunError};
 use crate::common::{C64, J};
 use crate::frf::FrfEngine;
@@ -20,6 +21,8 @@ pub struct BandConstantResult {
     pub center_hz: f64,
     pub width_hz: f64,
     pub result: BandResult,
+    /// Leakage-corrected passes (0 without `[measurements.estimator]`).
+    pub leakage_passes: usize,
 }
 
 /// Circle fit (Table 2) and IEM (Table 3) around one resonance.
@@ -32,14 +35,20 @@ pub struct IemBandResult {
     pub circle: CircleFitResult,
     /// The IEM result, or why it failed (the circle fit is kept either way).
     pub iem: Result<IemResult, String>,
+    /// Leakage-corrected passes (0 without `[measurements.estimator]`); the circle fit is then
+    /// of the corrected data.
+    pub leakage_passes: usize,
 }
 
 /// One global RFM run with the FRFs and correlation before and after.
 #[derive(Clone, Debug)]
 pub struct GlobalResult {
     pub result: RfmResult,
-    /// Analytical accelerance at the initial and updated parameters, `[line][k]` flattened
-    /// like [`MeasuredColumn::accelerance`].
+    /// Leakage-corrected passes (0 without `[measurements.estimator]`).
+    pub leakage_passes: usize,
+    /// Predicted measurement at the initial and updated parameters, `[line][k]` flattened
+    /// like [`MeasuredColumn::accelerance`]: the analytical accelerance, plus the H1
+    /// estimator's leakage bias when the study states its estimator.
     pub initial_frf: Vec<C64>,
     pub updated_frf: Vec<C64>,
     /// E*(w) at the initial parameters (Pa), one per line.
@@ -69,6 +78,8 @@ pub struct SensitivityCurves {
 pub struct LevelResults {
     pub level: String,
     pub per_line: Option<Vec<PerLineEstimate>>,
+    /// The model whose leakage bias corrected the per-line data, if any.
+    pub per_line_leakage_from: Option<String>,
     pub band_constant: Vec<BandConstantResult>,
     pub iem: Vec<IemBandResult>,
     pub global: Vec<GlobalResult>,
@@ -165,19 +176,20 @@ pub fn analyse_level(
         .map(|m| C64::new(m.initial[0], m.initial[1]))
         .unwrap_or(DEFAULT_E0);
 
-    // Per-line RFM (Fig. 13 / 18).
-    let per_line = if study.analyses.per_line {
-        progress(Event::Start {
-            step: format!("{lname}: per-line RFM"),
-            total: 0,
+    let leak = study
+        .measurements
+        .as_ref()
+        .and_then(|m| m.estimator.as_ref())
+        .map(|estimator| Leakage {
+            estimator,
+            engine,
+            data_band_hz: (
+                level.freq_hz.first().copied().unwrap_or(0.0),
+                level.freq_hz.last().copied().unwrap_or(0.0),
+            ),
         });
-        let r = crate::rfm::rfm_per_line(engine, col, &e_start, &params)
-            .map_err(|e| analysis(format!("per-line RFM at level {lname}"), e))?;
-        progress(Event::Finish);
-        Some(r)
-    } else {
-        None
-    };
+    let leak = leak.as_ref();
+    let constant = |p: &[f64], _w: f64| C64::new(p[0], p[1]);
 
     // Model 1 over bands (case study 1).
     let mut band_constant = Vec::new();
@@ -186,20 +198,27 @@ pub fn analyse_level(
             b.center_hz - b.width_hz / 2.0,
             b.center_hz + b.width_hz / 2.0,
         );
-        let r =
-            crate::rfm::rfm_band_constant(engine, col, band, model1_e0, &params).map_err(|e| {
-                analysis(
-                    format!(
-                        "Model 1 RFM over {:.1}..{:.1} Hz at level {lname}",
-                        band.0, band.1
-                    ),
-                    e,
-                )
-            })?;
+        let sub = col.restrict_to_band(band.0, band.1);
+        let name = format!(
+            "Model 1 RFM over {:.1}..{:.1} Hz at level {lname}",
+            band.0, band.1
+        );
+        let (r, _, passes) = fixed_point(
+            leak,
+            &sub,
+            |c, prev: Option<&BandResult>| {
+                let e0 = prev.map(|p| p.modulus).unwrap_or(model1_e0);
+                crate::rfm::rfm_band_constant(engine, c, band, e0, &params)
+                    .map_err(|e| analysis(&name, e))
+            },
+            |r| vec![r.modulus.re, r.modulus.im],
+            &constant,
+        )?;
         band_constant.push(BandConstantResult {
             center_hz: b.center_hz,
             width_hz: b.width_hz,
             result: r,
+            leakage_passes: passes,
         });
     }
 
@@ -221,25 +240,7 @@ pub fn analyse_level(
             .iter()
             .position(|&o| o == col.input)
             .unwrap_or(0);
-        let h = frf_of(&col.accelerance, n_out, k);
-        let circle = circle_fit(
-            &level.freq_hz,
-            &h,
-            crate::data::Quantity::Accelerance,
-            band,
-            &CircleFitParams::default(),
-        )
-        .map_err(|e| {
-            analysis(
-                format!("circle fit around {} Hz at level {lname}", b.center_hz),
-                e,
-            )
-        })?;
-        let target = ExperimentalMode {
-            freq_hz: circle.freq_hz,
-            loss_factor: circle.loss_factor,
-        };
-        let e0 = band_constant
+        let e_band = band_constant
             .iter()
             .find(|bc| (bc.center_hz - b.center_hz).abs() <= b.width_hz)
             .map(|bc| bc.result.modulus)
@@ -264,14 +265,57 @@ pub fn analyse_level(
                 })
                 .collect())
         };
-        let r = crate::iem::iem_mode(&provider, target, e0, &IemParams::default())
-            .map_err(|e| format!("IEM around {} Hz at level {lname} failed: {e}", b.center_hz));
+        let sub = col.restrict_to_band(band.0, band.1);
+        let sub_hz: Vec<f64> = sub
+            .omega_rad_s
+            .iter()
+            .map(|w| w / std::f64::consts::TAU)
+            .collect();
+        type IemFit = (CircleFitResult, Result<IemResult, String>);
+        let ((circle, r), _, passes) = fixed_point(
+            leak,
+            &sub,
+            |c, prev: Option<&IemFit>| {
+                let h = frf_of(&c.accelerance, n_out, k);
+                let circle = circle_fit(
+                    &sub_hz,
+                    &h,
+                    crate::data::Quantity::Accelerance,
+                    band,
+                    &CircleFitParams::default(),
+                )
+                .map_err(|e| {
+                    analysis(
+                        format!("circle fit around {} Hz at level {lname}", b.center_hz),
+                        e,
+                    )
+                })?;
+                let target = ExperimentalMode {
+                    freq_hz: circle.freq_hz,
+                    loss_factor: circle.loss_factor,
+                };
+                let e0 = match prev {
+                    Some((_, Ok(p))) => p.modulus,
+                    _ => e_band,
+                };
+                let r = crate::iem::iem_mode(&provider, target, e0, &IemParams::default()).map_err(
+                    |e| format!("IEM around {} Hz at level {lname} failed: {e}", b.center_hz),
+                );
+                Ok((circle, r))
+            },
+            |(_, r)| match r {
+                Ok(r) => vec![r.modulus.re, r.modulus.im],
+                Err(_) => Vec::new(),
+            },
+            &constant,
+        )?;
         iem.push(IemBandResult {
             center_hz: b.center_hz,
             width_hz: b.width_hz,
             response_id: level.response_ids[k],
             circle,
             iem: r,
+            leakage_passes: passes,
         });
         progress(Event::Advance);
     }
@@ -295,30 +339,64 @@ pub fn analyse_level(
         });
     }
     let x_rows = rows(&col.accelerance, n_out);
+    let specs_laws: Vec<&Box<dyn ConstitutiveModel>> = specs.iter().map(|(_, (_, l))| *l).collect();
     for (i, (m, law)) in specs {
-        let r = crate::rfm::rfm_global(engine, col, law.as_ref(), &m.initial, &params).map_err(
-            |e| match e {
-                crate::rfm::RfmError::SingularInitial { .. }
-                | crate::rfm::RfmError::InadmissibleInitial { .. }
-                | crate::rfm::RfmError::ParamCount { .. } => super::study_err(
-                    study,
-                    format!("models[{i}].initial"),
-                    format!("{} at level {lname}: {e}", m.name),
-                ),
-                e => analysis(format!("global RFM of {} at level {lname}", m.name), e),
+        let law_modulus = |p: &[f64], w: f64| law.modulus(p, w);
+        let (r, _, passes) = fixed_point(
+            leak,
+            col,
+            |c, prev: Option<&RfmResult>| {
+                let p0 = prev.map(|p| p.params.as_slice()).unwrap_or(&m.initial);
+                let r = crate::rfm::rfm_global(engine, c, law.as_ref(), p0, &params);
+                // A corrected pass continues the history of the previous one (Fig. 8 shows
+                // the whole path from the initial values).
+                let r = r.map(|mut r| {
+                    if let Some(p) = prev {
+                        let n0 = p.history.len();
+                        let mut h = p.history.clone();
+                        h.extend(r.history.drain(..).skip(1).enumerate().map(|(k, mut x)| {
+                            x.iteration = n0 + k;
+                            x
+                        }));
+                        r.history = h;
+                        r.iterations += p.iterations;
+                        r.initial = p.initial.clone();
+                    }
+                    r
+                });
+                r.map_err(|e| match e {
+                    crate::rfm::RfmError::SingularInitial { .. }
+                    | crate::rfm::RfmError::InadmissibleInitial { .. }
+                    | crate::rfm::RfmError::ParamCount { .. } => super::study_err(
+                        study,
+                        format!("models[{i}].initial"),
+                        format!("{} at level {lname}: {e}", m.name),
+                    ),
+                    e => analysis(format!("global RFM of {} at level {lname}", m.name), e),
+                })
             },
+            |r| r.params.clone(),
+            &law_modulus,
         )?;
         let initial_modulus: Vec<C64> = col
             .omega_rad_s
             .iter()
             .map(|&w| law.modulus(&m.initial, w))
             .collect();
-        let (initial_frf, _) = analytical_column(engine, col, &initial_modulus, false)
-            .map_err(|e| analysis(format!("FRFs of {} initial", m.name), e))?;
-        let (updated_frf, _) = analytical_column(engine, col, &r.modulus, false)
-            .map_err(|e| analysis(format!("FRFs of {} updated", m.name), e))?;
+        let predicted = |p: &[f64], modulus: &[C64], what: &str| -> Result<Vec<C64>, RunError> {
+            let (mut h, _) = analytical_column(engine, col, modulus, false)
+                .map_err(|e| analysis(format!("FRFs of {} {what}", m.name), e))?;
+            if let Some(l) = leak {
+                let bias = l.bias(col, &|w| law.modulus(p, w))?;
+                h.iter_mut().zip(&bias).for_each(|(x, b)| *x += b);
+            }
+            Ok(h)
+        };
+        let initial_frf = predicted(&m.initial, &initial_modulus, "initial")?;
+        let updated_frf = predicted(&r.params, &r.modulus, "updated")?;
         let (ri, ru) = (rows(&initial_frf, n_out), rows(&updated_frf, n_out));
         global.push(GlobalResult {
+            leakage_passes: passes,
             frac_initial: crate::correlation::frac_per_frf(&x_rows, &ri),
             frac_updated: crate::correlation::frac_per_frf(&x_rows, &ru),
             scc_initial: crate::correlation::scc_curve(&x_rows, &ri),
@@ -335,6 +413,34 @@ pub fn analyse_level(
     if !global.is_empty() {
         progress(Event::Finish);
     }
+
+    // Per-line RFM (Fig. 13 / 18), on data corrected by the leakage of the best-correlated
+    // global model when the study states its estimator.
+    let mut per_line_leakage_from = None;
+    let per_line = if study.analyses.per_line {
+        progress(Event::Start {
+            step: format!("{lname}: per-line RFM"),
+            total: 0,
+        });
+        let best = global.iter().zip(&specs_laws).max_by(|(a, _), (b, _)| {
+            let mean = |g: &GlobalResult| g.frac_updated.iter().sum::<f64>();
+            mean(a).total_cmp(&mean(b))
+        });
+        let data = match (leak, best) {
+            (Some(l), Some((g, law))) => {
+                per_line_leakage_from = Some(g.result.model_name.clone());
+                let bias = l.bias(col, &|w| law.modulus(&g.result.params, w))?;
+                Leakage::corrected(col, &bias)
+            }
+            _ => col.clone(),
+        };
+        let r = crate::rfm::rfm_per_line(engine, &data, &e_start, &params)
+            .map_err(|e| analysis(format!("per-line RFM at level {lname}"), e))?;
+        progress(Event::Finish);
+        Some(r)
+    } else {
+        None
+    };
 
     // Sensitivity (Fig. 9) at the first updated model, else the starting modulus.
     let sensitivity = if study.analyses.sensitivity {
@@ -392,6 +498,7 @@ pub fn analyse_level(
     Ok(LevelResults {
         level: lname.clone(),
         per_line,
+        per_line_leakage_from,
         band_constant,
         iem,
         global,

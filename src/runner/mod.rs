@@ -21,6 +21,7 @@
 //! earlier results untouched (at worst a stray `.tmp-*` folder).
 
 mod compute;
+mod leakage;
 pub mod write;
 
 pub use compute::{

@@ -365,6 +365,37 @@ fn build_report(
         study.sha256
     ));
     rep.paragraph(&format!("FRF {engine_note}."));
+    if let Some(e) = study
+        .measurements
+        .as_ref()
+        .and_then(|m| m.estimator.as_ref())
+    {
+        let passes: Vec<usize> = results
+            .iter()
+            .flat_map(|r| {
+                r.band_constant
+                    .iter()
+                    .map(|b| b.leakage_passes)
+                    .chain(r.iem.iter().map(|m| m.leakage_passes))
+                    .chain(r.global.iter().map(|g| g.leakage_passes))
+            })
+            .collect();
+        rep.paragraph(&format!(
+            "Measurement model: the data are H1 estimates with a {:?} window over {} s blocks (fs {} Hz){}. Every fit (Model 1 bands, circle fit + IEM, global RFM, per-line RFM) is made to the data minus the estimator's leakage bias at the fitted model, iterated to a fixed point ({}..{} corrected passes); circle fits are of the corrected data; FRFs and FRAC compare the data with the predicted measurement (model plus leakage).",
+            e.window,
+            e.block_s,
+            e.fs_hz,
+            match e.shaker {
+                Some(s) => format!(
+                    ", force spectrum coloured by a shaker with armature mass {} kg on a stinger of {:.3e} N/m",
+                    s.armature_mass_kg, s.stinger_stiffness_n_m
+                ),
+                None => ", flat force spectrum".into(),
+            },
+            passes.iter().min().copied().unwrap_or(0),
+            passes.iter().max().copied().unwrap_or(0),
+        ));
+    }
     // Table 2.
     let mut t2 = Vec::new();
     let mut t3 = Vec::new();

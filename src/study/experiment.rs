@@ -136,7 +136,7 @@ pub fn load_experiment(path: &Path) -> Result<Experiment, StudyError> {
 
 /// Parse and validate experiment text; `path` names the file and anchors relative paths.
 pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyError> {
-    use crate::experiment::spec::{ChainParams, Mode, NoiseLevel, Shaker, Window};
+    use crate::experiment::spec::{ChainParams, Mode, NoiseLevel, Shaker};
     let raw: RawExperimentFile = toml::from_str(text).map_err(|e| toml_error(path, text, &e))?;
     let ctx = Ctx { file: path };
     let structure = structure(&ctx, &raw.structure)?;
@@ -199,16 +199,7 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         chain.n_averages = v;
     }
     if let Some(w) = &c.window {
-        chain.window = match w.as_str() {
-            "hann" => Window::Hann,
-            "rectangular" => Window::Rectangular,
-            o => {
-                return Err(ctx.err(
-                    "chain.window",
-                    format!("\"{o}\": use \"hann\" or \"rectangular\""),
-                ))
-            }
-        };
+        chain.window = w.parse().map_err(|m: String| ctx.err("chain.window", m))?;
     }
     match (c.force_noise_rms, c.force_noise_fraction) {
         (Some(_), Some(_)) => {

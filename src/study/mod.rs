@@ -110,6 +110,20 @@ pub struct Measurements {
     pub levels: Vec<Level>,
     pub band_hz: Option<(f64, f64)>,
     pub channels: Option<Vec<u32>>,
+    /// The analyser's H1 estimator, when the study models its leakage.
+    pub estimator: Option<Estimator>,
+}
+
+/// How the measured H1 was estimated (`[measurements.estimator]`): window, block length and
+/// sampling rate, and optionally the shaker whose interaction colours the force spectrum.
+/// With it, every identification fits the model's expected H1 (window-kernel average, see
+/// [`crate::experiment::leakage_bias`]) instead of its exact FRF.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Estimator {
+    pub window: crate::experiment::Window,
+    pub block_s: f64,
+    pub fs_hz: f64,
+    pub shaker: Option<crate::experiment::Shaker>,
 }
 
 /// A constitutive model to identify, with initial values in the model's parameter order (SI).

@@ -129,6 +129,24 @@ pub struct RawMeasurements {
     pub band_hz: Option<Vec<f64>>,
     /// Response point ids to use (default: all measured at the study's points).
     pub channels: Option<Vec<u32>>,
+    /// How the analyser estimated H1 (optional): the identification then models its leakage.
+    pub estimator: Option<RawEstimator>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawEstimator {
+    pub window: String,
+    pub block_s: f64,
+    pub fs_hz: Option<f64>,
+    pub shaker: Option<RawEstimatorShaker>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawEstimatorShaker {
+    pub armature_mass: f64,
+    pub stinger_stiffness: f64,
 }
 
 #[derive(Debug, Deserialize)]

@@ -505,10 +505,54 @@ fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measure
             }
         }
     }
+    let estimator = match &m.estimator {
+        None => None,
+        Some(e) => {
+            let key = "measurements.estimator";
+            let window = e
+                .window
+                .parse()
+                .map_err(|msg: String| ctx.err(format!("{key}.window"), msg))?;
+            let block_s = ctx.positive(&format!("{key}.block_s"), e.block_s, "s")?;
+            let fs_hz = match e.fs_hz {
+                Some(f) => ctx.positive(&format!("{key}.fs_hz"), f, "Hz")?,
+                None => 2048.0,
+            };
+            let nb = fs_hz * block_s;
+            if (nb - nb.round()).abs() > 1e-9 * nb || nb < 4.0 {
+                return Err(ctx.err(
+                    format!("{key}.fs_hz"),
+                    format!("fs_hz * block_s = {nb} must be a whole number of samples (>= 4): give the analyser's sampling rate"),
+                ));
+            }
+            let shaker = match &e.shaker {
+                None => None,
+                Some(s) => Some(crate::experiment::Shaker {
+                    armature_mass_kg: ctx.positive(
+                        &format!("{key}.shaker.armature_mass"),
+                        s.armature_mass,
+                        "kg",
+                    )?,
+                    stinger_stiffness_n_m: ctx.positive(
+                        &format!("{key}.shaker.stinger_stiffness"),
+                        s.stinger_stiffness,
+                        "N/m",
+                    )?,
+                }),
+            };
+            Some(Estimator {
+                window,
+                block_s,
+                fs_hz,
+                shaker,
+            })
+        }
+    };
     Ok(Measurements {
         levels,
         band_hz,
         channels: m.channels.clone(),
+        estimator,
     })
 }
 
