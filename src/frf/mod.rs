@@ -110,4 +110,37 @@ pub trait FrfEngine: Send + Sync {
         self.sweep_into(omega_rad_s, modulus_pa, with_derivatives, &mut s)?;
         Ok(s)
     }
+
+    /// The lowest `n_modes` complex modes of (K_b + j D_b + E* S, M) at a constant modulus
+    /// (Pa), sorted by Re lambda, when this engine computes modes itself (the ROM does, from
+    /// its reduced pencil); `None` sends callers to [`crate::modes::complex_modes`] on the
+    /// full model.
+    fn complex_modes(
+        &self,
+        _modulus_pa: C64,
+        _n_modes: usize,
+    ) -> Option<Result<Vec<EngineMode>, FrfError>> {
+        None
+    }
+}
+
+/// A complex mode as an engine sees it: eigenvalue lambda = w_r^2 (1 + j eta), its
+/// sensitivity phi^T S phi = d lambda / dE' (phi^T M phi = 1, no conjugate) and the shape at
+/// the observation points.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EngineMode {
+    pub lambda: C64,
+    pub phi_s_phi: C64,
+    pub at_points: Vec<C64>,
+}
+
+impl EngineMode {
+    /// sqrt(Re lambda) / (2 pi).
+    pub fn freq_hz(&self) -> f64 {
+        self.lambda.re.max(0.0).sqrt() / (2.0 * std::f64::consts::PI)
+    }
+    /// Im lambda / Re lambda.
+    pub fn loss_factor(&self) -> f64 {
+        self.lambda.im / self.lambda.re
+    }
 }

@@ -6,8 +6,8 @@
 
 use super::dense::DenseLu;
 use super::{ModulusRange, RomError};
-use crate::common::C64;
-use crate::frf::{FrfEngine, FrfError, Sweep};
+use crate::common::{C64, J};
+use crate::frf::{EngineMode, FrfEngine, FrfError, Sweep};
 use faer::Mat;
 use rayon::prelude::*;
 
@@ -37,6 +37,101 @@ impl ReducedModel {
     /// The modulus range the ROM was built (and certified) for.
     pub fn range(&self) -> ModulusRange {
         self.range
+    }
+
+    /// The lowest `n_modes` complex modes of the reduced pencil (K_r + j D_r + E* S_r, M_r)
+    /// at a constant modulus (Pa), sorted by Re lambda (viscous C_r is left out, as in
+    /// [`crate::modes::complex_modes`]). With M_r = L L^T the pencil becomes the complex
+    /// symmetric A = L^-1 (K_r + j D_r + E* S_r) L^-T, whose eigenvectors y give
+    /// phi_r = L^-T y, normalised phi_r^T M_r phi_r = 1 (no conjugate). The basis holds the
+    /// Krylov sequences of the observation loads, so these are the modes the FRFs see, as
+    /// accurate as the certified FRFs around their resonances; modes the points do not
+    /// excite (torsion, lateral bending for in-plane loads) are absent.
+    pub fn complex_modes(&self, modulus: C64, n_modes: usize) -> Result<Vec<EngineMode>, RomError> {
+        let n = self.n_r;
+        let l = self
+            .m_r
+            .llt(faer::Side::Lower)
+            .map_err(|e| RomError::Factorization(format!("M_r is not positive definite: {e:?}")))?
+            .L()
+            .to_owned();
+        // K = K_r + j D_r + E* S_r, then A = L^-1 K L^-T.
+        let k = Mat::<C64>::from_fn(n, n, |i, j| {
+            let mut v = C64::new(self.k_r[(i, j)], 0.0) + modulus * self.s_r[(i, j)];
+            if let Some(d) = &self.d_r {
+                v += C64::new(0.0, d[(i, j)]);
+            }
+            v
+        });
+        let lc = Mat::<C64>::from_fn(n, n, |i, j| C64::new(l[(i, j)], 0.0));
+        let mut a = k;
+        faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+            lc.as_ref(),
+            a.as_mut(),
+            faer::Par::Seq,
+        );
+        let mut at = a.transpose().to_owned();
+        faer::linalg::triangular_solve::solve_lower_triangular_in_place(
+            lc.as_ref(),
+            at.as_mut(),
+            faer::Par::Seq,
+        );
+        // at = L^-1 (L^-1 K)^T = L^-1 K^T L^-T; K is symmetric, so at = A.
+        let evd = at
+            .eigen()
+            .map_err(|e| RomError::Factorization(format!("reduced complex eigensolver: {e:?}")))?;
+        let (vals, vecs) = (evd.S(), evd.U());
+        let mut order: Vec<usize> = (0..n).collect();
+        order.sort_by(|&x, &y| vals[x].re.total_cmp(&vals[y].re));
+        order.truncate(n_modes);
+        let mut out = Vec::with_capacity(order.len());
+        for idx in order {
+            // phi_r = L^-T y: solve L^T phi = y.
+            let mut phi = Mat::<C64>::from_fn(n, 1, |i, _| vecs[(i, idx)]);
+            faer::linalg::triangular_solve::solve_upper_triangular_in_place(
+                lc.transpose(),
+                phi.as_mut(),
+                faer::Par::Seq,
+            );
+            // phi^T m phi (no conjugate)
+            let quad = |phi: &Mat<C64>, m: &Mat<f64>| -> C64 {
+                let mut acc = C64::new(0.0, 0.0);
+                for i in 0..n {
+                    let mut row = C64::new(0.0, 0.0);
+                    for j in 0..n {
+                        row += phi[(j, 0)] * m[(i, j)];
+                    }
+                    acc += phi[(i, 0)] * row;
+                }
+                acc
+            };
+            let norm = quad(&phi, &self.m_r).sqrt();
+            if norm.norm() == 0.0 || !norm.re.is_finite() {
+                return Err(RomError::Factorization(
+                    "a reduced mode has phi^T M phi = 0".into(),
+                ));
+            }
+            for i in 0..n {
+                phi[(i, 0)] /= norm;
+            }
+            let phi_s_phi = quad(&phi, &self.s_r);
+            let lambda = quad(&phi, &self.k_r)
+                + modulus * phi_s_phi
+                + self
+                    .d_r
+                    .as_ref()
+                    .map(|d| J * quad(&phi, d))
+                    .unwrap_or_default();
+            let at_points = (0..self.n_out)
+                .map(|p| (0..n).map(|i| phi[(i, 0)] * self.b_r[(i, p)]).sum())
+                .collect();
+            out.push(EngineMode {
+                lambda,
+                phi_s_phi,
+                at_points,
+            });
+        }
+        Ok(out)
     }
 
     /// A(w) + e S_r as a row-major complex matrix.
@@ -179,6 +274,13 @@ impl FrfEngine for ReducedModel {
         out: &mut Sweep,
     ) -> Result<(), FrfError> {
         self.lu_sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
+    }
+    fn complex_modes(
+        &self,
+        modulus_pa: C64,
+        n_modes: usize,
+    ) -> Option<Result<Vec<EngineMode>, FrfError>> {
+        Some(ReducedModel::complex_modes(self, modulus_pa, n_modes).map_err(FrfError::from))
     }
 }
 

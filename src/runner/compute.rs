@@ -15,6 +15,10 @@ use crate::study::Study;
 /// Default initial modulus where a study gives none (Pa): the paper's IEM value, Level 1 mode 1.
 pub const DEFAULT_E0: C64 = C64::new(6.974e6, 1.4827e6);
 
+/// A ROM mode counts as seen by the measured points when its largest point response is at
+/// least this fraction of the largest among the modes computed.
+const OBSERVED: f64 = 1e-3;
+
 /// Model 1 (constant E*) over one band (case study 1).
 #[derive(Clone, Debug)]
 pub struct BandConstantResult {
@@ -247,7 +251,27 @@ pub fn analyse_level(
             .unwrap_or(model1_e0);
         let model = &built.model;
         let axes = built.dof_axes.as_deref();
+        // Modes from the engine when it has them (the ROM's reduced pencil: microseconds),
+        // else complex modes of the full model.
         let provider = move |e: C64| -> Result<Vec<AnalyticalMode>, String> {
+            if let Some(r) = engine.complex_modes(e, 8) {
+                let modes = r.map_err(|e| e.to_string())?;
+                // The ROM's basis is driven by the measured (y) loads; it may still carry
+                // traces of modes the points do not see (lateral bending, torsion), which
+                // these flags leave out.
+                let obs = |m: &crate::frf::EngineMode| {
+                    m.at_points.iter().map(|z| z.norm()).fold(0.0, f64::max)
+                };
+                let top = modes.iter().map(obs).fold(0.0, f64::max);
+                return Ok(modes
+                    .iter()
+                    .map(|m| AnalyticalMode {
+                        lambda: m.lambda,
+                        phi_s_phi: m.phi_s_phi,
+                        y_dominant: obs(m) > OBSERVED * top,
+                    })
+                    .collect());
+            }
             let modes = crate::modes::complex_modes(
                 model,
                 e,

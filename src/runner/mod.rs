@@ -322,6 +322,13 @@ impl FrfEngine for RomEngine {
                 .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
         }
     }
+    fn complex_modes(
+        &self,
+        modulus_pa: C64,
+        n_modes: usize,
+    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
+        FrfEngine::complex_modes(&self.rom, modulus_pa, n_modes)
+    }
 }
 
 /// The modulus range the ROM must cover: every model's initial E*(w) over the band, the
