@@ -15,6 +15,10 @@ pub struct RunArgs {
     /// Do not draw figures (faster).
     #[arg(long)]
     pub no_figures: bool,
+    /// Build and certify the ROM even if a certified ROM of the same model, points, band,
+    /// range and tolerance is in the cache (`.rom-cache/` beside the study's output folder).
+    #[arg(long)]
+    pub no_cache: bool,
 }
 
 #[derive(clap::Args, Debug)]
@@ -60,9 +64,17 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
             }
         }
     };
+    let rom_cache = (!a.no_cache).then(|| {
+        study
+            .output_dir
+            .parent()
+            .unwrap_or(std::path::Path::new("."))
+            .join(".rom-cache")
+    });
     let opts = RunOptions {
         no_figures: a.no_figures,
         output_dir: None,
+        rom_cache,
     };
     let summary = rfmlab::runner::run_study(&study, &opts, &progress).map_err(wrap)?;
     if let Some(pb) = bar.replace(None) {

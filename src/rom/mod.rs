@@ -17,6 +17,7 @@
 //! per-line eigen-decomposition of the reduced pencil prepared once per frequency grid.
 
 pub mod basis;
+pub mod cache;
 pub mod certify;
 pub(crate) mod dense;
 pub mod pencil;
@@ -118,7 +119,7 @@ impl Default for RomParams {
 }
 
 /// Outcome of the certificate (issue 3, "Error certificate").
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Certificate {
     /// Largest error over the validation set, relative to the peak |H_full| of each FRF.
     pub max_rel_error: f64,

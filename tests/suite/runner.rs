@@ -334,3 +334,57 @@ shaker = { armature_mass = 0.02, stinger_stiffness = 5.0e5 }\n";
         "Model 4 with leakage model: worst parameter error {m4}"
     );
 }
+
+/// A certified ROM is reused from the cache on the second run (same key), with the same
+/// results to the bit; a different tolerance is a different key and builds anew.
+#[test]
+fn rom_cache_is_reused_and_keyed() {
+    let dir = tempfile::tempdir().unwrap();
+    let freq = lines_hz(1.0, 60.0, 1.0);
+    let law = rfmlab::material::model_from_name("model1", None).unwrap();
+    let (truth, _) = rfmlab::material::paper_table4(1);
+    let data = dir.path().join("m1.uff");
+    write_data(&data, "L1", law.as_ref(), &truth, &freq);
+    let cache = dir.path().join("cache");
+    let analyses = "[analyses]\nper_line = false\nsensitivity = false\nfigures = false\n";
+    let run = |tol: &str| {
+        let out = dir.path().join("out");
+        let text = study_text_engine(
+            "cache",
+            &out,
+            &data,
+            (1.0, 60.0),
+            &[("model1", initial_of(1))],
+            analyses,
+            "rom",
+        )
+        .replace(
+            "tolerance = 1e-9\n",
+            &format!("tolerance = 1e-9\nrom_tolerance = {tol}\n"),
+        );
+        let file = write(&dir.path().join("cache.toml"), &text);
+        let study = rfmlab::study::load(&file).unwrap();
+        let opts = RunOptions {
+            rom_cache: Some(cache.clone()),
+            ..RunOptions::default()
+        };
+        let s = run_study(&study, &opts, &no_progress).unwrap();
+        let report = std::fs::read_to_string(out.join("report.md")).unwrap();
+        (
+            s.models[0].identified.clone(),
+            report.contains("loaded from the ROM cache"),
+        )
+    };
+    let (p1, cached1) = run("1e-6");
+    assert!(!cached1, "first run builds the ROM");
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 1);
+    let (p2, cached2) = run("1e-6");
+    assert!(cached2, "second run loads the ROM");
+    assert_eq!(
+        p1.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+        p2.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+    );
+    let (_, cached3) = run("2e-6");
+    assert!(!cached3, "another tolerance is another ROM");
+    assert_eq!(std::fs::read_dir(&cache).unwrap().count(), 2);
+}
