@@ -131,6 +131,64 @@ pub struct LevelData {
     pub reference_id: u32,
     /// The measured accelerance column ((m/s^2)/N) on the band's lines.
     pub column: crate::rfm::MeasuredColumn,
+    /// The law that made simulated data, from `measurements.truth`.
+    pub truth: Option<LevelTruth>,
+}
+
+/// The constitutive law and parameters (in the law's order, SI) that made a simulated level.
+#[derive(Clone, Debug)]
+pub struct LevelTruth {
+    pub law: String,
+    pub params: Vec<f64>,
+}
+
+impl LevelTruth {
+    /// E*(w) of the truth (Pa).
+    pub fn modulus(&self, omega_rad_s: f64) -> Option<C64> {
+        let law = crate::material::model_from_name(&self.law, None).ok()?;
+        Some(law.modulus(&self.params, omega_rad_s))
+    }
+}
+
+/// The truth of level `name` in a sidecar written by `rfmlab simulate`.
+fn read_truth(study: &Study, path: &Path, name: &str) -> Result<Option<LevelTruth>, RunError> {
+    let bad = |m: String| {
+        study_err(
+            study,
+            "measurements.truth",
+            format!("{}: {m}", path.display()),
+        )
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let Some(levels) = v.get("levels").and_then(|l| l.as_array()) else {
+        return Err(bad(
+            "no \"levels\" array: is this a .truth.json of `rfmlab simulate`?".into(),
+        ));
+    };
+    let Some(l) = levels
+        .iter()
+        .find(|l| l.get("level").and_then(|n| n.as_str()) == Some(name))
+    else {
+        return Ok(None);
+    };
+    let law = l
+        .get("law")
+        .and_then(|x| x.as_str())
+        .unwrap_or_default()
+        .to_string();
+    let m = crate::material::model_from_name(&law, None)
+        .map_err(|e| bad(format!("level {name}: {e}")))?;
+    let mut params = Vec::new();
+    for p in m.param_names() {
+        let x = l
+            .get("params")
+            .and_then(|ps| ps.get(&p))
+            .and_then(|x| x.as_f64())
+            .ok_or_else(|| bad(format!("level {name}: no parameter {p} of {law}")))?;
+        params.push(x);
+    }
+    Ok(Some(LevelTruth { law, params }))
 }
 
 fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) -> RunError {
@@ -286,6 +344,10 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
             freq_hz,
             response_ids: ids,
             reference_id: exc_point.id,
+            truth: match &meas.truth {
+                Some(p) => read_truth(study, p, &level.name)?,
+                None => None,
+            },
         });
     }
     Ok(out)

@@ -399,7 +399,12 @@ fn build_report(
     // Table 2.
     let mut t2 = Vec::new();
     let mut t3 = Vec::new();
-    for r in results {
+    let has_truth = levels.iter().any(|l| l.truth.is_some());
+    // (what, E' error, E'' error) against the truth curve, for the summary under Table 3.
+    let mut truth_errors: Vec<(String, f64, f64)> = Vec::new();
+    for (ld, r) in levels.iter().zip(results) {
+        // Truth E*(f) (MPa columns) and the errors of `e` against it.
+        let truth_at = |f: f64| ld.truth.as_ref().and_then(|t| t.modulus(TWO_PI * f));
         for m in &r.iem {
             let p = paper_mode(&r.level, m.center_hz);
             t2.push(vec![
@@ -434,6 +439,30 @@ fn build_report(
                 p.map(|p| f4(p.2)).unwrap_or_else(|| "-".into()),
                 p.map(|p| f4(p.3)).unwrap_or_else(|| "-".into()),
             ]);
+            if has_truth {
+                // At the mode: the IEM's analytical frequency, else the circle fit's.
+                let f = m
+                    .iem
+                    .as_ref()
+                    .map(|i| i.freq_hz)
+                    .unwrap_or(m.circle.freq_hz);
+                let t = truth_at(f);
+                let row = t3.last_mut().expect("row just pushed");
+                row.insert(2, format!("{f:.2}"));
+                row.insert(7, t.map(|t| f4(t.re * 1e-6)).unwrap_or_else(|| "-".into()));
+                row.insert(8, t.map(|t| f4(t.im * 1e-6)).unwrap_or_else(|| "-".into()));
+                if let Some(t) = t {
+                    let err = |e: C64| ((e.re - t.re) / t.re, (e.im - t.im) / t.im);
+                    if let Ok(i) = &m.iem {
+                        let (a, b) = err(i.modulus);
+                        truth_errors.push((format!("{} IEM at {f:.1} Hz", r.level), a, b));
+                    }
+                    if let Some(b) = band {
+                        let (x, y) = err(b.result.modulus);
+                        truth_errors.push((format!("{} Model 1 band at {f:.1} Hz", r.level), x, y));
+                    }
+                }
+            }
         }
         for b in &r.band_constant {
             if r.iem
@@ -453,6 +482,13 @@ fn build_report(
                 p.map(|p| f4(p.2)).unwrap_or_else(|| "-".into()),
                 p.map(|p| f4(p.3)).unwrap_or_else(|| "-".into()),
             ]);
+            if has_truth {
+                let t = truth_at(b.center_hz);
+                let row = t3.last_mut().expect("row just pushed");
+                row.insert(2, format!("{:.2}", b.center_hz));
+                row.insert(7, t.map(|t| f4(t.re * 1e-6)).unwrap_or_else(|| "-".into()));
+                row.insert(8, t.map(|t| f4(t.im * 1e-6)).unwrap_or_else(|| "-".into()));
+            }
         }
     }
     if !t2.is_empty() {
@@ -479,19 +515,38 @@ fn build_report(
         for f in &failures {
             rep.paragraph(&format!("**Warning:** {f}"));
         }
-        rep.table(
-            &[
-                "Level",
-                "Band centre (Hz)",
-                "IEM E'",
-                "IEM E''",
-                "RFM Model 1 E'",
-                "RFM Model 1 E''",
-                "paper IEM E'",
-                "paper IEM E''",
-            ],
-            &t3,
-        );
+        let mut h3 = vec![
+            "Level",
+            "Band centre (Hz)",
+            "IEM E'",
+            "IEM E''",
+            "RFM Model 1 E'",
+            "RFM Model 1 E''",
+            "paper IEM E'",
+            "paper IEM E''",
+        ];
+        if has_truth {
+            h3.insert(2, "f (Hz)");
+            h3.insert(7, "truth E'");
+            h3.insert(8, "truth E''");
+        }
+        rep.table(&h3, &t3);
+        if !truth_errors.is_empty() {
+            rep.paragraph(
+                "Against the truth curve of the simulated data (`measurements.truth`), at f:",
+            );
+            let rows: Vec<Vec<String>> = truth_errors
+                .iter()
+                .map(|(w, a, b)| {
+                    vec![
+                        w.clone(),
+                        format!("{:+.2} %", 100.0 * a),
+                        format!("{:+.2} %", 100.0 * b),
+                    ]
+                })
+                .collect();
+            rep.table(&["Estimate", "E' error", "E'' error"], &rows);
+        }
     }
     // Tables 4 and 5.
     for (ld, r) in levels.iter().zip(results) {
@@ -548,6 +603,13 @@ fn build_report(
             row.extend([res.iterations.to_string(), res.stop_reason.to_string()]);
             row.extend(g.frac_updated.iter().map(|&v| f4(v)));
             rows.push(row);
+            if let Some(t) = ld.truth.as_ref().filter(|t| t.law == res.model_name) {
+                let mut row = vec![res.model_name.clone(), s("truth")];
+                let mut c = fmt(&t.params);
+                c.resize(maxp, String::new());
+                row.extend(c);
+                rows.push(row);
+            }
             if let Some(p) = paper_identified(&res.model_name, &r.level) {
                 let mut row = vec![res.model_name.clone(), s("paper")];
                 let mut c = fmt(&p);

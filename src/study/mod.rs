@@ -112,6 +112,9 @@ pub struct Measurements {
     pub channels: Option<Vec<u32>>,
     /// The analyser's H1 estimator, when the study models its leakage.
     pub estimator: Option<Estimator>,
+    /// Truth sidecar (JSON written by `rfmlab simulate`) of simulated data: the report then
+    /// compares every identified modulus and parameter with the law that made the data.
+    pub truth: Option<PathBuf>,
 }
 
 /// How the measured H1 was estimated (`[measurements.estimator]`): window, block length and

@@ -131,6 +131,8 @@ pub struct RawMeasurements {
     pub channels: Option<Vec<u32>>,
     /// How the analyser estimated H1 (optional): the identification then models its leakage.
     pub estimator: Option<RawEstimator>,
+    /// Truth sidecar of simulated data (`rfmlab simulate`), for the report's truth columns.
+    pub truth: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]

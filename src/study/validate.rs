@@ -548,11 +548,25 @@ fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measure
             })
         }
     };
+    let truth = match &m.truth {
+        None => None,
+        Some(t) => {
+            let r = resolve(ctx.file, t);
+            if !r.is_file() {
+                return Err(ctx.err(
+                    "measurements.truth",
+                    format!("truth file {} not found: give the .truth.json that `rfmlab simulate` wrote beside the data, or remove the key", r.display()),
+                ));
+            }
+            Some(r)
+        }
+    };
     Ok(Measurements {
         levels,
         band_hz,
         channels: m.channels.clone(),
         estimator,
+        truth,
     })
 }
 

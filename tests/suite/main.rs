@@ -13,6 +13,7 @@ mod correlation;
 mod csv_io;
 mod data_checks;
 mod default_data;
+mod default_study;
 mod experiment;
 mod fe_cantilever;
 mod fe_element;
