@@ -1,5 +1,6 @@
 //! Wall time of `rfmlab run studies/default.toml` (the README's first command): median of a
-//! few runs of the built binary. Run with `cargo bench --bench default_study` (release).
+//! few runs of the built binary, cold (ROM built and certified) and warm (ROM from the cache).
+//! Run with `cargo build --release && cargo bench --bench default_study`.
 //! RFMLAB_BENCH_RUNS sets the number of runs (default 3). Needs studies/data/ (skips without it).
 
 use std::path::Path;
@@ -25,26 +26,33 @@ fn main() {
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(3);
-    let mut times = Vec::new();
-    for k in 0..runs {
-        let t = Instant::now();
-        let status = Command::new(&exe)
-            .args(["--quiet", "run"])
-            .arg(&study)
-            .current_dir(root)
-            .status()
-            .expect("run rfmlab");
-        let s = t.elapsed().as_secs_f64();
-        assert!(status.success(), "rfmlab run failed (exit {status})");
-        eprintln!("run {}: {s:.2} s", k + 1);
-        times.push(s);
+    // Cold: the ROM is built and certified (--no-cache); warm: it comes from the cache that
+    // the cold runs left in results/.rom-cache.
+    for (label, extra) in [
+        ("cold (--no-cache)", Some("--no-cache")),
+        ("warm (ROM cache)", None),
+    ] {
+        let mut times = Vec::new();
+        for k in 0..runs {
+            let t = Instant::now();
+            let mut cmd = Command::new(&exe);
+            cmd.args(["--quiet", "run"]).arg(&study).current_dir(root);
+            if let Some(x) = extra {
+                cmd.arg(x);
+            }
+            let status = cmd.status().expect("run rfmlab");
+            let s = t.elapsed().as_secs_f64();
+            assert!(status.success(), "rfmlab run failed (exit {status})");
+            eprintln!("{label} run {}: {s:.2} s", k + 1);
+            times.push(s);
+        }
+        times.sort_by(f64::total_cmp);
+        println!(
+            "rfmlab run studies/default.toml, {label}: median {:.2} s over {} runs (min {:.2} s, max {:.2} s)",
+            times[times.len() / 2],
+            runs,
+            times[0],
+            times[times.len() - 1]
+        );
     }
-    times.sort_by(f64::total_cmp);
-    println!(
-        "rfmlab run studies/default.toml: median {:.2} s over {} runs (min {:.2} s, max {:.2} s)",
-        times[times.len() / 2],
-        runs,
-        times[0],
-        times[times.len() - 1]
-    );
 }

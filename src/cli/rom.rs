@@ -1,4 +1,5 @@
-//! `rfmlab rom STUDY.toml [--band f0,f1] [--storage a,b] [--loss c,d] [--tolerance t] [--json]`:
+//! `rfmlab rom STUDY.toml [--band f0,f1] [--storage a,b] [--loss c,d] [--tolerance t]
+//! [--cert-moduli n] [--cert-lines n] [--json]`:
 //! build and certify the reduced-order model of a study's structure.
 
 use super::common::{build_model, load_study, parse_pair, print_json, spinner, Global};
@@ -21,6 +22,13 @@ pub struct RomArgs {
     /// Certificate tolerance (max error relative to each FRF's peak).
     #[arg(long, default_value_t = 1e-6)]
     pub tolerance: f64,
+    /// Validation moduli per axis of the modulus box (log-spaced, corners included): the
+    /// certificate solves the full model at (this squared) x `--cert-lines` points.
+    #[arg(long, default_value_t = RomParams::default().n_cert_moduli_per_axis)]
+    pub cert_moduli: usize,
+    /// Validation lines across the band (ends included).
+    #[arg(long, default_value_t = RomParams::default().n_cert_lines)]
+    pub cert_lines: usize,
     #[arg(long)]
     pub json: bool,
 }
@@ -39,6 +47,8 @@ pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
             e_loss_pa: loss,
         },
         tolerance: a.tolerance,
+        n_cert_moduli_per_axis: a.cert_moduli,
+        n_cert_lines: a.cert_lines,
         ..RomParams::default()
     };
     let sp = spinner(g, "building and certifying the ROM");
