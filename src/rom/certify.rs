@@ -184,6 +184,27 @@ pub(crate) fn certificate_error(
     Ok(worst)
 }
 
+/// A reduced model without a certificate: the first enrichment level of [`build_rom`]
+/// (`params.n_e_ref_initial` log-spaced E_ref over the range, `krylov_depth_initial` blocks
+/// each), no full-model solves. For the modes the observation points see (their Krylov
+/// sequences converge to them first), e.g. a mesh-convergence study at a single modulus on a
+/// mesh too large for full complex refinement; FRF use needs [`build_rom`].
+pub fn build_basis_only(
+    model: &StructuralModel,
+    inputs: &[usize],
+    params: &RomParams,
+) -> Result<ReducedModel, RomError> {
+    validate(model, inputs, params)?;
+    let pat = ModelPattern::new(model)?;
+    let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
+    let e_lo = params.range.e_storage_pa.0;
+    let e_hi = params.range.e_storage_pa.1.hypot(params.range.e_loss_pa.1);
+    for e in logspace(e_lo, e_hi, params.n_e_ref_initial) {
+        basis.extend(e, params.krylov_depth_initial)?;
+    }
+    Ok(reduce(model, &basis, inputs, params))
+}
+
 /// Build and certify a ROM for the FRFs of all observation points x `inputs`
 /// (indices into `model.points`) over `params.band_hz` and `params.range`.
 ///

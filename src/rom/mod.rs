@@ -24,7 +24,7 @@ pub mod pencil;
 pub mod reduced;
 pub(crate) mod sparse;
 
-pub use certify::build_rom;
+pub use certify::{build_basis_only, build_rom};
 pub use pencil::{PencilParams, PencilSweep};
 pub use reduced::ReducedModel;
 
