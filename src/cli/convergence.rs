@@ -93,15 +93,12 @@ pub fn run(a: &ConvergenceArgs, g: &Global) -> anyhow::Result<()> {
                 krylov_depth_initial: 6,
                 ..RomParams::default()
             };
-            let rom = build_basis_only(&b.model, &inputs, &params)?;
+            let rom = build_basis_only(&b.model, &inputs, &params, b.dof_axes.as_deref())?;
             let modes = rom.complex_modes(e, a.count)?;
-            let obs = |m: &rfmlab::frf::EngineMode| {
-                m.at_points.iter().map(|z| z.norm()).fold(0.0, f64::max)
-            };
-            let top = modes.iter().map(obs).fold(0.0, f64::max);
+            let threshold = ModesParams::default().y_dominant_threshold;
             modes
                 .iter()
-                .filter(|m| obs(m) > 1e-3 * top)
+                .filter(|m| m.energy_fraction_xyz.is_some_and(|f| f[1] > threshold))
                 .take(2)
                 .map(|m| (m.freq_hz(), m.loss_factor()))
                 .collect()

@@ -132,6 +132,8 @@ pub struct EngineMode {
     pub lambda: C64,
     pub phi_s_phi: C64,
     pub at_points: Vec<C64>,
+    /// Kinetic-energy fractions in x, y, z DOFs (sum 1), when the engine knows the DOF axes.
+    pub energy_fraction_xyz: Option<[f64; 3]>,
 }
 
 impl EngineMode {

@@ -177,6 +177,8 @@ pub fn load(path: &Path, key: &str) -> Option<(ReducedModel, Certificate)> {
         b_r: tall(&j.b_r)?,
         sb_r: tall(&j.sb_r)?,
         range: j.range,
+        // Not cached: only mode classification uses it (the runner classifies by the points).
+        m_axes_r: None,
     };
     Some((rom, j.certificate))
 }

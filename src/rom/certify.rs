@@ -113,7 +113,37 @@ fn reduce(
         b_r: basis.project_vecs(&basis.b_all),
         sb_r: basis.project_vecs(&sb),
         range: p.range,
+        m_axes_r: None,
     }
+}
+
+/// V^T M_a V for a = x, y, z, with M_a the entries of M between two DOFs of axis a.
+fn project_axis_masses(
+    model: &StructuralModel,
+    basis: &BasisBuilder<'_>,
+    dof_axes: &[u8],
+) -> Result<Box<[faer::Mat<f64>; 3]>, RomError> {
+    let n = model.n_dof();
+    if dof_axes.len() != n || dof_axes.iter().any(|&a| a > 2) {
+        return Err(RomError::Params(format!(
+            "dof_axes must have one entry 0, 1 or 2 per free DOF ({n}); got {}",
+            dof_axes.len()
+        )));
+    }
+    let r = basis.size();
+    let mut out: [faer::Mat<f64>; 3] = std::array::from_fn(|_| faer::Mat::zeros(r, r));
+    for (a, slot) in out.iter_mut().enumerate() {
+        let t: Vec<faer::sparse::Triplet<usize, usize, f64>> = model
+            .m
+            .triplet_iter()
+            .filter(|t| dof_axes[t.row] as usize == a && dof_axes[t.col] as usize == a)
+            .map(|t| faer::sparse::Triplet::new(t.row, t.col, *t.val))
+            .collect();
+        let ma = faer::sparse::SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &t)
+            .map_err(|e| RomError::Model(format!("axis mass matrix: {e:?}")))?;
+        *slot = basis.project(&ma);
+    }
+    Ok(Box::new(out))
 }
 
 /// Full-model receptances on the validation set: for each modulus m, lines l:
@@ -189,10 +219,14 @@ pub(crate) fn certificate_error(
 /// each), no full-model solves. For the modes the observation points see (their Krylov
 /// sequences converge to them first), e.g. a mesh-convergence study at a single modulus on a
 /// mesh too large for full complex refinement; FRF use needs [`build_rom`].
+///
+/// With `dof_axes` (0 = x, 1 = y, 2 = z per free DOF) the modes also carry their
+/// kinetic-energy split ([`crate::frf::EngineMode::energy_fraction_xyz`]).
 pub fn build_basis_only(
     model: &StructuralModel,
     inputs: &[usize],
     params: &RomParams,
+    dof_axes: Option<&[u8]>,
 ) -> Result<ReducedModel, RomError> {
     validate(model, inputs, params)?;
     let pat = ModelPattern::new(model)?;
@@ -202,7 +236,11 @@ pub fn build_basis_only(
     for e in logspace(e_lo, e_hi, params.n_e_ref_initial) {
         basis.extend(e, params.krylov_depth_initial)?;
     }
-    Ok(reduce(model, &basis, inputs, params))
+    let mut rom = reduce(model, &basis, inputs, params);
+    if let Some(ax) = dof_axes {
+        rom.m_axes_r = Some(project_axis_masses(model, &basis, ax)?);
+    }
+    Ok(rom)
 }
 
 /// Build and certify a ROM for the FRFs of all observation points x `inputs`

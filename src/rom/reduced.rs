@@ -27,6 +27,9 @@ pub struct ReducedModel {
     /// V^T S b_i (n_r x n_out).
     pub(crate) sb_r: Mat<f64>,
     pub(crate) range: ModulusRange,
+    /// V^T M_a V for the x, y, z DOFs (M_a: M restricted to pairs of DOFs of axis a), when
+    /// the DOF axes were known: the modes' kinetic-energy split.
+    pub(crate) m_axes_r: Option<Box<[Mat<f64>; 3]>>,
 }
 
 impl ReducedModel {
@@ -125,10 +128,27 @@ impl ReducedModel {
             let at_points = (0..self.n_out)
                 .map(|p| (0..n).map(|i| phi[(i, 0)] * self.b_r[(i, p)]).sum())
                 .collect();
+            // phi^H M_a phi per axis, normalised to sum 1
+            let energy_fraction_xyz = self.m_axes_r.as_ref().map(|ma| {
+                let mut e = [0.0f64; 3];
+                for (a, m) in ma.iter().enumerate() {
+                    for i in 0..n {
+                        for j in 0..n {
+                            e[a] += (phi[(i, 0)].conj() * phi[(j, 0)] * m[(i, j)]).re;
+                        }
+                    }
+                }
+                let tot: f64 = e.iter().sum();
+                if tot > 0.0 {
+                    e.iter_mut().for_each(|x| *x /= tot);
+                }
+                e
+            });
             out.push(EngineMode {
                 lambda,
                 phi_s_phi,
                 at_points,
+                energy_fraction_xyz,
             });
         }
         Ok(out)
