@@ -140,3 +140,61 @@ fn rom_complex_modes_match_the_full_model_in_band() {
         assert!(d_sens < 1e-4, "phi^T S phi {d_sens:e}");
     }
 }
+
+/// `rfmlab convergence --method rom`'s modes: a Krylov basis at the one modulus
+/// (`build_basis_only`, no certificate) gives the same first two y-dominant modes as the full
+/// model's refined complex modes, classified by the same kinetic-energy rule.
+#[test]
+fn basis_only_modes_match_full_y_modes_at_10mm() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let study = rfmlab::study::load(&root.join("studies/paper_geometry.toml")).unwrap();
+    let mut s = study.structure.clone();
+    if let rfmlab::study::StructureSource::Mesher(j) = &mut s.source {
+        j.mesh = rfmlab::study::MeshSize::ElementSize(0.010);
+    }
+    let b = rfmlab::study::build::build_model(&s, "paper_geometry.toml").unwrap();
+    let e = rfmlab::common::C64::new(6.974e6, 1.4827e6);
+    let threshold = rfmlab::modes::ModesParams::default().y_dominant_threshold;
+    let full: Vec<_> = rfmlab::modes::complex_modes(
+        &b.model,
+        e,
+        8,
+        b.dof_axes.as_deref(),
+        &rfmlab::modes::ModesParams::default(),
+    )
+    .unwrap()
+    .into_iter()
+    .filter(|m| m.y_dominant == Some(true))
+    .take(2)
+    .collect();
+    let params = RomParams {
+        range: rfmlab::rom::ModulusRange {
+            e_storage_pa: (e.re, e.re),
+            e_loss_pa: (e.im, e.im),
+        },
+        krylov_depth_initial: 6,
+        ..RomParams::default()
+    };
+    let inputs = all_inputs(&b.model);
+    let rom =
+        rfmlab::rom::build_basis_only(&b.model, &inputs, &params, b.dof_axes.as_deref()).unwrap();
+    let reduced: Vec<_> = rom
+        .complex_modes(e, 8)
+        .unwrap()
+        .into_iter()
+        .filter(|m| m.energy_fraction_xyz.is_some_and(|f| f[1] > threshold))
+        .take(2)
+        .collect();
+    assert_eq!((full.len(), reduced.len()), (2, 2));
+    for (f, r) in full.iter().zip(&reduced) {
+        let d = (f.lambda - r.lambda).norm() / f.lambda.norm();
+        eprintln!(
+            "full {:.4} Hz eta {:.5} | basis-only {:.4} Hz eta {:.5}: {d:.1e}",
+            f.freq_hz,
+            f.loss_factor,
+            r.freq_hz(),
+            r.loss_factor()
+        );
+        assert!(d < 1e-8, "eigenvalue differs by {d:e}");
+    }
+}
