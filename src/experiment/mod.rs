@@ -210,6 +210,22 @@ pub(crate) fn band_model_fine(
     BandModel::build(plant, chain, n)
 }
 
+/// [`BandModel::expected`] at DFT bin `k` (frequency `k / block_s`) of the chain's layout.
+fn expected_at_bin(
+    band: &BandModel,
+    chain: &ChainParams,
+    layout: &spec::Layout,
+    k: usize,
+) -> (Vec<Vec<C64>>, Vec<C64>) {
+    band.expected(
+        k as f64 * (1.0 / chain.block_s),
+        chain.window,
+        layout.n_block,
+        chain.block_s,
+        chain.kernel.half_width_hz,
+    )
+}
+
 /// The H1 estimator's systematic (leakage) error for `plant`, as the identification's model of
 /// its own measurement chain: `[channel][line]` of `K_i(f_k) - H_i(f_k)` on `chain.lines_hz`,
 /// the window-kernel average `int H S_F |W|^2 / int S_F |W|^2` of the exact accelerance minus
@@ -223,16 +239,9 @@ pub fn leakage_bias(
     let layout = chain.layout(plant.n_channels())?;
     let band = band_model_fine(plant, chain)?;
     let exact = plant_eval(plant, &chain.lines_hz)?;
-    let df = 1.0 / chain.block_s;
     let mut out: Vec<Vec<C64>> = vec![Vec::with_capacity(chain.lines_hz.len()); exact.len()];
     for (li, &k) in layout.line_bins.iter().enumerate() {
-        let (_, kernel) = band.expected(
-            k as f64 * df,
-            chain.window,
-            layout.n_block,
-            chain.block_s,
-            chain.kernel.half_width_hz,
-        );
+        let (_, kernel) = expected_at_bin(&band, chain, &layout, k);
         for (i, o) in out.iter_mut().enumerate() {
             o.push(kernel[i] - exact[i][li]);
         }
@@ -261,7 +270,6 @@ pub fn simulate_level(
         .map(|i| noise_rms(chain.response_noise_of(i), response_rms[i]))
         .collect();
     let n_eff = effective_averages(chain.window, layout.n_block, layout.hop, chain.n_averages);
-    let df = 1.0 / chain.block_s;
 
     // Truth on the lines.
     let exact = plant_eval(plant, &chain.lines_hz)?;
@@ -285,13 +293,7 @@ pub fn simulate_level(
         })
         .collect();
     for (li, &k) in layout.line_bins.iter().enumerate() {
-        let (cov, kernel) = band.expected(
-            k as f64 * df,
-            chain.window,
-            layout.n_block,
-            chain.block_s,
-            chain.kernel.half_width_hz,
-        );
+        let (cov, kernel) = expected_at_bin(&band, chain, &layout, k);
         let g_ff = cov[0][0].re + force_noise.powi(2) * p_w;
         for (i, c) in channels.iter_mut().enumerate() {
             let g_aa = cov[i + 1][i + 1].re + resp_noise[i].powi(2) * p_w;
