@@ -57,6 +57,7 @@ fn good(s: &Setup) -> String {
         (10.0, 100.0),
         &[("model1", initial_of(1))],
         ANALYSES,
+        "full",
     )
 }
 

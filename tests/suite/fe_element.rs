@@ -1,6 +1,7 @@
 //! Element battery for the 20-node serendipity hexahedron (fenris style): partition of unity,
 //! nodal interpolation, patch test, zero-energy modes, mass sums, stiffness symmetry/PSD.
 
+use crate::numerics::spmv;
 use faer::{Mat, Side};
 use rfmlab::fe::assembly::{Assembler, DofMap};
 use rfmlab::fe::element::{shape_gradients, shape_values, Integration, NODE_XI, N_DOF, N_NODES};
@@ -158,17 +159,6 @@ fn patch_residual(rule: Integration, seed: u64, amp: f64) -> (f64, f64) {
         .flat_map(|&n| (0..3).map(move |c| 3 * n + c))
         .fold(0.0f64, |m, d| m.max(f[d].abs()));
     (worst, scale)
-}
-
-fn spmv(a: &rfmlab::fe::model::SpMat, x: &[f64]) -> Vec<f64> {
-    let (sym, val) = a.parts();
-    let mut y = vec![0.0; a.nrows()];
-    for (j, &xj) in x.iter().enumerate().take(a.ncols()) {
-        for p in sym.col_ptr()[j]..sym.col_ptr()[j + 1] {
-            y[sym.row_idx()[p]] += val[p] * xj;
-        }
-    }
-    y
 }
 
 #[test]

@@ -1,6 +1,7 @@
 //! Joint model: mesh counts, total mass, S exactly linear in E, K_b + E S positive definite,
 //! point mapping, and one bad spec per FeError variant.
 
+use crate::numerics::spmv;
 use faer::Side;
 use rfmlab::common::{Axis, Direction};
 use rfmlab::fe::assembly::{Assembler, DofMap};
@@ -9,7 +10,6 @@ use rfmlab::fe::joint::{
     build_joint_model, joint_mesh_from_spec, Divisions, JointSpec, MeshSize, PointSpec,
 };
 use rfmlab::fe::mesh::Region;
-use rfmlab::fe::model::SpMat;
 use rfmlab::fe::points::PointMapping;
 use rfmlab::fe::FeError;
 
@@ -17,17 +17,6 @@ fn spec(h: f64) -> JointSpec {
     let mut s = JointSpec::paper();
     s.mesh.size = MeshSize::ElementSize(h);
     s
-}
-
-fn spmv(a: &SpMat, x: &[f64]) -> Vec<f64> {
-    let (sym, val) = a.parts();
-    let mut y = vec![0.0; a.nrows()];
-    for (j, &xj) in x.iter().enumerate().take(a.ncols()) {
-        for p in sym.col_ptr()[j]..sym.col_ptr()[j + 1] {
-            y[sym.row_idx()[p]] += val[p] * xj;
-        }
-    }
-    y
 }
 
 #[test]

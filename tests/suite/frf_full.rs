@@ -3,6 +3,7 @@
 //! Models: the synthetic mass-spring lattice of `rfmlab::linalg::synthetic` (a free adherend
 //! held by "adhesive" springs scaled by E), seeded.
 
+use crate::numerics::sweep_difference;
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use rfmlab::common::{C64, J};
@@ -161,13 +162,9 @@ fn sensitivities_match_central_differences() {
         let step = 1e-4 * E0.re;
         for (dir, worst) in [(C64::new(1.0, 0.0), &mut worst_re), (J, &mut worst_im)] {
             let d = |h: f64| -> Vec<C64> {
-                let ep: Vec<C64> = e.iter().map(|&x| x + dir * h).collect();
-                let em: Vec<C64> = e.iter().map(|&x| x - dir * h).collect();
-                let hp = fm.sweep(&w, &ep, false).unwrap();
-                let hm = fm.sweep(&w, &em, false).unwrap();
-                hp.h.iter()
-                    .zip(&hm.h)
-                    .map(|(p, m)| (p - m) / (2.0 * h))
+                sweep_difference(&fm, &w, &e, dir * h)
+                    .into_iter()
+                    .map(|d| d / (2.0 * h))
                     .collect()
             };
             let (d1, d2) = (d(step), d(2.0 * step));

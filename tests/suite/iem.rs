@@ -1,38 +1,12 @@
 //! IEM (paper eq. 20) on a small dense spring-mass chain: the exact eigenvalue of a truth
 //! modulus is recovered to 1e-10, and phi^T S phi is the eigenvalue derivative.
 
+use crate::spring_model::{chain, N};
 use faer::linalg::solvers::Solve;
 use faer::{Mat, Side};
 use rfmlab::common::{C64, J};
 use rfmlab::iem::{iem_mode, nearest_mode, AnalyticalMode, ExperimentalMode, IemError, IemParams};
 use std::f64::consts::PI;
-
-const N: usize = 8;
-
-/// The chain of tests/rfm.rs: 8 masses, adhesive springs ground-1, 1-2, ground-5.
-fn chain() -> (Mat<f64>, Mat<f64>, Mat<f64>) {
-    let mut m = Mat::<f64>::zeros(N, N);
-    for i in 0..N {
-        m[(i, i)] = 0.08 + 0.01 * i as f64;
-    }
-    let mut k = Mat::<f64>::zeros(N, N);
-    let mut s = Mat::<f64>::zeros(N, N);
-    let add = |a: &mut Mat<f64>, i: Option<usize>, j: usize, v: f64| {
-        a[(j, j)] += v;
-        if let Some(i) = i {
-            a[(i, i)] += v;
-            a[(i, j)] -= v;
-            a[(j, i)] -= v;
-        }
-    };
-    add(&mut s, None, 0, 0.02);
-    add(&mut s, Some(0), 1, 0.01);
-    add(&mut s, None, 4, 0.004);
-    for i in 1..N - 1 {
-        add(&mut k, Some(i), i + 1, 1.5e6 + 2e5 * i as f64);
-    }
-    (m, k, s)
-}
 
 fn bilinear(x: &[C64], a: &Mat<f64>, y: &[C64]) -> C64 {
     let mut t = C64::new(0.0, 0.0);

@@ -3,8 +3,11 @@
 
 // Shared fixtures.
 mod common_data;
+mod numerics;
+mod python_checks;
 mod rom_model;
 mod runner_common;
+mod spring_model;
 
 mod circle_fit;
 mod cli_errors;

@@ -6,6 +6,7 @@
 //! `python3 -m venv .venv && .venv/bin/pip install numpy scipy`). When it is missing the SciPy
 //! test prints a skip notice, unless env CI is set, in which case it fails.
 
+use crate::python_checks::{python_for_scipy, scipy_round_trip};
 use rfmlab::common::C64;
 use rfmlab::fe::matrix_market::{
     export_model, import_model, parse_dof_map, parse_mtx, MmError, MmPaths,
@@ -14,7 +15,7 @@ use rfmlab::fe::model::StructuralModel;
 use rfmlab::frf::full::{FullModel, FullParams};
 use rfmlab::frf::FrfEngine;
 use rfmlab::linalg::synthetic::{add_damping, lattice_model, LatticeParams};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 fn model() -> StructuralModel {
     let mut m = lattice_model(&LatticeParams::new(10, 3, 2, 21)).model;
@@ -64,41 +65,13 @@ fn export_import_is_bit_exact() {
     assert_eq!(sweep(&m), sweep(&back));
 }
 
-fn python() -> Option<PathBuf> {
-    let p = std::env::var_os("RFMLAB_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python"));
-    p.exists().then_some(p)
-}
-
 #[test]
 fn scipy_round_trip_gives_same_frfs() {
-    let Some(py) = python() else {
-        if std::env::var_os("CI").is_some() {
-            panic!(
-                "CI is set but no Python with SciPy was found (set RFMLAB_PYTHON or create .venv)"
-            );
-        }
-        eprintln!("SKIP scipy_round_trip_gives_same_frfs: no Python found (set RFMLAB_PYTHON or create <crate>/.venv with numpy and scipy)");
+    let Some(py) = python_for_scipy("scipy_round_trip_gives_same_frfs") else {
         return;
     };
     let m = model();
-    let ours = tempfile::tempdir().unwrap();
-    let theirs = tempfile::tempdir().unwrap();
-    export_model(&m, ours.path()).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/mm_roundtrip.py");
-    let out = std::process::Command::new(&py)
-        .arg(&script)
-        .arg(ours.path())
-        .arg(theirs.path())
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "mm_roundtrip.py failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let back = import_model(&MmPaths::in_dir(theirs.path())).unwrap();
+    let back = scipy_round_trip(&py, &m);
     assert!(back.c_b.is_some() && back.d_b.is_some());
     let (a, b) = (sweep(&m), sweep(&back));
     let worst = a

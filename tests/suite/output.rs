@@ -1,6 +1,7 @@
 //! Output module: parquet round trips, atomic writes, manifest, results folder, report, and
 //! the Python readers (scripts/check_parquet.py).
 
+use crate::python_checks::{check_parquet, python_for_parquet, script};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -296,33 +297,11 @@ fn report_markdown_layout() {
     assert_eq!(std::fs::read_to_string(&p).unwrap(), expected);
 }
 
-/// Python interpreter for the reader check: RFMLAB_PYTHON, else `<crate root>/.venv/bin/python`.
-fn python() -> PathBuf {
-    std::env::var_os("RFMLAB_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python"))
-}
-
 #[test]
 fn python_polars_and_pandas_read_the_tables() {
-    let py = python();
-    let ok = Command::new(&py)
-        .args(["-c", "import polars, pandas, pyarrow"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !ok {
-        let msg = format!(
-            "Python with polars, pandas and pyarrow not found at '{}' (set RFMLAB_PYTHON, or: \
-             python3 -m venv .venv && .venv/bin/pip install polars pandas pyarrow)",
-            py.display()
-        );
-        if std::env::var_os("CI").is_some() {
-            panic!("{msg}");
-        }
-        eprintln!("SKIPPED python_polars_and_pandas_read_the_tables: {msg}");
+    let Some(py) = python_for_parquet("python_polars_and_pandas_read_the_tables") else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let mut rd = ResultsDir::create(dir.path(), "study").unwrap();
     rd.write_table(&full_table()).unwrap();
@@ -332,20 +311,7 @@ fn python_polars_and_pandas_read_the_tables() {
         .push_f64("e_storage", "Pa", vec![7e6; 5])
         .unwrap();
     rd.write_table(&t).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check_parquet.py");
-    let out = Command::new(&py)
-        .arg(&script)
-        .arg(rd.path())
-        .arg("--json")
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "check_parquet failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let (summary, _) = check_parquet(&py, rd.path());
     let files = summary.as_array().unwrap();
     assert_eq!(files.len(), 2);
     let all = files.iter().find(|f| f["table"] == "all_types").unwrap();
@@ -408,7 +374,7 @@ fn python_polars_and_pandas_read_the_tables() {
         .unwrap();
     assert!(status.success());
     let out = Command::new(&py)
-        .arg(&script)
+        .arg(script("check_parquet.py"))
         .arg(rd.path())
         .output()
         .unwrap();

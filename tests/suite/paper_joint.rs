@@ -11,18 +11,18 @@
 //! (`python3 -m venv .venv && .venv/bin/pip install numpy scipy`). Missing Python skips the
 //! test with a notice, unless env CI is set, in which case it fails.
 
+use crate::numerics::sweep_difference;
+use crate::python_checks::{python_for_scipy, scipy_round_trip};
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use rfmlab::common::{C64, J};
 use rfmlab::fe::joint::{build_joint_model, Divisions, JointSpec, MeshSize};
-use rfmlab::fe::matrix_market::{export_model, import_model, MmPaths};
 use rfmlab::fe::model::StructuralModel;
 use rfmlab::frf::full::{FullModel, FullParams};
 use rfmlab::frf::FrfEngine;
 use rfmlab::linalg::synthetic::to_dense_c64;
 use rfmlab::modes::{complex_modes, ModesParams};
 use std::f64::consts::PI;
-use std::path::{Path, PathBuf};
 
 /// Excitation point: id 2 (x = 150 mm), index 1 in `JointSpec::paper().points`.
 const INPUT: usize = 1;
@@ -206,13 +206,9 @@ fn sensitivities_match_central_differences_on_10mm_joint() {
     let base = fm.sweep(&w, &e, true).unwrap();
     // central difference along direction `dir` with step h (per line E*)
     let cd = |dir: C64, h: f64| -> Vec<C64> {
-        let ep: Vec<C64> = e.iter().map(|&x| x + dir * h).collect();
-        let em: Vec<C64> = e.iter().map(|&x| x - dir * h).collect();
-        let hp = fm.sweep(&w, &ep, false).unwrap();
-        let hm = fm.sweep(&w, &em, false).unwrap();
-        hp.h.iter()
-            .zip(&hm.h)
-            .map(|(p, m)| (p - m) / (dir * (2.0 * h)))
+        sweep_difference(&fm, &w, &e, dir * h)
+            .into_iter()
+            .map(|d| d / (dir * (2.0 * h)))
             .collect()
     };
     let n_dir = 8;
@@ -352,24 +348,11 @@ fn frfs_match_dense_direct_solve_on_coarse_joint() {
     );
 }
 
-fn python() -> Option<PathBuf> {
-    let p = std::env::var_os("RFMLAB_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python"));
-    p.exists().then_some(p)
-}
-
 /// The 10 mm joint (with adherend damping, so C_b and D_b travel too) exported with
 /// `export_model`, rewritten by scipy.io.mmread/mmwrite, imported: same FRFs to 1e-12.
 #[test]
 fn scipy_matrix_market_round_trip_of_the_joint() {
-    let Some(py) = python() else {
-        if std::env::var_os("CI").is_some() {
-            panic!(
-                "CI is set but no Python with SciPy was found (set RFMLAB_PYTHON or create .venv)"
-            );
-        }
-        eprintln!("SKIP scipy_matrix_market_round_trip_of_the_joint: no Python found (set RFMLAB_PYTHON or create <crate>/.venv with numpy and scipy)");
+    let Some(py) = python_for_scipy("scipy_matrix_market_round_trip_of_the_joint") else {
         return;
     };
     let mut s = JointSpec::paper();
@@ -378,22 +361,7 @@ fn scipy_matrix_market_round_trip_of_the_joint() {
     s.damping.rayleigh_beta_s = 1e-6;
     s.damping.structural_loss_factor = 0.002;
     let model = build_joint_model(&s).unwrap().0;
-    let ours = tempfile::tempdir().unwrap();
-    let theirs = tempfile::tempdir().unwrap();
-    export_model(&model, ours.path()).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/mm_roundtrip.py");
-    let out = std::process::Command::new(&py)
-        .arg(&script)
-        .arg(ours.path())
-        .arg(theirs.path())
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "mm_roundtrip.py failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let back = import_model(&MmPaths::in_dir(theirs.path())).unwrap();
+    let back = scipy_round_trip(&py, &model);
     assert_eq!(back.n_dof(), model.n_dof());
     assert!(back.c_b.is_some() && back.d_b.is_some());
     assert_eq!(back.points.len(), model.points.len());

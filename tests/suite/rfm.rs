@@ -2,7 +2,7 @@
 //! the identity of eq. 9 with all DOFs measured, per-line and band-constant estimates, global
 //! recovery of Models 1-5 from the paper's Table 4 'Initial' rows, and the error paths.
 
-use faer::Mat;
+use crate::spring_model::{chain, N};
 use rfmlab::common::{C64, J};
 use rfmlab::frf::{FrfEngine, FrfError, Sweep};
 use rfmlab::material::ConstitutiveModel;
@@ -13,37 +13,10 @@ use rfmlab::rfm::{
 use std::f64::consts::PI;
 
 // ---------------------------------------------------------------- test double: the chain
-const N_DOF: usize = 8;
-
-/// Chain of 8 masses (0.08..0.15 kg). Springs: ground-1 and 1-2 and ground-5 are adhesive
-/// (stiffness E* x area/thickness), the rest steel-like. Modes span about 20-1500 Hz.
-fn chain_matrices() -> (Mat<f64>, Mat<f64>, Mat<f64>) {
-    let mut m = Mat::<f64>::zeros(N_DOF, N_DOF);
-    for i in 0..N_DOF {
-        m[(i, i)] = 0.08 + 0.01 * i as f64;
-    }
-    let mut k = Mat::<f64>::zeros(N_DOF, N_DOF);
-    let mut s = Mat::<f64>::zeros(N_DOF, N_DOF);
-    let add = |a: &mut Mat<f64>, i: Option<usize>, j: usize, v: f64| {
-        a[(j, j)] += v;
-        if let Some(i) = i {
-            a[(i, i)] += v;
-            a[(i, j)] -= v;
-            a[(j, i)] -= v;
-        }
-    };
-    add(&mut s, None, 0, 0.02);
-    add(&mut s, Some(0), 1, 0.01);
-    add(&mut s, None, 4, 0.004);
-    for i in 1..N_DOF - 1 {
-        add(&mut k, Some(i), i + 1, 1.5e6 + 2e5 * i as f64);
-    }
-    (m, k, s)
-}
 
 /// Engine observing DOFs `dofs`, with all observation points as inputs.
 fn engine(dofs: &[usize]) -> DenseEngine {
-    let (m, k, s) = chain_matrices();
+    let (m, k, s) = chain();
     let points = dofs.iter().map(|&d| vec![(d, 1.0)]).collect();
     DenseEngine::new(m, k, s, points, (0..dofs.len()).collect()).expect("valid chain")
 }
@@ -228,7 +201,7 @@ fn test_models_jacobians_match_finite_differences() {
 /// B = E*_X - E*_A at every line and every FRF, whatever E*_A.
 #[test]
 fn eq9_is_exact_when_all_dofs_are_measured() {
-    let dofs: Vec<usize> = (0..N_DOF).collect();
+    let dofs: Vec<usize> = (0..N).collect();
     let e = engine(&dofs);
     let omega = lines_hz(5.0, 800.0, 15.0);
     let truth = TestModel(Law::M4);
@@ -241,8 +214,8 @@ fn eq9_is_exact_when_all_dofs_are_measured() {
     let lin = rfm_linearise(&e, &data, &sweep, &lines, Denominator::MeasuredColumn).unwrap();
     let mut worst: f64 = 0.0;
     for l in 0..omega.len() {
-        for k in 0..N_DOF {
-            let b = lin.b[l * N_DOF + k];
+        for k in 0..N {
+            let b = lin.b[l * N + k];
             worst = worst.max(rel(b, e_x[l] - e_a[l]));
         }
     }
@@ -251,7 +224,7 @@ fn eq9_is_exact_when_all_dofs_are_measured() {
     // The analytical denominator is only a linearisation: clearly not exact.
     let lin_a = rfm_linearise(&e, &data, &sweep, &lines, Denominator::Analytical).unwrap();
     let worst_a = (0..lin_a.b.len())
-        .map(|i| rel(lin_a.b[i], e_x[i / N_DOF] - e_a[i / N_DOF]))
+        .map(|i| rel(lin_a.b[i], e_x[i / N] - e_a[i / N]))
         .fold(0.0, f64::max);
     assert!(
         worst_a > 1e-3,
@@ -500,7 +473,7 @@ fn bad_inputs_give_typed_errors() {
         Err(RfmError::ParamCount { .. })
     ));
     // Engine whose inputs do not cover the measured points.
-    let (m, k, s) = chain_matrices();
+    let (m, k, s) = chain();
     let narrow = DenseEngine::new(
         m,
         k,

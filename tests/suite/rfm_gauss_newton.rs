@@ -10,6 +10,7 @@
 //! * With the paper's measured-column denominator, the two agree to second order in the noise:
 //!   their difference is small against the distance to the truth and scales like noise^2.
 
+use crate::spring_model::{chain, N};
 use faer::linalg::solvers::Solve;
 use faer::Mat;
 use rfmlab::common::{C64, J};
@@ -17,33 +18,8 @@ use rfmlab::material::ConstitutiveModel;
 use rfmlab::rfm::{rfm_global, Denominator, DenseEngine, MeasuredColumn, RfmParams, StopReason};
 use std::f64::consts::PI;
 
-const N: usize = 8;
 const MEASURED: [usize; 4] = [1, 3, 5, 7];
 const INPUT_POINT: usize = 1; // observation point 1 = DOF 3
-
-fn chain() -> (Mat<f64>, Mat<f64>, Mat<f64>) {
-    let mut m = Mat::<f64>::zeros(N, N);
-    for i in 0..N {
-        m[(i, i)] = 0.08 + 0.01 * i as f64;
-    }
-    let mut k = Mat::<f64>::zeros(N, N);
-    let mut s = Mat::<f64>::zeros(N, N);
-    let add = |a: &mut Mat<f64>, i: Option<usize>, j: usize, v: f64| {
-        a[(j, j)] += v;
-        if let Some(i) = i {
-            a[(i, i)] += v;
-            a[(i, j)] -= v;
-            a[(j, i)] -= v;
-        }
-    };
-    add(&mut s, None, 0, 0.02);
-    add(&mut s, Some(0), 1, 0.01);
-    add(&mut s, None, 4, 0.004);
-    for i in 1..N - 1 {
-        add(&mut k, Some(i), i + 1, 1.5e6 + 2e5 * i as f64);
-    }
-    (m, k, s)
-}
 
 /// Paper Model 3 (SLS): E0 + j w eta1 E1 / (E1 + j w eta1), p = [E0, E1, eta1].
 #[derive(Debug)]

@@ -3,6 +3,7 @@
 //! values) to 1e-6 relative; tables read back with their units; the report has the paper's
 //! table layouts; IEM and Model 1 bands on Model 4 data.
 
+use crate::python_checks::{check_parquet, python_for_parquet};
 use crate::runner_common::*;
 
 use rfmlab::output::Table;
@@ -27,6 +28,7 @@ fn each_model_recovers_its_truth_from_table4_initial_rows() {
             (10.0, 490.0),
             &[(&format!("model{k}"), initial_of(k))],
             "[analyses]\nper_line = false\nsensitivity = false\nfigures = false\n",
+            "full",
         );
         let file = write(&dir.path().join(format!("m{k}.toml")), &text);
         let study = rfmlab::study::load(&file).unwrap();
@@ -69,7 +71,7 @@ fn model4_data_band_iem_tables_and_report() {
     let analyses = "[analyses]\nper_line = true\nsensitivity = true\nfigures = true\n\
 [[analyses.band_constant]]\ncenter_hz = 22.0\nwidth_hz = 10.0\n\
 [[analyses.iem]]\ncenter_hz = 22.0\nwidth_hz = 10.0\n";
-    let text = study_text_engine(
+    let text = study_text(
         "m4",
         &out,
         &data,
@@ -143,40 +145,10 @@ fn model4_data_band_iem_tables_and_report() {
 /// The output module's pattern: scripts/check_parquet.py reads every table with polars and
 /// pandas and checks the units metadata (skipped without Python, unless CI is set).
 fn python_reads_tables(dir: &std::path::Path, n_tables: usize) {
-    use std::path::{Path, PathBuf};
-    let py: PathBuf = std::env::var_os("RFMLAB_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python"));
-    let ok = std::process::Command::new(&py)
-        .args(["-c", "import polars, pandas, pyarrow"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !ok {
-        let msg = format!(
-            "Python with polars, pandas and pyarrow not found at '{}' (set RFMLAB_PYTHON)",
-            py.display()
-        );
-        if std::env::var_os("CI").is_some() {
-            panic!("{msg}");
-        }
-        eprintln!("SKIPPED the Python read-back: {msg}");
+    let Some(py) = python_for_parquet("the Python read-back") else {
         return;
-    }
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check_parquet.py");
-    let out = std::process::Command::new(&py)
-        .arg(&script)
-        .arg(dir)
-        .arg("--json")
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "check_parquet failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let summary: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    };
+    let (summary, stdout) = check_parquet(&py, dir);
     assert_eq!(
         summary.as_array().map(|a| a.len()),
         Some(n_tables),
@@ -196,12 +168,7 @@ fn leakage_model_removes_the_h1_estimator_bias() {
     use rfmlab::experiment::{simulate_level, ChainParams, Mode, Shaker};
     use rfmlab::frf::{FullModel, FullParams};
     let dir = tempfile::tempdir().unwrap();
-    let study = rfmlab::study::parse_str(
-        &format!("[study]\nname = \"gen\"\n{STRUCTURE}"),
-        std::path::Path::new("gen.toml"),
-    )
-    .unwrap();
-    let built = rfmlab::study::build::build_model(&study.structure, "gen.toml").unwrap();
+    let built = built_structure();
     let engine = FullModel::new(&built.model, &[built.excitation], FullParams::default()).unwrap();
     let law = rfmlab::material::model_from_name("model4", None).unwrap();
     let (truth, _) = rfmlab::material::paper_table4(4);
@@ -260,7 +227,7 @@ shaker = { armature_mass = 0.02, stinger_stiffness = 5.0e5 }\n";
     // (IEM E', E'' rel. error, band E', E'' rel. error, worst Model 4 parameter rel. error)
     let run = |with_model: bool| {
         let out = dir.path().join(format!("out{with_model}"));
-        let mut text = study_text_engine(
+        let mut text = study_text(
             "leak",
             &out,
             &data,
@@ -349,7 +316,7 @@ fn rom_cache_is_reused_and_keyed() {
     let analyses = "[analyses]\nper_line = false\nsensitivity = false\nfigures = false\n";
     let run = |tol: &str| {
         let out = dir.path().join("out");
-        let text = study_text_engine(
+        let text = study_text(
             "cache",
             &out,
             &data,

@@ -8,8 +8,9 @@ use rfmlab::frf::{FrfEngine, FullModel, FullParams};
 use rfmlab::material::ConstitutiveModel;
 use std::path::{Path, PathBuf};
 
-/// The paper's structure on a 10 mm mesh (fast; unconverged like the paper's Mesh 1).
-pub const STRUCTURE: &str = r#"
+/// The paper's structure on a 10 mm mesh (fast; unconverged like the paper's Mesh 1), without
+/// its points.
+const STRUCTURE_NO_POINTS: &str = r#"
 [structure]
 name = "paper bonded joint, 10 mm mesh"
 source = "mesher"
@@ -32,23 +33,29 @@ rho = 1160.0
 element_size = 0.010
 integration = "full"
 point_mapping = "interpolate"
-[[structure.points]]
-id = 1
-position = [0.100, 0.010, 0.010]
-direction = "+y"
-[[structure.points]]
-id = 2
-position = [0.150, 0.010, 0.010]
-direction = "+y"
-[[structure.points]]
-id = 3
-position = [0.200, 0.010, 0.010]
-direction = "+y"
-[[structure.points]]
-id = 4
-position = [0.250, 0.010, 0.010]
-direction = "+y"
 "#;
+
+/// The `[structure]` TOML of the tests: [`STRUCTURE_NO_POINTS`] with points 1-4 at x = 100,
+/// 150, 200 and 250 mm on the top face, all "+y" (excitation at point 2).
+pub fn structure() -> String {
+    let mut s = STRUCTURE_NO_POINTS.to_string();
+    for (id, x) in [(1, "0.100"), (2, "0.150"), (3, "0.200"), (4, "0.250")] {
+        s.push_str(&format!(
+            "[[structure.points]]\nid = {id}\nposition = [{x}, 0.010, 0.010]\ndirection = \"+y\"\n"
+        ));
+    }
+    s
+}
+
+/// [`structure`] built as the study runner builds it.
+pub fn built_structure() -> rfmlab::study::build::BuiltModel {
+    let study = rfmlab::study::parse_str(
+        &format!("[study]\nname = \"gen\"\n{}", structure()),
+        Path::new("gen.toml"),
+    )
+    .expect("structure parses");
+    rfmlab::study::build::build_model(&study.structure, "gen.toml").expect("model builds")
+}
 
 /// Frequency lines of the test data (Hz).
 pub fn lines_hz(lo: f64, hi: f64, step: f64) -> Vec<f64> {
@@ -65,13 +72,7 @@ pub fn write_data(
     truth: &[f64],
     freq_hz: &[f64],
 ) {
-    let study = rfmlab::study::parse_str(
-        &format!("[study]\nname = \"gen\"\n{STRUCTURE}"),
-        Path::new("gen.toml"),
-    )
-    .expect("structure parses");
-    let built =
-        rfmlab::study::build::build_model(&study.structure, "gen.toml").expect("model builds");
+    let built = built_structure();
     let engine =
         FullModel::new(&built.model, &[built.excitation], FullParams::default()).expect("engine");
     let omega: Vec<f64> = freq_hz
@@ -110,20 +111,9 @@ pub fn write_data(
     rfmlab::data::frf_set_to_uff(&set, path, false).expect("write UFF");
 }
 
-/// A study file text: structure + one level + models (name, [(param, initial)]) + settings.
+/// A study file text: structure + one level + models (name, [(param, initial)]) + settings,
+/// solved with the engine `engine` ("full" or "rom").
 pub fn study_text(
-    name: &str,
-    out: &Path,
-    data: &Path,
-    band: (f64, f64),
-    models: &[(&str, Vec<(String, f64)>)],
-    analyses: &str,
-) -> String {
-    study_text_engine(name, out, data, band, models, analyses, "full")
-}
-
-/// [`study_text`] with the engine ("full" or "rom").
-pub fn study_text_engine(
     name: &str,
     out: &Path,
     data: &Path,
@@ -133,8 +123,9 @@ pub fn study_text_engine(
     engine: &str,
 ) -> String {
     let mut s = format!(
-        "[study]\nname = \"{name}\"\noutput_dir = \"{}\"\n{STRUCTURE}\n[measurements]\nband_hz = [{}, {}]\n[[measurements.levels]]\nname = \"L1\"\nfiles = [\"{}\"]\n",
+        "[study]\nname = \"{name}\"\noutput_dir = \"{}\"\n{}\n[measurements]\nband_hz = [{}, {}]\n[[measurements.levels]]\nname = \"L1\"\nfiles = [\"{}\"]\n",
         out.display(),
+        structure(),
         band.0,
         band.1,
         data.display()

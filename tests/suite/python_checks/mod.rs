@@ -1,0 +1,100 @@
+//! The Python interoperability checks shared by several test files: finding the interpreter
+//! (skipped when missing, unless `CI` is set), the SciPy Matrix Market round trip
+//! (matrix_market.rs, paper_joint.rs) and the Parquet read-back (output.rs, runner.rs).
+#![allow(dead_code)]
+
+use rfmlab::fe::matrix_market::{export_model, import_model, MmPaths};
+use rfmlab::fe::model::StructuralModel;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// `RFMLAB_PYTHON`, else `<crate>/.venv/bin/python` (which may not exist).
+pub fn interpreter() -> PathBuf {
+    std::env::var_os("RFMLAB_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python"))
+}
+
+/// `<crate>/scripts/<name>`.
+pub fn script(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scripts")
+        .join(name)
+}
+
+/// The interpreter for the SciPy round trips, when it exists. None (with a skip notice naming
+/// `test`) when it does not; panics instead when `CI` is set.
+pub fn python_for_scipy(test: &str) -> Option<PathBuf> {
+    let py = interpreter();
+    if py.exists() {
+        return Some(py);
+    }
+    if std::env::var_os("CI").is_some() {
+        panic!("CI is set but no Python with SciPy was found (set RFMLAB_PYTHON or create .venv)");
+    }
+    eprintln!("SKIP {test}: no Python found (set RFMLAB_PYTHON or create <crate>/.venv with numpy and scipy)");
+    None
+}
+
+/// `model` exported with `export_model`, rewritten by scipy.io.mmread/mmwrite
+/// (scripts/mm_roundtrip.py) and imported again.
+pub fn scipy_round_trip(py: &Path, model: &StructuralModel) -> StructuralModel {
+    let ours = tempfile::tempdir().unwrap();
+    let theirs = tempfile::tempdir().unwrap();
+    export_model(model, ours.path()).unwrap();
+    let out = Command::new(py)
+        .arg(script("mm_roundtrip.py"))
+        .arg(ours.path())
+        .arg(theirs.path())
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "mm_roundtrip.py failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    import_model(&MmPaths::in_dir(theirs.path())).unwrap()
+}
+
+/// The interpreter for the Parquet read-back, when it imports polars, pandas and pyarrow. None
+/// (with a skip notice naming `test`) when it does not; panics instead when `CI` is set.
+pub fn python_for_parquet(test: &str) -> Option<PathBuf> {
+    let py = interpreter();
+    let ok = Command::new(&py)
+        .args(["-c", "import polars, pandas, pyarrow"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if ok {
+        return Some(py);
+    }
+    let msg = format!(
+        "Python with polars, pandas and pyarrow not found at '{}' (set RFMLAB_PYTHON, or: \
+         python3 -m venv .venv && .venv/bin/pip install polars pandas pyarrow)",
+        py.display()
+    );
+    if std::env::var_os("CI").is_some() {
+        panic!("{msg}");
+    }
+    eprintln!("SKIPPED {test}: {msg}");
+    None
+}
+
+/// scripts/check_parquet.py --json on a results folder: reads every table with polars and
+/// pandas and checks the units metadata. Asserts that it succeeded; its JSON summary and stdout.
+pub fn check_parquet(py: &Path, dir: &Path) -> (serde_json::Value, String) {
+    let out = Command::new(py)
+        .arg(script("check_parquet.py"))
+        .arg(dir)
+        .arg("--json")
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "check_parquet failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let summary = serde_json::from_str(&stdout).unwrap();
+    (summary, stdout)
+}

@@ -1,0 +1,35 @@
+//! The small dense spring-mass chain of the RFM, IEM and Gauss-Newton tests (rfm.rs, iem.rs,
+//! rfm_gauss_newton.rs).
+#![allow(dead_code)]
+
+use faer::Mat;
+
+/// Number of DOFs (masses) of the chain.
+pub const N: usize = 8;
+
+/// Chain of 8 masses (0.08..0.15 kg), as (M, K_b, S) with K = K_b + E* S. Springs: ground-1,
+/// 1-2 and ground-5 are adhesive (stiffness E* x area/thickness, in S), the rest steel-like (in
+/// K_b). Modes span about 20-1500 Hz.
+pub fn chain() -> (Mat<f64>, Mat<f64>, Mat<f64>) {
+    let mut m = Mat::<f64>::zeros(N, N);
+    for i in 0..N {
+        m[(i, i)] = 0.08 + 0.01 * i as f64;
+    }
+    let mut k = Mat::<f64>::zeros(N, N);
+    let mut s = Mat::<f64>::zeros(N, N);
+    let add = |a: &mut Mat<f64>, i: Option<usize>, j: usize, v: f64| {
+        a[(j, j)] += v;
+        if let Some(i) = i {
+            a[(i, i)] += v;
+            a[(i, j)] -= v;
+            a[(j, i)] -= v;
+        }
+    };
+    add(&mut s, None, 0, 0.02);
+    add(&mut s, Some(0), 1, 0.01);
+    add(&mut s, None, 4, 0.004);
+    for i in 1..N - 1 {
+        add(&mut k, Some(i), i + 1, 1.5e6 + 2e5 * i as f64);
+    }
+    (m, k, s)
+}
