@@ -148,6 +148,40 @@ fn bad_study_files_exit_2_naming_file_and_key_and_keep_earlier_results() {
         &g.replace("E0 = 8e6", "E0 = 1e30"),
         &["models[0].initial", "singular"],
     );
+    // The measurement model and the truth sidecar.
+    let with_meas = |extra: &str| {
+        g.replace(
+            "[[measurements.levels]]",
+            &format!("{extra}[[measurements.levels]]"),
+        )
+    };
+    expect_input_error(
+        &s,
+        "bad_window",
+        &with_meas("[measurements.estimator]\nwindow = \"hanning\"\nblock_s = 1.0\n"),
+        &["measurements.estimator.window", "\"hann\""],
+    );
+    expect_input_error(
+        &s,
+        "bad_block",
+        &with_meas("[measurements.estimator]\nwindow = \"hann\"\nblock_s = -1.0\n"),
+        &["measurements.estimator.block_s"],
+    );
+    expect_input_error(
+        &s,
+        "bad_samples",
+        &with_meas("[measurements.estimator]\nwindow = \"hann\"\nblock_s = 1.0\nfs_hz = 1000.5\n"),
+        &["measurements.estimator.fs_hz", "whole number of samples"],
+    );
+    expect_input_error(
+        &s,
+        "missing_truth",
+        &g.replace(
+            "[[measurements.levels]]",
+            "truth = \"nope.truth.json\"\n[[measurements.levels]]",
+        ),
+        &["measurements.truth", "nope.truth.json"],
+    );
     // The results of the good run are untouched by the failed runs.
     assert_eq!(snapshot(&s.out), before);
     // No stray temporary folders either.
