@@ -798,6 +798,28 @@ fn draw_figures(
                 .with_color(col),
             );
         }
+        if let Some(t) = &ld.truth {
+            let e: Option<Vec<C64>> = ld.freq_hz.iter().map(|f| t.modulus(TWO_PI * f)).collect();
+            if let Some(e) = e {
+                let grey = (120, 120, 120);
+                st.push(
+                    Curve::line(
+                        "truth (simulated data)",
+                        ld.freq_hz.clone(),
+                        e.iter().map(|z| z.re).collect(),
+                    )
+                    .with_color(grey),
+                );
+                lo.push(
+                    Curve::line(
+                        "truth (simulated data)",
+                        ld.freq_hz.clone(),
+                        e.iter().map(|z| z.im).collect(),
+                    )
+                    .with_color(grey),
+                );
+            }
+        }
         if !st.is_empty() {
             let stem = format!("fig_modulus_{lv}");
             crate::plot::modulus_figure(
