@@ -116,46 +116,55 @@ impl Line {
 /// does not depend on the instruction set used. acc: 6 blk rows of LANES (h, dh, sh; re, im).
 #[inline(always)]
 fn near_kernel(line: &Line, blk: usize, d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
+    // Fixed-size arrays (no slices, no aliasing between accumulators) so that every `t` loop
+    // compiles to whole-register vector instructions; the arithmetic and its order are the
+    // same per lane as a scalar loop would do.
+    #[inline(always)]
+    fn lanes(v: &[f64], o: usize) -> &[f64; LANES] {
+        v[o..o + LANES].try_into().expect("LANES-wide chunk")
+    }
     let n_pad = line.n_pad;
     for c in (0..n_pad).step_by(LANES) {
+        let (nr, ni) = (lanes(&line.nu_re, c), lanes(&line.nu_im, c));
         let mut wr = [0.0; LANES];
         let mut wi = [0.0; LANES];
         let mut vr = [0.0; LANES];
         let mut vi = [0.0; LANES];
         for t in 0..LANES {
-            let (nr, ni) = (line.nu_re[c + t], line.nu_im[c + t]);
-            let re = 1.0 + (d.re * nr - d.im * ni);
-            let im = d.re * ni + d.im * nr;
+            let re = 1.0 + (d.re * nr[t] - d.im * ni[t]);
+            let im = d.re * ni[t] + d.im * nr[t];
             let inv = 1.0 / (re * re + im * im);
             wr[t] = re * inv;
             wi[t] = -im * inv;
             let w2r = wr[t] * wr[t] - wi[t] * wi[t];
             let w2i = 2.0 * wr[t] * wi[t];
-            vr[t] = nr * w2r - ni * w2i;
-            vi[t] = nr * w2i + ni * w2r;
+            vr[t] = nr[t] * w2r - ni[t] * w2i;
+            vi[t] = nr[t] * w2i + ni[t] * w2r;
         }
         for q in 0..blk {
             let o = q * n_pad + c;
-            let ar = &line.a_re[o..o + LANES];
-            let ai = &line.a_im[o..o + LANES];
-            {
-                let (hr, rest) = acc[6 * q..6 * q + 6].split_at_mut(1);
-                let hi = &mut rest[0];
-                for t in 0..LANES {
-                    hr[0][t] += ar[t] * wr[t] - ai[t] * wi[t];
-                    hi[t] += ar[t] * wi[t] + ai[t] * wr[t];
-                }
+            let (ar, ai) = (lanes(&line.a_re, o), lanes(&line.a_im, o));
+            let (mut hr, mut hi) = (acc[6 * q], acc[6 * q + 1]);
+            for t in 0..LANES {
+                hr[t] += ar[t] * wr[t] - ai[t] * wi[t];
+                hi[t] += ar[t] * wi[t] + ai[t] * wr[t];
             }
+            acc[6 * q] = hr;
+            acc[6 * q + 1] = hi;
             if with_d {
-                let sr = &line.s_re[o..o + LANES];
-                let si = &line.s_im[o..o + LANES];
-                let rows = &mut acc[6 * q + 2..6 * q + 6];
+                let (sr, si) = (lanes(&line.s_re, o), lanes(&line.s_im, o));
+                let (mut dr, mut di) = (acc[6 * q + 2], acc[6 * q + 3]);
+                let (mut xr, mut xi) = (acc[6 * q + 4], acc[6 * q + 5]);
                 for t in 0..LANES {
-                    rows[0][t] -= ar[t] * vr[t] - ai[t] * vi[t];
-                    rows[1][t] -= ar[t] * vi[t] + ai[t] * vr[t];
-                    rows[2][t] += sr[t] * wr[t] - si[t] * wi[t];
-                    rows[3][t] += sr[t] * wi[t] + si[t] * wr[t];
+                    dr[t] -= ar[t] * vr[t] - ai[t] * vi[t];
+                    di[t] -= ar[t] * vi[t] + ai[t] * vr[t];
+                    xr[t] += sr[t] * wr[t] - si[t] * wi[t];
+                    xi[t] += sr[t] * wi[t] + si[t] * wr[t];
                 }
+                acc[6 * q + 2] = dr;
+                acc[6 * q + 3] = di;
+                acc[6 * q + 4] = xr;
+                acc[6 * q + 5] = xi;
             }
         }
     }
