@@ -89,50 +89,51 @@ impl<'a> BasisBuilder<'a> {
         y
     }
 
-    /// M-orthonormalise the columns of `x` against the M-orthonormal columns of `q` and each
-    /// other (classical Gram-Schmidt twice against q, modified twice within); columns whose
-    /// M-norm falls below `tol` times their norm before are dropped.
-    fn orthonormalise(&self, q: &Mat<f64>, mut x: Mat<f64>, tol: f64) -> Mat<f64> {
-        let n = x.nrows();
-        let k = x.ncols();
-        let r = q.ncols();
-        let mnorm = |c: &[f64]| {
-            let mc = self.m_times(c);
-            (
-                c.iter()
-                    .zip(&mc)
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>()
-                    .max(0.0)
-                    .sqrt(),
-                mc,
-            )
-        };
-        let norm0: Vec<f64> = (0..k)
-            .map(|j| mnorm(&x.col(j).iter().copied().collect::<Vec<_>>()).0)
-            .collect();
+    /// (sqrt(c^T M c), M c), the M-norm clamped at 0 against rounding.
+    fn m_norm(&self, c: &[f64]) -> (f64, Vec<f64>) {
+        let mc = self.m_times(c);
+        let nrm = c
+            .iter()
+            .zip(&mc)
+            .map(|(a, b)| a * b)
+            .sum::<f64>()
+            .max(0.0)
+            .sqrt();
+        (nrm, mc)
+    }
+
+    /// The M-norms of the columns of `x`.
+    fn col_m_norms(&self, x: &Mat<f64>) -> Vec<f64> {
+        (0..x.ncols())
+            .map(|j| self.m_norm(&x.col(j).iter().copied().collect::<Vec<_>>()).0)
+            .collect()
+    }
+
+    /// Modified Gram-Schmidt, twice, of each column of `x` against the (q, M q) pairs of
+    /// `fixed` and then the columns kept before it; a column is kept, M-normalised, when its
+    /// M-norm is still above `tol` times `norm0` (its norm before any orthogonalisation).
+    fn gram_schmidt(
+        &self,
+        x: &Mat<f64>,
+        norm0: &[f64],
+        fixed: &[(Vec<f64>, Vec<f64>)],
+        tol: f64,
+    ) -> Vec<(Vec<f64>, Vec<f64>)> {
         let mut kept: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
-        let qcols: Vec<(Vec<f64>, Vec<f64>)> = (0..r)
-            .map(|j| {
-                let c: Vec<f64> = q.col(j).iter().copied().collect();
-                let mc = self.m_times(&c);
-                (c, mc)
-            })
-            .collect();
-        for j in 0..k {
+        for j in 0..x.ncols() {
             if !(norm0[j] > 0.0 && norm0[j].is_finite()) {
                 continue;
             }
             let mut col: Vec<f64> = x.col(j).iter().copied().collect();
             for _ in 0..2 {
-                for (qq, mq) in qcols.iter().chain(kept.iter()) {
+                for (q, mq) in fixed.iter().chain(kept.iter()) {
                     let c: f64 = mq.iter().zip(&col).map(|(a, b)| a * b).sum();
-                    for (ci, qi) in col.iter_mut().zip(qq) {
+                    for (ci, qi) in col.iter_mut().zip(q) {
                         *ci -= c * qi;
                     }
                 }
             }
-            let (nrm, mcol) = mnorm(&col);
+            let (nrm, mcol) = self.m_norm(&col);
             if nrm > tol * norm0[j] {
                 let inv = 1.0 / nrm;
                 kept.push((
@@ -141,33 +142,31 @@ impl<'a> BasisBuilder<'a> {
                 ));
             }
         }
-        x = Mat::zeros(n, kept.len());
-        for (j, (c, _)) in kept.iter().enumerate() {
-            for i in 0..n {
-                x[(i, j)] = c[i];
-            }
-        }
-        x
+        kept
     }
 
-    /// M-orthogonalise the columns of `x` against V and each other, deflate, append the kept
-    /// ones to V; returns them (n x kept).
-    fn absorb(&mut self, mut x: Mat<f64>) -> Mat<f64> {
-        let n = x.nrows();
-        let k = x.ncols();
-        // norms before
-        let norm0: Vec<f64> = (0..k)
+    /// M-orthonormalise the columns of `x` against the M-orthonormal columns of `q` and each
+    /// other ([`Self::gram_schmidt`]); columns whose M-norm falls below `tol` times their norm
+    /// before are dropped.
+    fn orthonormalise(&self, q: &Mat<f64>, x: Mat<f64>, tol: f64) -> Mat<f64> {
+        let norm0 = self.col_m_norms(&x);
+        let qcols: Vec<(Vec<f64>, Vec<f64>)> = (0..q.ncols())
             .map(|j| {
-                let col: Vec<f64> = x.col(j).iter().copied().collect();
-                let mx = self.m_times(&col);
-                col.iter()
-                    .zip(&mx)
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>()
-                    .max(0.0)
-                    .sqrt()
+                let c: Vec<f64> = q.col(j).iter().copied().collect();
+                let mc = self.m_times(&c);
+                (c, mc)
             })
             .collect();
+        let kept = self.gram_schmidt(&x, &norm0, &qcols, tol);
+        Mat::from_fn(x.nrows(), kept.len(), |i, j| kept[j].0[i])
+    }
+
+    /// M-orthogonalise the columns of `x` against V (block classical Gram-Schmidt, twice) and
+    /// each other ([`Self::gram_schmidt`]), deflate, and append the kept ones to V.
+    fn absorb(&mut self, mut x: Mat<f64>) {
+        let n = x.nrows();
+        let k = x.ncols();
+        let norm0 = self.col_m_norms(&x);
         let r = self.v.ncols();
         if r > 0 {
             for _ in 0..2 {
@@ -190,49 +189,16 @@ impl<'a> BasisBuilder<'a> {
                 );
             }
         }
-        let mut kept: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
-        for j in 0..k {
-            if !(norm0[j] > 0.0 && norm0[j].is_finite()) {
-                continue;
-            }
-            let mut col: Vec<f64> = x.col(j).iter().copied().collect();
-            for _ in 0..2 {
-                for (q, mq) in &kept {
-                    let c: f64 = mq.iter().zip(&col).map(|(a, b)| a * b).sum();
-                    for (ci, qi) in col.iter_mut().zip(q) {
-                        *ci -= c * qi;
-                    }
-                }
-            }
-            let mcol = self.m_times(&col);
-            let nrm = col
-                .iter()
-                .zip(&mcol)
-                .map(|(a, b)| a * b)
-                .sum::<f64>()
-                .max(0.0)
-                .sqrt();
-            if nrm > self.tol * norm0[j] {
-                let inv = 1.0 / nrm;
-                kept.push((
-                    col.iter().map(|v| v * inv).collect(),
-                    mcol.iter().map(|v| v * inv).collect(),
-                ));
-            }
-        }
-        let kk = kept.len();
-        let mut out = Mat::<f64>::zeros(n, kk);
+        let kept = self.gram_schmidt(&x, &norm0, &[], self.tol);
         let r0 = self.v.ncols();
-        self.v.resize_with(n, r0 + kk, |_, _| 0.0);
-        self.mv.resize_with(n, r0 + kk, |_, _| 0.0);
+        self.v.resize_with(n, r0 + kept.len(), |_, _| 0.0);
+        self.mv.resize_with(n, r0 + kept.len(), |_, _| 0.0);
         for (j, (q, mq)) in kept.iter().enumerate() {
             for i in 0..n {
-                out[(i, j)] = q[i];
                 self.v[(i, r0 + j)] = q[i];
                 self.mv[(i, r0 + j)] = mq[i];
             }
         }
-        out
     }
 
     /// Bring the Krylov sequence at `e_ref` to `depth` blocks (creating it if new).

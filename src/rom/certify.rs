@@ -214,6 +214,25 @@ pub(crate) fn certificate_error(
     Ok(worst)
 }
 
+/// Enrichment level `level` (0 first): 2^level (n0 - 1) + 1 log-spaced E_ref over the range,
+/// snapped to the previous levels' values (nested grids, so their Krylov sequences continue),
+/// each brought to depth d0 + level * step blocks.
+fn enrich(basis: &mut BasisBuilder<'_>, params: &RomParams, level: usize) -> Result<(), RomError> {
+    let e_lo = params.range.e_storage_pa.0;
+    let e_hi = params.range.e_storage_pa.1.hypot(params.range.e_loss_pa.1);
+    let n_e = ((params.n_e_ref_initial - 1) << level) + 1;
+    let depth = params.krylov_depth_initial + level * params.krylov_depth_step;
+    for e in logspace(e_lo, e_hi, n_e) {
+        let e = basis
+            .e_refs()
+            .into_iter()
+            .find(|&x| ((x - e) / e).abs() < 1e-9)
+            .unwrap_or(e);
+        basis.extend(e, depth)?;
+    }
+    Ok(())
+}
+
 /// A reduced model without a certificate: the first enrichment level of [`build_rom`]
 /// (`params.n_e_ref_initial` log-spaced E_ref over the range, `krylov_depth_initial` blocks
 /// each), no full-model solves. For the modes the observation points see (their Krylov
@@ -231,11 +250,7 @@ pub fn build_basis_only(
     validate(model, inputs, params)?;
     let pat = ModelPattern::new(model)?;
     let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
-    let e_lo = params.range.e_storage_pa.0;
-    let e_hi = params.range.e_storage_pa.1.hypot(params.range.e_loss_pa.1);
-    for e in logspace(e_lo, e_hi, params.n_e_ref_initial) {
-        basis.extend(e, params.krylov_depth_initial)?;
-    }
+    enrich(&mut basis, params, 0)?;
     let mut rom = reduce(model, &basis, inputs, params);
     if let Some(ax) = dof_axes {
         rom.m_axes_r = Some(project_axis_masses(model, &basis, ax)?);
@@ -264,25 +279,13 @@ pub fn build_rom(
 
     let pat = ModelPattern::new(model)?;
     let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
-    let e_lo = params.range.e_storage_pa.0;
-    let e_hi = params.range.e_storage_pa.1.hypot(params.range.e_loss_pa.1);
     let mut history = Vec::new();
     let mut best: Option<(ReducedModel, f64)> = None;
     let mut levels = 0;
     for level in 0..params.max_levels.max(1) {
         levels = level + 1;
         let t = Instant::now();
-        let n_e = ((params.n_e_ref_initial - 1) << level) + 1;
-        let depth = params.krylov_depth_initial + level * params.krylov_depth_step;
-        for e in logspace(e_lo, e_hi, n_e) {
-            // snap to the previous level's values exactly (nested grids)
-            let e = basis
-                .e_refs()
-                .into_iter()
-                .find(|&x| ((x - e) / e).abs() < 1e-9)
-                .unwrap_or(e);
-            basis.extend(e, depth)?;
-        }
+        enrich(&mut basis, params, level)?;
         let rom = reduce(model, &basis, inputs, params);
         seconds_basis += t.elapsed().as_secs_f64();
         let t = Instant::now();
