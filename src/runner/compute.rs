@@ -50,6 +50,9 @@ pub struct GlobalResult {
     pub result: RfmResult,
     /// Leakage-corrected passes (0 without `[measurements.estimator]`).
     pub leakage_passes: usize,
+    /// The H1 estimator's leakage bias at the updated parameters, `[line][k]` flattened (empty
+    /// without `[measurements.estimator]`).
+    pub leakage_bias: Vec<C64>,
     /// Predicted measurement at the initial and updated parameters, `[line][k]` flattened
     /// like [`MeasuredColumn::accelerance`]: the analytical accelerance, plus the H1
     /// estimator's leakage bias when the study states its estimator.
@@ -207,7 +210,7 @@ pub fn analyse_level(
             "Model 1 RFM over {:.1}..{:.1} Hz at level {lname}",
             band.0, band.1
         );
-        let (r, _, passes) = fixed_point(
+        let (r, passes) = fixed_point(
             leak,
             &sub,
             |c, prev: Option<&BandResult>| {
@@ -296,7 +299,7 @@ pub fn analyse_level(
             .map(|w| w / std::f64::consts::TAU)
             .collect();
         type IemFit = (CircleFitResult, Result<IemResult, String>);
-        let ((circle, r), _, passes) = fixed_point(
+        let ((circle, r), passes) = fixed_point(
             leak,
             &sub,
             |c, prev: Option<&IemFit>| {
@@ -363,10 +366,9 @@ pub fn analyse_level(
         });
     }
     let x_rows = rows(&col.accelerance, n_out);
-    let specs_laws: Vec<&Box<dyn ConstitutiveModel>> = specs.iter().map(|(_, (_, l))| *l).collect();
     for (i, (m, law)) in specs {
         let law_modulus = |p: &[f64], w: f64| law.modulus(p, w);
-        let (r, _, passes) = fixed_point(
+        let (r, passes) = fixed_point(
             leak,
             col,
             |c, prev: Option<&RfmResult>| {
@@ -407,20 +409,24 @@ pub fn analyse_level(
             .iter()
             .map(|&w| law.modulus(&m.initial, w))
             .collect();
-        let predicted = |p: &[f64], modulus: &[C64], what: &str| -> Result<Vec<C64>, RunError> {
-            let (mut h, _) = analytical_column(engine, col, modulus, false)
-                .map_err(|e| analysis(format!("FRFs of {} {what}", m.name), e))?;
-            if let Some(l) = leak {
-                let bias = l.bias(col, &|w| law.modulus(p, w))?;
+        // (predicted measurement, its leakage bias: empty without a leakage model)
+        let predicted =
+            |p: &[f64], modulus: &[C64], what: &str| -> Result<(Vec<C64>, Vec<C64>), RunError> {
+                let (mut h, _) = analytical_column(engine, col, modulus, false)
+                    .map_err(|e| analysis(format!("FRFs of {} {what}", m.name), e))?;
+                let bias = match leak {
+                    Some(l) => l.bias(col, &|w| law.modulus(p, w))?,
+                    None => Vec::new(),
+                };
                 h.iter_mut().zip(&bias).for_each(|(x, b)| *x += b);
-            }
-            Ok(h)
-        };
-        let initial_frf = predicted(&m.initial, &initial_modulus, "initial")?;
-        let updated_frf = predicted(&r.params, &r.modulus, "updated")?;
+                Ok((h, bias))
+            };
+        let (initial_frf, _) = predicted(&m.initial, &initial_modulus, "initial")?;
+        let (updated_frf, leakage_bias) = predicted(&r.params, &r.modulus, "updated")?;
         let (ri, ru) = (rows(&initial_frf, n_out), rows(&updated_frf, n_out));
         global.push(GlobalResult {
             leakage_passes: passes,
+            leakage_bias,
             frac_initial: crate::correlation::frac_per_frf(&x_rows, &ri),
             frac_updated: crate::correlation::frac_per_frf(&x_rows, &ru),
             scc_initial: crate::correlation::scc_curve(&x_rows, &ri),
@@ -446,17 +452,14 @@ pub fn analyse_level(
             step: format!("{lname}: per-line RFM"),
             total: 0,
         });
-        let best = global.iter().zip(&specs_laws).max_by(|(a, _), (b, _)| {
-            let mean = |g: &GlobalResult| g.frac_updated.iter().sum::<f64>();
-            mean(a).total_cmp(&mean(b))
-        });
-        let data = match (leak, best) {
-            (Some(l), Some((g, law))) => {
+        let mean = |g: &GlobalResult| g.frac_updated.iter().sum::<f64>();
+        let best = global.iter().max_by(|a, b| mean(a).total_cmp(&mean(b)));
+        let data = match best.filter(|g| !g.leakage_bias.is_empty()) {
+            Some(g) => {
                 per_line_leakage_from = Some(g.result.model_name.clone());
-                let bias = l.bias(col, &|w| law.modulus(&g.result.params, w))?;
-                Leakage::corrected(col, &bias)
+                Leakage::corrected(col, &g.leakage_bias)
             }
-            _ => col.clone(),
+            None => col.clone(),
         };
         let r = crate::rfm::rfm_per_line(engine, &data, &e_start, &params)
             .map_err(|e| analysis(format!("per-line RFM at level {lname}"), e))?;

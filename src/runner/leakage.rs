@@ -110,28 +110,26 @@ impl Leakage<'_> {
 /// Run `fit` on the data, then, with a leakage model, again on the data corrected by the
 /// bias of the previous fit until its parameters (`params_of`) change by less than
 /// [`PASS_TOLERANCE`] (relative, largest component). `modulus(p, w)` is E*(w) (Pa) at
-/// parameters `p`. Returns the last fit, the bias it was fitted against (empty without a
-/// model) and the number of corrected passes.
+/// parameters `p`. Returns the last fit and the number of corrected passes.
 pub fn fixed_point<T>(
     leak: Option<&Leakage<'_>>,
     col: &MeasuredColumn,
     mut fit: impl FnMut(&MeasuredColumn, Option<&T>) -> Result<T, RunError>,
     params_of: impl Fn(&T) -> Vec<f64>,
     modulus: &(dyn Fn(&[f64], f64) -> C64 + Sync),
-) -> Result<(T, Vec<C64>, usize), RunError> {
+) -> Result<(T, usize), RunError> {
     let mut r = fit(col, None)?;
     let Some(leak) = leak else {
-        return Ok((r, Vec::new(), 0));
+        return Ok((r, 0));
     };
     if params_of(&r).is_empty() {
         // The fit failed (e.g. an IEM that found no mode): nothing to correct with.
-        return Ok((r, Vec::new(), 0));
+        return Ok((r, 0));
     }
-    let mut bias = Vec::new();
     let mut passes = 0;
     for _ in 0..MAX_PASSES {
         let p = params_of(&r);
-        bias = leak.bias(col, &|w| modulus(&p, w))?;
+        let bias = leak.bias(col, &|w| modulus(&p, w))?;
         let next = fit(&Leakage::corrected(col, &bias), Some(&r))?;
         passes += 1;
         let change = params_of(&r)
@@ -144,5 +142,5 @@ pub fn fixed_point<T>(
             break;
         }
     }
-    Ok((r, bias, passes))
+    Ok((r, passes))
 }

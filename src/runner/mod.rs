@@ -138,15 +138,16 @@ pub struct LevelData {
 /// The constitutive law and parameters (in the law's order, SI) that made a simulated level.
 #[derive(Clone, Debug)]
 pub struct LevelTruth {
+    /// The law's name as in the sidecar (`"model4"`, ...).
     pub law: String,
+    pub model: std::sync::Arc<dyn crate::material::ConstitutiveModel>,
     pub params: Vec<f64>,
 }
 
 impl LevelTruth {
     /// E*(w) of the truth (Pa).
-    pub fn modulus(&self, omega_rad_s: f64) -> Option<C64> {
-        let law = crate::material::model_from_name(&self.law, None).ok()?;
-        Some(law.modulus(&self.params, omega_rad_s))
+    pub fn modulus(&self, omega_rad_s: f64) -> C64 {
+        self.model.modulus(&self.params, omega_rad_s)
     }
 }
 
@@ -188,7 +189,11 @@ fn read_truth(study: &Study, path: &Path, name: &str) -> Result<Option<LevelTrut
             .ok_or_else(|| bad(format!("level {name}: no parameter {p} of {law}")))?;
         params.push(x);
     }
-    Ok(Some(LevelTruth { law, params }))
+    Ok(Some(LevelTruth {
+        law,
+        model: m.into(),
+        params,
+    }))
 }
 
 fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) -> RunError {

@@ -404,7 +404,7 @@ fn build_report(
     let mut truth_errors: Vec<(String, f64, f64)> = Vec::new();
     for (ld, r) in levels.iter().zip(results) {
         // Truth E*(f) (MPa columns) and the errors of `e` against it.
-        let truth_at = |f: f64| ld.truth.as_ref().and_then(|t| t.modulus(TWO_PI * f));
+        let truth_at = |f: f64| ld.truth.as_ref().map(|t| t.modulus(TWO_PI * f));
         for m in &r.iem {
             let p = paper_mode(&r.level, m.center_hz);
             t2.push(vec![
@@ -799,26 +799,24 @@ fn draw_figures(
             );
         }
         if let Some(t) = &ld.truth {
-            let e: Option<Vec<C64>> = ld.freq_hz.iter().map(|f| t.modulus(TWO_PI * f)).collect();
-            if let Some(e) = e {
-                let grey = (120, 120, 120);
-                st.push(
-                    Curve::line(
-                        "truth (simulated data)",
-                        ld.freq_hz.clone(),
-                        e.iter().map(|z| z.re).collect(),
-                    )
-                    .with_color(grey),
-                );
-                lo.push(
-                    Curve::line(
-                        "truth (simulated data)",
-                        ld.freq_hz.clone(),
-                        e.iter().map(|z| z.im).collect(),
-                    )
-                    .with_color(grey),
-                );
-            }
+            let e: Vec<C64> = ld.freq_hz.iter().map(|f| t.modulus(TWO_PI * f)).collect();
+            let grey = (120, 120, 120);
+            st.push(
+                Curve::line(
+                    "truth (simulated data)",
+                    ld.freq_hz.clone(),
+                    e.iter().map(|z| z.re).collect(),
+                )
+                .with_color(grey),
+            );
+            lo.push(
+                Curve::line(
+                    "truth (simulated data)",
+                    ld.freq_hz.clone(),
+                    e.iter().map(|z| z.im).collect(),
+                )
+                .with_color(grey),
+            );
         }
         if !st.is_empty() {
             let stem = format!("fig_modulus_{lv}");
