@@ -6,6 +6,7 @@
 //! All loops are sequential and in a fixed order, so results are bit-identical whatever the
 //! number of threads of the caller.
 
+pub mod blocked;
 pub mod synthetic;
 
 use crate::common::C64;

@@ -13,34 +13,57 @@
 //! the modes of (K, M) seen by B to an accuracy that grows with k (Lanczos), so the basis
 //! holds both the static responses and the low modes at every E_ref.
 
-use super::sparse::{spmv_add, ModelPattern, SpdSolver};
+use super::sparse::{ModelPattern, SpdSolver};
 use super::RomError;
-use faer::linalg::matmul::matmul;
+use crate::linalg::blocked::{nn_acc, tn, Csr};
 use faer::sparse::linalg::cholesky::SymbolicCholesky;
-use faer::{Accum, Mat, Par};
+use faer::Mat;
+use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Per-E_ref Krylov state.
 struct KrylovState {
     e_ref: f64,
     depth: usize,
-    /// This sequence's own M-orthonormal blocks Q_0..Q_k (n x sum k), kept independently of
-    /// the global deflation so that the Krylov recurrence keeps converging to higher modes
-    /// even when its new directions are already (nearly) in V.
+    /// This sequence's own M-orthonormal blocks Q_0..Q_k (n x sum k) and M Q, kept
+    /// independently of the global deflation so that the Krylov recurrence keeps converging
+    /// to higher modes even when its new directions are already (nearly) in V.
     q: Mat<f64>,
+    mq: Mat<f64>,
     /// Columns of the last block Q_k inside `q`; empty when the sequence is exhausted.
     last: std::ops::Range<usize>,
 }
 
-/// Incrementally built M-orthonormal basis V (n x n_r) with MV = M V.
+/// A sequence's new blocks: the raw K^-1 M Q_k (before the global M-orthogonalisation).
+type RawBlocks = Vec<Mat<f64>>;
+
+/// Incrementally built M-orthonormal basis V (n x n_r) with the products A V and the
+/// projections V^T A V of every model matrix A (M, K_b, S, C_b, D_b in the order of
+/// [`ModelPattern`]), so that reducing the model and extending the basis never revisit the
+/// columns already there.
 pub struct BasisBuilder<'a> {
     pat: &'a ModelPattern<'a>,
-    chol: std::sync::Arc<SymbolicCholesky<usize>>,
+    chol: Arc<SymbolicCholesky<usize>>,
+    /// Row-major copies of the model matrices (same order as `av`).
+    ops: Vec<Csr>,
     /// Unit loads at the observation points (n x n_out).
     pub b_all: Mat<f64>,
     v: Mat<f64>,
-    mv: Mat<f64>,
+    /// A V for each model matrix; `av[0]` is M V.
+    av: Vec<Mat<f64>>,
+    /// V^T A V for each model matrix (upper blocks computed, lower mirrored).
+    proj: Vec<Mat<f64>>,
     tol: f64,
     states: Vec<KrylovState>,
+    /// Cholesky factors of K_b + e S, kept while the basis grows (a later enrichment level
+    /// continues the same sequences); [`Self::drop_factors`] releases them.
+    factors: Vec<(f64, Arc<SpdSolver>)>,
+}
+
+/// Append the columns of `x` to `m` (same row count).
+fn append_cols(m: &mut Mat<f64>, x: &Mat<f64>) {
+    let (n, r0) = (m.nrows(), m.ncols());
+    m.resize_with(n, r0 + x.ncols(), |i, j| x[(i, j - r0)]);
 }
 
 impl<'a> BasisBuilder<'a> {
@@ -60,15 +83,20 @@ impl<'a> BasisBuilder<'a> {
                 b_all[(d, i)] += w;
             }
         }
-        let chol = std::sync::Arc::new(SpdSolver::symbolic(pat)?);
+        let chol = Arc::new(SpdSolver::symbolic(pat)?);
+        let ops: Vec<Csr> = pat.matrices().iter().map(|a| Csr::from_csc(a)).collect();
+        let nop = ops.len();
         Ok(BasisBuilder {
             pat,
             chol,
+            ops,
             b_all,
             v: Mat::zeros(n, 0),
-            mv: Mat::zeros(n, 0),
+            av: (0..nop).map(|_| Mat::zeros(n, 0)).collect(),
+            proj: (0..nop).map(|_| Mat::zeros(0, 0)).collect(),
             tol: deflation_tol,
             states: Vec::new(),
+            factors: Vec::new(),
         })
     }
 
@@ -81,218 +109,282 @@ impl<'a> BasisBuilder<'a> {
     pub fn e_refs(&self) -> Vec<f64> {
         self.states.iter().map(|s| s.e_ref).collect()
     }
-
-    /// M x for a column.
-    fn m_times(&self, x: &[f64]) -> Vec<f64> {
-        let mut y = vec![0.0; x.len()];
-        spmv_add(&self.pat.model.m, x, 1.0, &mut y);
-        y
+    /// A V for model matrix `k` (0 M, 1 K_b, 2 S, then C_b, D_b when present).
+    pub(crate) fn av(&self, k: usize) -> &Mat<f64> {
+        &self.av[k]
+    }
+    /// M X (exact, sparse product).
+    fn m_times(&self, x: &Mat<f64>) -> Mat<f64> {
+        self.ops[0].mul(x.as_ref())
     }
 
-    /// (sqrt(c^T M c), M c), the M-norm clamped at 0 against rounding.
-    fn m_norm(&self, c: &[f64]) -> (f64, Vec<f64>) {
-        let mc = self.m_times(c);
-        let nrm = c
-            .iter()
-            .zip(&mc)
-            .map(|(a, b)| a * b)
-            .sum::<f64>()
-            .max(0.0)
-            .sqrt();
-        (nrm, mc)
+    /// Drop the kept factors (memory).
+    pub(crate) fn drop_factors(&mut self) {
+        self.factors.clear();
     }
 
-    /// The M-norms of the columns of `x`.
-    fn col_m_norms(&self, x: &Mat<f64>) -> Vec<f64> {
-        (0..x.ncols())
-            .map(|j| self.m_norm(&x.col(j).iter().copied().collect::<Vec<_>>()).0)
-            .collect()
-    }
-
-    /// Modified Gram-Schmidt, twice, of each column of `x` against the (q, M q) pairs of
-    /// `fixed` and then the columns kept before it; a column is kept, M-normalised, when its
-    /// M-norm is still above `tol` times `norm0` (its norm before any orthogonalisation).
-    fn gram_schmidt(
+    /// M-orthonormalise the columns of `x` (with `mx` = M x) against the M-orthonormal
+    /// columns of `q` (with `mq` = M q): block classical Gram-Schmidt twice, then modified
+    /// Gram-Schmidt twice within the block. A column is kept, M-normalised, when its M-norm
+    /// is still above `tol` times its M-norm before. Returns (Q, M Q) of the kept columns,
+    /// M Q recomputed exactly.
+    fn orthonormalise(
         &self,
-        x: &Mat<f64>,
-        norm0: &[f64],
-        fixed: &[(Vec<f64>, Vec<f64>)],
+        q: &Mat<f64>,
+        mq: &Mat<f64>,
+        mut x: Mat<f64>,
+        mut mx: Mat<f64>,
         tol: f64,
-    ) -> Vec<(Vec<f64>, Vec<f64>)> {
-        let mut kept: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
-        for j in 0..x.ncols() {
+    ) -> (Mat<f64>, Mat<f64>) {
+        let k = x.ncols();
+        let norm0: Vec<f64> = (0..k)
+            .map(|j| {
+                x.col(j)
+                    .iter()
+                    .zip(mx.col(j).iter())
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>()
+                    .max(0.0)
+                    .sqrt()
+            })
+            .collect();
+        if q.ncols() > 0 {
+            for _ in 0..2 {
+                let c = tn(mq.as_ref(), x.as_ref());
+                nn_acc(x.as_mut(), q.as_ref(), c.as_ref(), -1.0);
+                nn_acc(mx.as_mut(), mq.as_ref(), c.as_ref(), -1.0);
+            }
+        }
+        let mut kept: Vec<usize> = Vec::new();
+        for j in 0..k {
             if !(norm0[j] > 0.0 && norm0[j].is_finite()) {
                 continue;
             }
-            let mut col: Vec<f64> = x.col(j).iter().copied().collect();
             for _ in 0..2 {
-                for (q, mq) in fixed.iter().chain(kept.iter()) {
-                    let c: f64 = mq.iter().zip(&col).map(|(a, b)| a * b).sum();
-                    for (ci, qi) in col.iter_mut().zip(q) {
-                        *ci -= c * qi;
+                for &i in &kept {
+                    let c: f64 = mx
+                        .col(i)
+                        .iter()
+                        .zip(x.col(j).iter())
+                        .map(|(a, b)| a * b)
+                        .sum();
+                    let (xi, xj) = x.two_cols_mut(i, j);
+                    for (a, b) in xj.iter_mut().zip(xi.iter()) {
+                        *a -= c * b;
+                    }
+                    let (mi, mj) = mx.two_cols_mut(i, j);
+                    for (a, b) in mj.iter_mut().zip(mi.iter()) {
+                        *a -= c * b;
                     }
                 }
             }
-            let (nrm, mcol) = self.m_norm(&col);
+            let nrm = x
+                .col(j)
+                .iter()
+                .zip(mx.col(j).iter())
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                .max(0.0)
+                .sqrt();
             if nrm > tol * norm0[j] {
                 let inv = 1.0 / nrm;
-                kept.push((
-                    col.iter().map(|v| v * inv).collect(),
-                    mcol.iter().map(|v| v * inv).collect(),
-                ));
+                x.col_mut(j).iter_mut().for_each(|v| *v *= inv);
+                mx.col_mut(j).iter_mut().for_each(|v| *v *= inv);
+                kept.push(j);
             }
         }
-        kept
+        let out = Mat::from_fn(x.nrows(), kept.len(), |i, j| x[(i, kept[j])]);
+        let m_out = self.m_times(&out);
+        (out, m_out)
     }
 
-    /// M-orthonormalise the columns of `x` against the M-orthonormal columns of `q` and each
-    /// other ([`Self::gram_schmidt`]); columns whose M-norm falls below `tol` times their norm
-    /// before are dropped.
-    fn orthonormalise(&self, q: &Mat<f64>, x: Mat<f64>, tol: f64) -> Mat<f64> {
-        let norm0 = self.col_m_norms(&x);
-        let qcols: Vec<(Vec<f64>, Vec<f64>)> = (0..q.ncols())
-            .map(|j| {
-                let c: Vec<f64> = q.col(j).iter().copied().collect();
-                let mc = self.m_times(&c);
-                (c, mc)
+    /// M-orthogonalise the columns of `x` against V and each other ([`Self::orthonormalise`]),
+    /// deflate with `deflation_tol`, append the kept ones to V and update A V and V^T A V.
+    /// Returns the number of columns kept.
+    fn absorb(&mut self, x: Mat<f64>) -> usize {
+        let mx = self.m_times(&x);
+        let (q, mq) = self.orthonormalise(&self.v, &self.av[0], x, mx, self.tol);
+        let k = q.ncols();
+        if k == 0 {
+            return 0;
+        }
+        let r0 = self.v.ncols();
+        let aq: Vec<Mat<f64>> = (0..self.ops.len())
+            .map(|i| {
+                if i == 0 {
+                    mq.clone()
+                } else {
+                    self.ops[i].mul(q.as_ref())
+                }
             })
             .collect();
-        let kept = self.gram_schmidt(&x, &norm0, &qcols, tol);
-        Mat::from_fn(x.nrows(), kept.len(), |i, j| kept[j].0[i])
-    }
-
-    /// M-orthogonalise the columns of `x` against V (block classical Gram-Schmidt, twice) and
-    /// each other ([`Self::gram_schmidt`]), deflate, and append the kept ones to V.
-    fn absorb(&mut self, mut x: Mat<f64>) {
-        let n = x.nrows();
-        let k = x.ncols();
-        let norm0 = self.col_m_norms(&x);
-        let r = self.v.ncols();
-        if r > 0 {
-            for _ in 0..2 {
-                let mut c = Mat::<f64>::zeros(r, k);
-                matmul(
-                    c.as_mut(),
-                    Accum::Replace,
-                    self.mv.transpose(),
-                    x.as_ref(),
-                    1.0,
-                    Par::Seq,
-                );
-                matmul(
-                    x.as_mut(),
-                    Accum::Add,
-                    self.v.as_ref(),
-                    c.as_ref(),
-                    -1.0,
-                    Par::Seq,
-                );
+        for (i, a_q) in aq.iter().enumerate() {
+            let top = tn(self.v.as_ref(), a_q.as_ref()); // V^T A Q (r0 x k)
+            let corner = tn(q.as_ref(), a_q.as_ref()); // Q^T A Q
+            let p = &mut self.proj[i];
+            let old = std::mem::replace(p, Mat::zeros(r0 + k, r0 + k));
+            for c in 0..r0 {
+                for r in 0..r0 {
+                    p[(r, c)] = old[(r, c)];
+                }
+            }
+            for c in 0..k {
+                for r in 0..r0 {
+                    p[(r, r0 + c)] = top[(r, c)];
+                    p[(r0 + c, r)] = top[(r, c)];
+                }
+                for r in 0..k {
+                    p[(r0 + r, r0 + c)] = 0.5 * (corner[(r, c)] + corner[(c, r)]);
+                }
             }
         }
-        let kept = self.gram_schmidt(&x, &norm0, &[], self.tol);
-        let r0 = self.v.ncols();
-        self.v.resize_with(n, r0 + kept.len(), |_, _| 0.0);
-        self.mv.resize_with(n, r0 + kept.len(), |_, _| 0.0);
-        for (j, (q, mq)) in kept.iter().enumerate() {
-            for i in 0..n {
-                self.v[(i, r0 + j)] = q[i];
-                self.mv[(i, r0 + j)] = mq[i];
-            }
+        append_cols(&mut self.v, &q);
+        for (i, a_q) in aq.iter().enumerate() {
+            append_cols(&mut self.av[i], a_q);
         }
+        k
     }
 
     /// Bring the Krylov sequence at `e_ref` to `depth` blocks (creating it if new).
     pub fn extend(&mut self, e_ref: f64, depth: usize) -> Result<(), RomError> {
-        let idx = match self.states.iter().position(|s| s.e_ref == e_ref) {
-            Some(i) => i,
-            None => {
-                self.states.push(KrylovState {
-                    e_ref,
-                    depth: 0,
-                    q: Mat::zeros(self.pat.model.n_dof(), 0),
-                    last: 0..0,
-                });
-                self.states.len() - 1
-            }
-        };
-        if self.states[idx].depth >= depth {
-            return Ok(());
-        }
-        if self.states[idx].depth > 0 && self.states[idx].last.is_empty() {
-            return Ok(()); // exhausted
-        }
-        let chol = self.chol.clone();
-        let solver = SpdSolver::new(&chol, self.pat, e_ref)?;
-        while self.states[idx].depth < depth {
-            let st = &self.states[idx];
-            let mut x = if st.depth == 0 {
-                self.b_all.clone()
-            } else {
-                let mut mq = Mat::<f64>::zeros(st.q.nrows(), st.last.len());
-                for (jj, j) in st.last.clone().enumerate() {
-                    let col: Vec<f64> = st.q.col(j).iter().copied().collect();
-                    let y = self.m_times(&col);
-                    for (i, v) in y.into_iter().enumerate() {
-                        mq[(i, jj)] = v;
-                    }
+        self.extend_all(&[(e_ref, depth)])
+    }
+
+    /// Bring the Krylov sequences at several E_ref to their depths. The sequences are
+    /// independent of V and of each other, so they run in parallel; their blocks are then
+    /// absorbed into V in the order of `targets` (block order within each), which makes V
+    /// the same as with one [`Self::extend`] per target in that order.
+    pub fn extend_all(&mut self, targets: &[(f64, usize)]) -> Result<(), RomError> {
+        let mut work: Vec<(usize, usize)> = Vec::new(); // (state index, depth)
+        for &(e_ref, depth) in targets {
+            let idx = match self.states.iter().position(|s| s.e_ref == e_ref) {
+                Some(i) => i,
+                None => {
+                    let n = self.pat.model.n_dof();
+                    self.states.push(KrylovState {
+                        e_ref,
+                        depth: 0,
+                        q: Mat::zeros(n, 0),
+                        mq: Mat::zeros(n, 0),
+                        last: 0..0,
+                    });
+                    self.states.len() - 1
                 }
-                mq
             };
-            solver.solve_in_place(x.as_mut());
-            // the sequence's own block: M-orthonormal against its previous blocks, relative
-            // deflation at rounding level only (1e-13)
-            let own = self.orthonormalise(&self.states[idx].q, x.clone(), 1e-13);
-            self.absorb(x);
-            let st = &mut self.states[idx];
-            st.depth += 1;
-            let r0 = st.q.ncols();
-            let k = own.ncols();
-            let n = st.q.nrows();
-            st.q.resize_with(n, r0 + k, |i, j| own[(i, j - r0)]);
-            st.last = r0..r0 + k;
-            if k == 0 {
-                break;
+            let st = &self.states[idx];
+            if st.depth >= depth || (st.depth > 0 && st.last.is_empty()) {
+                continue; // deep enough, or exhausted
+            }
+            work.push((idx, depth));
+        }
+        // factors first (two at a time at most: each is a few hundred MB on a fine mesh)
+        let missing: Vec<f64> = work
+            .iter()
+            .map(|&(i, _)| self.states[i].e_ref)
+            .filter(|e| !self.factors.iter().any(|(x, _)| x == e))
+            .collect();
+        for pair in missing.chunks(2) {
+            let made: Vec<Result<SpdSolver, RomError>> = pair
+                .par_iter()
+                .map(|&e| SpdSolver::new(self.chol.clone(), self.pat, e))
+                .collect();
+            for (&e, f) in pair.iter().zip(made) {
+                self.factors.push((e, Arc::new(f?)));
+            }
+        }
+        let jobs: Vec<(usize, usize, Arc<SpdSolver>, KrylovState)> = work
+            .iter()
+            .map(|&(i, depth)| {
+                let e = self.states[i].e_ref;
+                let f = self
+                    .factors
+                    .iter()
+                    .find(|(x, _)| *x == e)
+                    .map(|(_, f)| f.clone())
+                    .expect("factor made above");
+                let st = std::mem::replace(
+                    &mut self.states[i],
+                    KrylovState {
+                        e_ref: e,
+                        depth: 0,
+                        q: Mat::zeros(0, 0),
+                        mq: Mat::zeros(0, 0),
+                        last: 0..0,
+                    },
+                );
+                (i, depth, f, st)
+            })
+            .collect();
+        let this = &*self;
+        let done: Vec<(usize, KrylovState, RawBlocks)> = jobs
+            .into_par_iter()
+            .map(|(i, depth, f, mut st)| {
+                let raw = this.run_sequence(&mut st, depth, &f);
+                (i, st, raw)
+            })
+            .collect();
+        let mut all_raw: Vec<(usize, RawBlocks)> = Vec::new();
+        for (i, st, raw) in done {
+            self.states[i] = st;
+            all_raw.push((i, raw));
+        }
+        // absorb in the order of `targets`
+        for &(i, _) in &work {
+            if let Some(pos) = all_raw.iter().position(|(j, _)| *j == i) {
+                let (_, raw) = all_raw.swap_remove(pos);
+                for x in raw {
+                    self.absorb(x);
+                }
             }
         }
         Ok(())
     }
 
-    /// V^T A V for a sparse A (symmetrised).
-    pub(crate) fn project(&self, a: &crate::fe::model::SpMat) -> Mat<f64> {
-        let n = self.v.nrows();
-        let r = self.v.ncols();
-        let mut av = Mat::<f64>::zeros(n, r);
-        for j in 0..r {
-            let col: Vec<f64> = self.v.col(j).iter().copied().collect();
-            let mut y = vec![0.0; n];
-            spmv_add(a, &col, 1.0, &mut y);
-            for (i, v) in y.into_iter().enumerate() {
-                av[(i, j)] = v;
+    /// Continue one Krylov sequence to `depth` blocks; returns its new raw blocks.
+    fn run_sequence(&self, st: &mut KrylovState, depth: usize, f: &SpdSolver) -> RawBlocks {
+        let mut raw = Vec::new();
+        while st.depth < depth {
+            let mut x = if st.depth == 0 {
+                self.b_all.clone()
+            } else {
+                Mat::from_fn(st.q.nrows(), st.last.len(), |i, j| {
+                    st.mq[(i, st.last.start + j)]
+                })
+            };
+            f.solve_cols(x.as_mut());
+            // the sequence's own block: M-orthonormal against its previous blocks, relative
+            // deflation at rounding level only (1e-13)
+            let mx = self.m_times(&x);
+            let (own, m_own) = self.orthonormalise(&st.q, &st.mq, x.clone(), mx, 1e-13);
+            raw.push(x);
+            st.depth += 1;
+            let r0 = st.q.ncols();
+            let k = own.ncols();
+            append_cols(&mut st.q, &own);
+            append_cols(&mut st.mq, &m_own);
+            st.last = r0..r0 + k;
+            if k == 0 {
+                break;
             }
         }
-        let mut out = Mat::<f64>::zeros(r, r);
-        matmul(
-            out.as_mut(),
-            Accum::Replace,
-            self.v.transpose(),
-            av.as_ref(),
-            1.0,
-            Par::Seq,
-        );
+        raw
+    }
+
+    /// V^T A V for model matrix `k`.
+    pub(crate) fn project_op(&self, k: usize) -> Mat<f64> {
+        self.proj[k].clone()
+    }
+
+    /// V^T A V for a sparse A that is not one of the model matrices (symmetrised).
+    pub(crate) fn project(&self, a: &crate::fe::model::SpMat) -> Mat<f64> {
+        let av = Csr::from_csc(a).mul(self.v.as_ref());
+        let out = tn(self.v.as_ref(), av.as_ref());
+        let r = out.nrows();
         Mat::from_fn(r, r, |i, j| 0.5 * (out[(i, j)] + out[(j, i)]))
     }
 
     /// V^T X for a dense X (n x k).
     pub(crate) fn project_vecs(&self, x: &Mat<f64>) -> Mat<f64> {
-        let mut out = Mat::<f64>::zeros(self.v.ncols(), x.ncols());
-        matmul(
-            out.as_mut(),
-            Accum::Replace,
-            self.v.transpose(),
-            x.as_ref(),
-            1.0,
-            Par::Seq,
-        );
-        out
+        tn(self.v.as_ref(), x.as_ref())
     }
 }

@@ -85,33 +85,29 @@ fn validate(model: &StructuralModel, inputs: &[usize], p: &RomParams) -> Result<
     Ok(())
 }
 
-/// Reduced model from the current basis.
+/// Reduced model from the current basis (the builder keeps its projections up to date).
 fn reduce(
     model: &StructuralModel,
     basis: &BasisBuilder<'_>,
     inputs: &[usize],
     p: &RomParams,
 ) -> ReducedModel {
-    let mut sb = faer::Mat::<f64>::zeros(model.n_dof(), model.points.len());
-    for j in 0..model.points.len() {
-        let col: Vec<f64> = basis.b_all.col(j).iter().copied().collect();
-        let mut y = vec![0.0; col.len()];
-        super::sparse::spmv_add(&model.s, &col, 1.0, &mut y);
-        for (i, v) in y.into_iter().enumerate() {
-            sb[(i, j)] = v;
-        }
-    }
+    let has_c = model.c_b.is_some();
     ReducedModel {
         n_r: basis.size(),
         n_out: model.points.len(),
         inputs: inputs.to_vec(),
-        m_r: basis.project(&model.m),
-        k_r: basis.project(&model.k_b),
-        s_r: basis.project(&model.s),
-        c_r: model.c_b.as_ref().map(|c| basis.project(c)),
-        d_r: model.d_b.as_ref().map(|d| basis.project(d)),
+        m_r: basis.project_op(0),
+        k_r: basis.project_op(1),
+        s_r: basis.project_op(2),
+        c_r: has_c.then(|| basis.project_op(3)),
+        d_r: model
+            .d_b
+            .as_ref()
+            .map(|_| basis.project_op(if has_c { 4 } else { 3 })),
         b_r: basis.project_vecs(&basis.b_all),
-        sb_r: basis.project_vecs(&sb),
+        // V^T S B = (S V)^T B, S symmetric
+        sb_r: crate::linalg::blocked::tn(basis.av(2).as_ref(), basis.b_all.as_ref()),
         range: p.range,
         m_axes_r: None,
     }
@@ -222,14 +218,18 @@ fn enrich(basis: &mut BasisBuilder<'_>, params: &RomParams, level: usize) -> Res
     let e_hi = params.range.e_storage_pa.1.hypot(params.range.e_loss_pa.1);
     let n_e = ((params.n_e_ref_initial - 1) << level) + 1;
     let depth = params.krylov_depth_initial + level * params.krylov_depth_step;
-    for e in logspace(e_lo, e_hi, n_e) {
-        let e = basis
-            .e_refs()
-            .into_iter()
-            .find(|&x| ((x - e) / e).abs() < 1e-9)
-            .unwrap_or(e);
-        basis.extend(e, depth)?;
-    }
+    let targets: Vec<(f64, usize)> = logspace(e_lo, e_hi, n_e)
+        .into_iter()
+        .map(|e| {
+            let e = basis
+                .e_refs()
+                .into_iter()
+                .find(|&x| ((x - e) / e).abs() < 1e-9)
+                .unwrap_or(e);
+            (e, depth)
+        })
+        .collect();
+    basis.extend_all(&targets)?;
     Ok(())
 }
 
@@ -251,6 +251,7 @@ pub fn build_basis_only(
     let pat = ModelPattern::new(model)?;
     let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
     enrich(&mut basis, params, 0)?;
+    basis.drop_factors();
     let mut rom = reduce(model, &basis, inputs, params);
     if let Some(ax) = dof_axes {
         rom.m_axes_r = Some(project_axis_masses(model, &basis, ax)?);
@@ -297,6 +298,7 @@ pub fn build_rom(
             break;
         }
     }
+    basis.drop_factors();
     let (rom, err) = best.ok_or_else(|| RomError::Params("max_levels must be >= 1".into()))?;
     let cert = Certificate {
         max_rel_error: err,

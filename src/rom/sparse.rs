@@ -15,22 +15,6 @@ use faer::sparse::linalg::lu::{factorize_symbolic_lu, NumericLu, SymbolicLu};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side};
 
-/// y += alpha * A x for a real CSC matrix and a real vector.
-pub(crate) fn spmv_add(a: &SpMat, x: &[f64], alpha: f64, y: &mut [f64]) {
-    let sym = a.symbolic();
-    let rows = sym.row_idx();
-    let val = a.val();
-    for (j, &xj) in x.iter().enumerate().take(a.ncols()) {
-        if xj == 0.0 {
-            continue;
-        }
-        let s = alpha * xj;
-        for p in sym.col_range(j) {
-            y[rows[p]] += val[p] * s;
-        }
-    }
-}
-
 /// The union pattern of several square matrices, and for each matrix the map
 /// (source value index, destination value index).
 pub(crate) struct UnionPattern {
@@ -115,16 +99,21 @@ pub(crate) struct ModelPattern<'a> {
 impl<'a> ModelPattern<'a> {
     pub fn new(model: &'a StructuralModel) -> Result<Self, RomError> {
         let mut mats: Vec<&SpMat> = vec![&model.m, &model.k_b, &model.s];
-        if let Some(c) = &model.c_b {
-            mats.push(c);
-        }
-        if let Some(d) = &model.d_b {
-            mats.push(d);
-        }
+        mats.extend(model.c_b.as_ref());
+        mats.extend(model.d_b.as_ref());
         Ok(ModelPattern {
             model,
             pat: UnionPattern::new(&mats)?,
         })
+    }
+
+    /// The model matrices in the pattern's order: M, K_b, S, then C_b and D_b when present.
+    pub fn matrices(&self) -> Vec<&'a SpMat> {
+        let m = self.model;
+        let mut v: Vec<&SpMat> = vec![&m.m, &m.k_b, &m.s];
+        v.extend(m.c_b.as_ref());
+        v.extend(m.d_b.as_ref());
+        v
     }
 
     /// Values of K_b + e S on the union pattern.
@@ -156,12 +145,16 @@ impl<'a> ModelPattern<'a> {
 }
 
 /// Sparse Cholesky of the real SPD matrix K_b + E_ref S; symbolic analysis shared.
-pub(crate) struct SpdSolver<'s> {
-    symbolic: &'s SymbolicCholesky<usize>,
+pub(crate) struct SpdSolver {
+    symbolic: std::sync::Arc<SymbolicCholesky<usize>>,
     values: Vec<f64>,
 }
 
-impl<'s> SpdSolver<'s> {
+/// Columns per independent triangular solve in [`SpdSolver::solve_cols`] (fixed, so that
+/// the result does not depend on the thread count).
+const SOLVE_GROUP: usize = 16;
+
+impl SpdSolver {
     pub fn symbolic(pat: &ModelPattern<'_>) -> Result<SymbolicCholesky<usize>, RomError> {
         factorize_symbolic_cholesky(
             pat.pat.sym.as_ref(),
@@ -173,7 +166,7 @@ impl<'s> SpdSolver<'s> {
     }
 
     pub fn new(
-        symbolic: &'s SymbolicCholesky<usize>,
+        symbolic: std::sync::Arc<SymbolicCholesky<usize>>,
         pat: &ModelPattern<'_>,
         e_ref: f64,
     ) -> Result<Self, RomError> {
@@ -200,6 +193,13 @@ impl<'s> SpdSolver<'s> {
                 ))
             })?;
         Ok(SpdSolver { symbolic, values })
+    }
+
+    /// Solve (K_b + E_ref S) X = RHS in place, groups of columns in parallel.
+    pub fn solve_cols(&self, rhs: MatMut<'_, f64>) {
+        use rayon::prelude::*;
+        rhs.par_col_chunks_mut(SOLVE_GROUP)
+            .for_each(|chunk| self.solve_in_place(chunk));
     }
 
     /// Solve (K_b + E_ref S) X = RHS in place (columns of a column-major n x k matrix).
