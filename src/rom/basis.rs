@@ -118,6 +118,26 @@ impl<'a> BasisBuilder<'a> {
         self.ops[0].mul(x.as_ref())
     }
 
+    /// The kept Cholesky factor of K_b + e S whose e is nearest to `target` on a log scale
+    /// (None when none is kept).
+    pub(crate) fn nearest_factor(&self, target: f64) -> Option<(f64, Arc<SpdSolver>)> {
+        let t = target.max(f64::MIN_POSITIVE);
+        self.factors
+            .iter()
+            .min_by(|a, b| (a.0 / t).ln().abs().total_cmp(&(b.0 / t).ln().abs()))
+            .map(|(e, f)| (*e, f.clone()))
+    }
+    /// Y = A X for model matrix `k` (0 M, 1 K_b, 2 S, then C_b, D_b when present).
+    pub(crate) fn op_mul(&self, k: usize, x: faer::MatRef<'_, f64>) -> Mat<f64> {
+        self.ops[k].mul(x)
+    }
+    pub(crate) fn n_ops(&self) -> usize {
+        self.ops.len()
+    }
+    pub(crate) fn model(&self) -> &crate::fe::model::StructuralModel {
+        self.pat.model
+    }
+
     /// Drop the kept factors (memory).
     pub(crate) fn drop_factors(&mut self) {
         self.factors.clear();
