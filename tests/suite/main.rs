@@ -11,6 +11,7 @@ mod spring_model;
 
 mod circle_fit;
 mod cli_errors;
+mod cli_inspect;
 mod cli_structure_errors;
 mod correlation;
 mod csv_io;
