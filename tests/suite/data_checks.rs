@@ -134,3 +134,54 @@ fn convert_quantities() {
     let w = 2.0 * std::f64::consts::PI * 2.0;
     assert!((r.channels[0].values[1] * (-w * w) - C64::new(1.0, 0.0)).norm() < 1e-12);
 }
+
+/// Two files with different frequency grids read into one level: the error names the second
+/// file, its dataset and line, and says what to do.
+#[test]
+fn mixed_grids_within_a_uff_level_are_an_error() {
+    use rfmlab::data::read_uff;
+    use rfmlab::data::uff_frf::{frf_set_from_uff_files, UffImportOptions};
+    let beam = read_uff(crate::common_data::data("beam/beam_accelerance_3frf.uff")).unwrap();
+    let other = read_uff(crate::common_data::data(
+        "uff/ufffiles_jl/dataset151_164_58_55.unv",
+    ))
+    .unwrap();
+    let files = vec![(beam, "L1".to_string()), (other, "L1".to_string())];
+    let err = frf_set_from_uff_files(&files, &UffImportOptions::default())
+        .expect_err("two grids in one level")
+        .to_string();
+    assert!(err.contains("dataset151_164_58_55.unv"), "{err}");
+    assert!(err.contains("dataset 2"), "{err}");
+    assert!(err.contains("line"), "{err}");
+    assert!(err.contains("mixed grids within level L1"), "{err}");
+}
+
+/// Dataset 164 (inch, pound-force) scales an FRF to SI: value x force factor / length factor.
+#[test]
+fn dataset_164_unit_factors_convert_frfs_to_si() {
+    use rfmlab::data::read_uff;
+    use rfmlab::data::uff58::Ordinate;
+    use rfmlab::data::uff_frf::{frf_set_from_uff_files, UffImportOptions};
+    let f = read_uff(crate::common_data::data(
+        "uff/ufffiles_jl/dataset151_164_58_55.unv",
+    ))
+    .unwrap();
+    let u = f.units.clone().expect("dataset 164");
+    assert!(
+        (u.length - 39.37007874015748).abs() < 1e-9 && (u.force - 0.2248089430997105).abs() < 1e-12
+    );
+    let raw: Vec<C64> = match &f.datasets[0].values {
+        Ordinate::Complex(v) => v.clone(),
+        Ordinate::Real(v) => v.iter().map(|&x| C64::new(x, 0.0)).collect(),
+    };
+    let set = frf_set_from_uff_files(&[(f, String::new())], &UffImportOptions::default()).unwrap();
+    let ch = &set.levels[0].channels[0];
+    assert_eq!(ch.values.len(), raw.len());
+    let factor = 0.2248089430997105 / 39.37007874015748;
+    for (a, b) in ch.values.iter().zip(&raw) {
+        assert!(
+            (a - b * factor).norm() <= 1e-12 * (b * factor).norm().max(1e-300),
+            "{a} vs {b}"
+        );
+    }
+}
