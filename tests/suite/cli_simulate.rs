@@ -7,6 +7,7 @@ use std::process::Command;
 const BIN: &str = env!("CARGO_BIN_EXE_rfmlab");
 
 fn experiment(mode_law: &str, gain: f64) -> String {
+    let structure = crate::runner_common::structure();
     format!(
         r#"
 [experiment]
@@ -18,51 +19,7 @@ output = "opt.uff"
 binary = true
 engine = "full"
 
-[structure]
-name = "paper bonded joint"
-excitation = 2
-
-[structure.beam]
-length = 0.300
-thickness = 0.010
-width = 0.020
-
-[structure.beam.material]
-E = 198e9
-nu = 0.3
-rho = 7800.0
-
-[structure.adhesive]
-length = 0.050
-thickness = 0.010
-x_start = 0.0
-nu = 0.44
-rho = 1160.0
-
-[structure.mesh]
-element_size = 0.010
-integration = "full"
-
-[[structure.points]]
-id = 1
-position = [0.100, 0.010, 0.010]
-direction = "+y"
-
-[[structure.points]]
-id = 2
-position = [0.150, 0.010, 0.010]
-direction = "+y"
-
-[[structure.points]]
-id = 3
-position = [0.200, 0.010, 0.010]
-direction = "+y"
-
-[[structure.points]]
-id = 4
-position = [0.250, 0.010, 0.010]
-direction = "+y"
-
+{structure}
 [chain]
 band_hz = [1.0, 100.0]
 lines_hz = [1.0, 100.0, 1.0]
