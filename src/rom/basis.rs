@@ -120,12 +120,12 @@ impl<'a> BasisBuilder<'a> {
 
     /// The kept Cholesky factor of K_b + e S whose e is nearest to `target` on a log scale
     /// (None when none is kept).
-    pub(crate) fn nearest_factor(&self, target: f64) -> Option<(f64, Arc<SpdSolver>)> {
+    pub(crate) fn nearest_factor(&self, target: f64) -> Option<Arc<SpdSolver>> {
         let t = target.max(f64::MIN_POSITIVE);
         self.factors
             .iter()
             .min_by(|a, b| (a.0 / t).ln().abs().total_cmp(&(b.0 / t).ln().abs()))
-            .map(|(e, f)| (*e, f.clone()))
+            .map(|(_, f)| f.clone())
     }
     /// Y = A X for model matrix `k` (0 M, 1 K_b, 2 S, then C_b, D_b when present).
     pub(crate) fn op_mul(&self, k: usize, x: faer::MatRef<'_, f64>) -> Mat<f64> {
@@ -136,6 +136,9 @@ impl<'a> BasisBuilder<'a> {
     }
     pub(crate) fn model(&self) -> &crate::fe::model::StructuralModel {
         self.pat.model
+    }
+    pub(crate) fn pattern(&self) -> &ModelPattern<'a> {
+        self.pat
     }
 
     /// Drop the kept factors (memory).
@@ -156,18 +159,18 @@ impl<'a> BasisBuilder<'a> {
         mut mx: Mat<f64>,
         tol: f64,
     ) -> (Mat<f64>, Mat<f64>) {
+        // sqrt(x_j^T M x_j), clamped at 0 against rounding
+        let m_norm = |x: &Mat<f64>, mx: &Mat<f64>, j: usize| {
+            x.col(j)
+                .iter()
+                .zip(mx.col(j).iter())
+                .map(|(a, b)| a * b)
+                .sum::<f64>()
+                .max(0.0)
+                .sqrt()
+        };
         let k = x.ncols();
-        let norm0: Vec<f64> = (0..k)
-            .map(|j| {
-                x.col(j)
-                    .iter()
-                    .zip(mx.col(j).iter())
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>()
-                    .max(0.0)
-                    .sqrt()
-            })
-            .collect();
+        let norm0: Vec<f64> = (0..k).map(|j| m_norm(&x, &mx, j)).collect();
         if q.ncols() > 0 {
             for _ in 0..2 {
                 let c = tn(mq.as_ref(), x.as_ref());
@@ -198,14 +201,7 @@ impl<'a> BasisBuilder<'a> {
                     }
                 }
             }
-            let nrm = x
-                .col(j)
-                .iter()
-                .zip(mx.col(j).iter())
-                .map(|(a, b)| a * b)
-                .sum::<f64>()
-                .max(0.0)
-                .sqrt();
+            let nrm = m_norm(&x, &mx, j);
             if nrm > tol * norm0[j] {
                 let inv = 1.0 / nrm;
                 x.col_mut(j).iter_mut().for_each(|v| *v *= inv);
@@ -242,12 +238,7 @@ impl<'a> BasisBuilder<'a> {
             let top = tn(self.v.as_ref(), a_q.as_ref()); // V^T A Q (r0 x k)
             let corner = tn(q.as_ref(), a_q.as_ref()); // Q^T A Q
             let p = &mut self.proj[i];
-            let old = std::mem::replace(p, Mat::zeros(r0 + k, r0 + k));
-            for c in 0..r0 {
-                for r in 0..r0 {
-                    p[(r, c)] = old[(r, c)];
-                }
-            }
+            p.resize_with(r0 + k, r0 + k, |_, _| 0.0);
             for c in 0..k {
                 for r in 0..r0 {
                     p[(r, r0 + c)] = top[(r, c)];
@@ -265,15 +256,10 @@ impl<'a> BasisBuilder<'a> {
         k
     }
 
-    /// Bring the Krylov sequence at `e_ref` to `depth` blocks (creating it if new).
-    pub fn extend(&mut self, e_ref: f64, depth: usize) -> Result<(), RomError> {
-        self.extend_all(&[(e_ref, depth)])
-    }
-
-    /// Bring the Krylov sequences at several E_ref to their depths. The sequences are
-    /// independent of V and of each other, so they run in parallel; their blocks are then
-    /// absorbed into V in the order of `targets` (block order within each), which makes V
-    /// the same as with one [`Self::extend`] per target in that order.
+    /// Bring the Krylov sequences at several E_ref to their depths (creating new ones). The
+    /// sequences are independent of V and of each other, so they run in parallel; their
+    /// blocks are then absorbed into V in the order of `targets` (block order within each),
+    /// so V is the same as when the sequences are extended one after the other.
     pub fn extend_all(&mut self, targets: &[(f64, usize)]) -> Result<(), RomError> {
         let mut work: Vec<(usize, usize)> = Vec::new(); // (state index, depth)
         for &(e_ref, depth) in targets {

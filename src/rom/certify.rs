@@ -310,6 +310,7 @@ pub fn build_rom(
             // tolerance), so the first level's basis serves every later level
             let (h, st) = super::reference::reference(
                 &basis,
+                &rom,
                 inputs,
                 &moduli,
                 &lines,

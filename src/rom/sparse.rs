@@ -98,18 +98,18 @@ pub(crate) struct ModelPattern<'a> {
 
 impl<'a> ModelPattern<'a> {
     pub fn new(model: &'a StructuralModel) -> Result<Self, RomError> {
-        let mut mats: Vec<&SpMat> = vec![&model.m, &model.k_b, &model.s];
-        mats.extend(model.c_b.as_ref());
-        mats.extend(model.d_b.as_ref());
         Ok(ModelPattern {
             model,
-            pat: UnionPattern::new(&mats)?,
+            pat: UnionPattern::new(&Self::matrices_of(model))?,
         })
     }
 
     /// The model matrices in the pattern's order: M, K_b, S, then C_b and D_b when present.
     pub fn matrices(&self) -> Vec<&'a SpMat> {
-        let m = self.model;
+        Self::matrices_of(self.model)
+    }
+
+    fn matrices_of(m: &'a StructuralModel) -> Vec<&'a SpMat> {
         let mut v: Vec<&SpMat> = vec![&m.m, &m.k_b, &m.s];
         v.extend(m.c_b.as_ref());
         v.extend(m.d_b.as_ref());
@@ -124,21 +124,30 @@ impl<'a> ModelPattern<'a> {
         v
     }
 
+    /// The coefficients of the model matrices in Z(w, E*) = -w^2 M + K_b + E* S + j w C_b + j D_b,
+    /// in the order of [`Self::matrices`].
+    pub fn coefficients(&self, omega: f64, e: C64) -> Vec<C64> {
+        let m = self.model;
+        let mut c = vec![C64::new(-omega * omega, 0.0), C64::new(1.0, 0.0), e];
+        if m.c_b.is_some() {
+            c.push(C64::new(0.0, omega));
+        }
+        if m.d_b.is_some() {
+            c.push(C64::new(0.0, 1.0));
+        }
+        c
+    }
+
     /// Values of Z(w, E*) on the union pattern.
     pub fn dynamic_values(&self, omega: f64, e: C64) -> Vec<C64> {
         let mut v = vec![C64::new(0.0, 0.0); self.pat.nnz()];
-        let m = self.model;
-        self.pat
-            .add_cplx(0, &m.m, C64::new(-omega * omega, 0.0), &mut v);
-        self.pat.add_cplx(1, &m.k_b, C64::new(1.0, 0.0), &mut v);
-        self.pat.add_cplx(2, &m.s, e, &mut v);
-        let mut k = 3;
-        if let Some(c) = &m.c_b {
-            self.pat.add_cplx(k, c, C64::new(0.0, omega), &mut v);
-            k += 1;
-        }
-        if let Some(d) = &m.d_b {
-            self.pat.add_cplx(k, d, C64::new(0.0, 1.0), &mut v);
+        for (k, (a, c)) in self
+            .matrices()
+            .into_iter()
+            .zip(self.coefficients(omega, e))
+            .enumerate()
+        {
+            self.pat.add_cplx(k, a, c, &mut v);
         }
         v
     }

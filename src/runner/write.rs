@@ -758,64 +758,37 @@ fn draw_figures(
             )?;
             out.push((format!("{stem}.png"), format!("convergence level {lv}")));
         }
+        // E' (storage) and E'' (loss) curves of one modulus series, same label and colour
         let mut st = Vec::new();
         let mut lo = Vec::new();
-        if let Some(pl) = &r.per_line {
+        let mut push = |label: &str, e: &[C64], style: CurveStyle, rgb: (u8, u8, u8)| {
             let f = ld.freq_hz.clone();
             st.push(
-                Curve::points(
-                    "per-line RFM",
-                    f.clone(),
-                    pl.iter().map(|e| e.modulus_combined.re).collect(),
-                )
-                .with_color((0, 0, 0)),
+                Curve::new(label, f.clone(), e.iter().map(|z| z.re).collect(), style)
+                    .with_color(rgb),
             );
-            lo.push(
-                Curve::points(
-                    "per-line RFM",
-                    f,
-                    pl.iter().map(|e| e.modulus_combined.im).collect(),
-                )
-                .with_color((0, 0, 0)),
-            );
+            lo.push(Curve::new(label, f, e.iter().map(|z| z.im).collect(), style).with_color(rgb));
+        };
+        if let Some(pl) = &r.per_line {
+            let e: Vec<C64> = pl.iter().map(|x| x.modulus_combined).collect();
+            push("per-line RFM", &e, CurveStyle::Points, (0, 0, 0));
         }
         for (c, g) in r.global.iter().enumerate() {
             let col = palette[c % palette.len()];
-            st.push(
-                Curve::line(
-                    &g.result.model_name,
-                    ld.freq_hz.clone(),
-                    g.result.modulus.iter().map(|z| z.re).collect(),
-                )
-                .with_color(col),
-            );
-            lo.push(
-                Curve::line(
-                    &g.result.model_name,
-                    ld.freq_hz.clone(),
-                    g.result.modulus.iter().map(|z| z.im).collect(),
-                )
-                .with_color(col),
+            push(
+                &g.result.model_name,
+                &g.result.modulus,
+                CurveStyle::Line,
+                col,
             );
         }
         if let Some(t) = &ld.truth {
             let e: Vec<C64> = ld.freq_hz.iter().map(|f| t.modulus(TWO_PI * f)).collect();
-            let grey = (120, 120, 120);
-            st.push(
-                Curve::line(
-                    "truth (simulated data)",
-                    ld.freq_hz.clone(),
-                    e.iter().map(|z| z.re).collect(),
-                )
-                .with_color(grey),
-            );
-            lo.push(
-                Curve::line(
-                    "truth (simulated data)",
-                    ld.freq_hz.clone(),
-                    e.iter().map(|z| z.im).collect(),
-                )
-                .with_color(grey),
+            push(
+                "truth (simulated data)",
+                &e,
+                CurveStyle::Line,
+                (120, 120, 120),
             );
         }
         if !st.is_empty() {
