@@ -4,9 +4,13 @@
 //! it, and partial sums over chunks are added in chunk order.
 //!
 //! - [`Csr`]: a row-major copy of a sparse matrix and Y = A X with X, Y dense;
+//! - [`combine_mul`]: W = sum_o A_o X C_o, complex columns with per-column coefficients
+//!   (Z(w, E*) applied to many systems at once: one pass over the rows for all operators);
+//! - [`to_row_major`] / [`from_row_major`]: layout changes of tall blocks;
 //! - [`tn`]: A^T B (a k x l result, a reduction over the n rows);
 //! - [`nn_acc`]: C += alpha A B (n x l, rows independent).
 
+use crate::common::C64;
 use crate::fe::model::SpMat;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
@@ -78,42 +82,332 @@ impl Csr {
         }
         // X row-major so that each stored entry updates k contiguous values
         let mut xt = vec![0.0; self.ncols * k];
-        xt.par_chunks_mut(SPARSE_CHUNK * k)
-            .enumerate()
-            .for_each(|(c, chunk)| {
-                let i0 = c * SPARSE_CHUNK;
-                for (r, row) in chunk.chunks_mut(k).enumerate() {
-                    for (t, v) in row.iter_mut().enumerate() {
-                        *v = x[(i0 + r, t)];
-                    }
-                }
-            });
+        to_row_major(x, &mut xt);
         let mut yt = vec![0.0; self.nrows * k];
         yt.par_chunks_mut(SPARSE_CHUNK * k)
             .enumerate()
             .for_each(|(c, chunk)| {
-                let i0 = c * SPARSE_CHUNK;
-                for (r, acc) in chunk.chunks_mut(k).enumerate() {
-                    let i = i0 + r;
-                    for p in self.row_ptr[i]..self.row_ptr[i + 1] {
-                        let a = self.val[p];
-                        let xr = &xt[self.col_idx[p] * k..][..k];
-                        for (y, &xv) in acc.iter_mut().zip(xr) {
-                            *y += a * xv;
+                let mut acc = vec![0.0; k];
+                rows_kernel(
+                    Ops::Single(self),
+                    c * SPARSE_CHUNK,
+                    &xt,
+                    k,
+                    &mut acc,
+                    &mut |r, acc| {
+                        chunk[r * k..][..k].copy_from_slice(&acc[..k]);
+                    },
+                );
+            });
+        let mut y = Mat::<f64>::zeros(self.nrows, k);
+        from_row_major(&yt, y.as_mut());
+        y
+    }
+
+    /// acc[t] += sum_p A[i, col_p] X[col_p, t] for t < k, X row-major with k columns; the
+    /// entries of row i are taken in storage order.
+    #[inline(always)]
+    fn row_acc(&self, i: usize, xt: &[f64], k: usize, acc: &mut [f64]) {
+        let acc = &mut acc[..k];
+        for p in self.row_ptr[i]..self.row_ptr[i + 1] {
+            let a = self.val[p];
+            let xr = &xt[self.col_idx[p] * k..][..k];
+            for (y, &xv) in acc.iter_mut().zip(xr) {
+                *y += a * xv;
+            }
+        }
+    }
+}
+
+/// Several sparse matrices of one size on the union of their patterns, row-major, with the
+/// values of all matrices stored together per entry (`val[p * n_ops + o]`, 0 where a
+/// matrix has no entry): one pass over the rows reads each column index and each row of X
+/// once for all operators.
+pub struct MultiCsr {
+    nrows: usize,
+    ncols: usize,
+    n_ops: usize,
+    row_ptr: Vec<usize>,
+    col_idx: Vec<usize>,
+    val: Vec<f64>,
+}
+
+impl MultiCsr {
+    /// The union of the row-major copies `ops` (all of one size).
+    pub fn new(ops: &[Csr]) -> MultiCsr {
+        assert!(!ops.is_empty(), "MultiCsr: no operators");
+        let (nrows, ncols, n_ops) = (ops[0].nrows, ops[0].ncols, ops.len());
+        assert!(
+            ops.iter().all(|a| a.nrows == nrows && a.ncols == ncols),
+            "MultiCsr: operators of different sizes"
+        );
+        let mut row_ptr = vec![0usize];
+        let mut col_idx = Vec::new();
+        let mut val = Vec::new();
+        let mut row: Vec<(usize, usize, f64)> = Vec::new();
+        for i in 0..nrows {
+            row.clear();
+            for (o, a) in ops.iter().enumerate() {
+                for p in a.row_ptr[i]..a.row_ptr[i + 1] {
+                    row.push((a.col_idx[p], o, a.val[p]));
+                }
+            }
+            row.sort_by_key(|&(j, o, _)| (j, o));
+            for &(j, o, v) in &row {
+                if col_idx.len() == row_ptr[i] || *col_idx.last().expect("non-empty") != j {
+                    col_idx.push(j);
+                    val.extend(std::iter::repeat_n(0.0, n_ops));
+                }
+                let q = val.len() - n_ops + o;
+                val[q] += v;
+            }
+            row_ptr.push(col_idx.len());
+        }
+        MultiCsr {
+            nrows,
+            ncols,
+            n_ops,
+            row_ptr,
+            col_idx,
+            val,
+        }
+    }
+
+    pub fn n_ops(&self) -> usize {
+        self.n_ops
+    }
+
+    /// acc[o * k + t] += sum_p A_o[i, col_p] X[col_p, t], X row-major with k columns, in
+    /// tiles of `TILE` columns so that the accumulators of one tile stay in registers.
+    #[inline(always)]
+    fn row_acc(&self, i: usize, xt: &[f64], k: usize, acc: &mut [f64]) {
+        let no = self.n_ops;
+        let entries = self.row_ptr[i]..self.row_ptr[i + 1];
+        let full = k / TILE * TILE;
+        if no == 3 {
+            // the common case (M, K_b, S): fixed-size accumulators
+            for t0 in (0..full).step_by(TILE) {
+                let mut a = [[0.0f64; TILE]; 3];
+                for p in entries.clone() {
+                    let x: &[f64; TILE] = xt[self.col_idx[p] * k + t0..][..TILE]
+                        .try_into()
+                        .expect("tile");
+                    let v = &self.val[p * 3..p * 3 + 3];
+                    for o in 0..3 {
+                        for t in 0..TILE {
+                            a[o][t] += v[o] * x[t];
                         }
                     }
                 }
-            });
-        let mut y = Mat::<f64>::zeros(self.nrows, k);
-        y.par_col_chunks_mut(1)
-            .enumerate()
-            .for_each(|(t, mut col)| {
-                for i in 0..self.nrows {
-                    col[(i, 0)] = yt[i * k + t];
+                for (o, ao) in a.iter().enumerate() {
+                    acc[o * k + t0..][..TILE].copy_from_slice(ao);
                 }
-            });
-        y
+            }
+        } else {
+            for t0 in (0..full).step_by(TILE) {
+                for p in entries.clone() {
+                    let x = &xt[self.col_idx[p] * k + t0..][..TILE];
+                    for o in 0..no {
+                        let v = self.val[p * no + o];
+                        for (y, &xv) in acc[o * k + t0..][..TILE].iter_mut().zip(x) {
+                            *y += v * xv;
+                        }
+                    }
+                }
+            }
+        }
+        for p in entries {
+            let x = &xt[self.col_idx[p] * k..][..k];
+            for o in 0..no {
+                let v = self.val[p * no + o];
+                for t in full..k {
+                    acc[o * k + t] += v * x[t];
+                }
+            }
+        }
     }
+}
+
+/// Columns per register tile of [`MultiCsr`]'s row kernel.
+const TILE: usize = 8;
+
+/// For each row i of a chunk of `SPARSE_CHUNK` rows starting at `i0` (clipped to the matrix),
+/// the products of row i of every operator with X (row-major, k columns) are formed in
+/// `acc` (operator o in `acc[o * k..][..k]`) and handed to `emit(i - i0, acc)`.
+#[inline(always)]
+fn rows_generic(
+    ops: Ops<'_>,
+    i0: usize,
+    xt: &[f64],
+    k: usize,
+    acc: &mut [f64],
+    emit: &mut dyn FnMut(usize, &[f64]),
+) {
+    match ops {
+        Ops::Single(a) => {
+            let i1 = (i0 + SPARSE_CHUNK).min(a.nrows);
+            for i in i0..i1 {
+                let ao = &mut acc[..k];
+                ao.iter_mut().for_each(|v| *v = 0.0);
+                a.row_acc(i, xt, k, ao);
+                emit(i - i0, acc);
+            }
+        }
+        Ops::Multi(a) => {
+            let i1 = (i0 + SPARSE_CHUNK).min(a.nrows);
+            for i in i0..i1 {
+                let ao = &mut acc[..a.n_ops * k];
+                ao.iter_mut().for_each(|v| *v = 0.0);
+                a.row_acc(i, xt, k, ao);
+                emit(i - i0, acc);
+            }
+        }
+    }
+}
+
+/// The operand of the row kernels.
+#[derive(Clone, Copy)]
+enum Ops<'a> {
+    Single(&'a Csr),
+    Multi(&'a MultiCsr),
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn rows_avx512(
+    ops: Ops<'_>,
+    i0: usize,
+    xt: &[f64],
+    k: usize,
+    acc: &mut [f64],
+    emit: &mut dyn FnMut(usize, &[f64]),
+) {
+    rows_generic(ops, i0, xt, k, acc, emit)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn rows_avx2(
+    ops: Ops<'_>,
+    i0: usize,
+    xt: &[f64],
+    k: usize,
+    acc: &mut [f64],
+    emit: &mut dyn FnMut(usize, &[f64]),
+) {
+    rows_generic(ops, i0, xt, k, acc, emit)
+}
+
+/// [`rows_generic`] on the widest available instruction set. The arithmetic is elementwise
+/// (no reduction is reordered, and Rust never contracts a * b + c into an FMA), so every path
+/// gives the same bits.
+fn rows_kernel(
+    ops: Ops<'_>,
+    i0: usize,
+    xt: &[f64],
+    k: usize,
+    acc: &mut [f64],
+    emit: &mut dyn FnMut(usize, &[f64]),
+) {
+    let (ncols, n_ops) = match ops {
+        Ops::Single(a) => (a.ncols, 1),
+        Ops::Multi(a) => (a.ncols, a.n_ops),
+    };
+    assert!(ncols * k <= xt.len() && acc.len() >= n_ops * k);
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f") {
+            // SAFETY: the required CPU feature was detected at run time.
+            unsafe { rows_avx512(ops, i0, xt, k, acc, emit) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: as above.
+            unsafe { rows_avx2(ops, i0, xt, k, acc, emit) };
+            return;
+        }
+    }
+    rows_generic(ops, i0, xt, k, acc, emit)
+}
+
+/// W = sum_o A_o X C_o for complex columns: X is n x 2s real row-major holding s complex
+/// columns as (re, im) pairs, `coefs[a][o]` the coefficient of operator o for complex column
+/// a, and W (n x 2s, row-major, same pairing) receives column a = sum_o coefs[a][o] A_o x_a.
+/// Rows in parallel over fixed chunks, each row summed in storage order.
+pub fn combine_mul(ops: &MultiCsr, coefs: &[&[C64]], xt: &[f64], wt: &mut [f64]) {
+    let s = coefs.len();
+    let k = 2 * s;
+    if s == 0 {
+        return;
+    }
+    let n = ops.nrows;
+    assert_eq!(wt.len(), n * k, "combine_mul: W has the wrong size");
+    assert!(coefs.iter().all(|c| c.len() == ops.n_ops));
+    wt.par_chunks_mut(SPARSE_CHUNK * k)
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            let mut acc = vec![0.0; ops.n_ops * k];
+            rows_kernel(
+                Ops::Multi(ops),
+                c * SPARSE_CHUNK,
+                xt,
+                k,
+                &mut acc,
+                &mut |r, acc| {
+                    let w = &mut chunk[r * k..][..k];
+                    for (a, co) in coefs.iter().enumerate() {
+                        let (mut re, mut im) = (0.0, 0.0);
+                        for (o, c) in co.iter().enumerate() {
+                            let (x, y) = (acc[o * k + 2 * a], acc[o * k + 2 * a + 1]);
+                            re += c.re * x - c.im * y;
+                            im += c.re * y + c.im * x;
+                        }
+                        w[2 * a] = re;
+                        w[2 * a + 1] = im;
+                    }
+                },
+            );
+        });
+}
+
+/// out[i * k + t] = x[(i, t)] (x: n x k), parallel over fixed row chunks.
+pub fn to_row_major(x: MatRef<'_, f64>, out: &mut [f64]) {
+    let (n, k) = (x.nrows(), x.ncols());
+    assert_eq!(out.len(), n * k, "to_row_major: wrong output size");
+    if k == 0 {
+        return;
+    }
+    out.par_chunks_mut(SPARSE_CHUNK * k)
+        .enumerate()
+        .for_each(|(c, chunk)| {
+            let i0 = c * SPARSE_CHUNK;
+            let m = chunk.len() / k;
+            for t in 0..k {
+                let col = x.col(t).subrows(i0, m);
+                for (r, &v) in col.iter().enumerate() {
+                    chunk[r * k + t] = v;
+                }
+            }
+        });
+}
+
+/// y[(i, t)] = rm[i * k + t] (y: n x k), parallel over fixed row chunks.
+pub fn from_row_major(rm: &[f64], y: MatMut<'_, f64>) {
+    let k = y.ncols();
+    assert_eq!(rm.len(), y.nrows() * k, "from_row_major: wrong input size");
+    if k == 0 {
+        return;
+    }
+    y.par_row_chunks_mut(SPARSE_CHUNK)
+        .enumerate()
+        .for_each(|(c, mut yc)| {
+            let i0 = c * SPARSE_CHUNK;
+            for t in 0..k {
+                for (r, v) in yc.as_mut().col_mut(t).iter_mut().enumerate() {
+                    *v = rm[(i0 + r) * k + t];
+                }
+            }
+        });
 }
 
 /// A^T B for tall A (n x k) and B (n x l): partial products of fixed row chunks, summed in order.

@@ -15,7 +15,7 @@
 
 use super::sparse::{ModelPattern, SpdSolver};
 use super::RomError;
-use crate::linalg::blocked::{nn_acc, tn, Csr};
+use crate::linalg::blocked::{nn_acc, tn, Csr, MultiCsr};
 use faer::sparse::linalg::cholesky::SymbolicCholesky;
 use faer::Mat;
 use rayon::prelude::*;
@@ -46,6 +46,7 @@ pub struct BasisBuilder<'a> {
     chol: Arc<SymbolicCholesky<usize>>,
     /// Row-major copies of the model matrices (same order as `av`).
     ops: Vec<Csr>,
+    multi: std::sync::OnceLock<MultiCsr>,
     /// Unit loads at the observation points (n x n_out).
     pub b_all: Mat<f64>,
     v: Mat<f64>,
@@ -90,6 +91,7 @@ impl<'a> BasisBuilder<'a> {
             pat,
             chol,
             ops,
+            multi: std::sync::OnceLock::new(),
             b_all,
             v: Mat::zeros(n, 0),
             av: (0..nop).map(|_| Mat::zeros(n, 0)).collect(),
@@ -127,9 +129,10 @@ impl<'a> BasisBuilder<'a> {
             .min_by(|a, b| (a.0 / t).ln().abs().total_cmp(&(b.0 / t).ln().abs()))
             .map(|(_, f)| f.clone())
     }
-    /// Y = A X for model matrix `k` (0 M, 1 K_b, 2 S, then C_b, D_b when present).
-    pub(crate) fn op_mul(&self, k: usize, x: faer::MatRef<'_, f64>) -> Mat<f64> {
-        self.ops[k].mul(x)
+    /// The model matrices on their union pattern, row-major (order of
+    /// [`ModelPattern::matrices`]), made on first use.
+    pub(crate) fn multi_op(&self) -> &MultiCsr {
+        self.multi.get_or_init(|| MultiCsr::new(&self.ops))
     }
     pub(crate) fn n_ops(&self) -> usize {
         self.ops.len()

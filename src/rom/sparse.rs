@@ -161,7 +161,7 @@ pub(crate) struct SpdSolver {
 
 /// Columns per independent triangular solve in [`SpdSolver::solve_cols`] (fixed, so that
 /// the result does not depend on the thread count).
-const SOLVE_GROUP: usize = 16;
+const SOLVE_GROUP: usize = 32;
 
 impl SpdSolver {
     pub fn symbolic(pat: &ModelPattern<'_>) -> Result<SymbolicCholesky<usize>, RomError> {

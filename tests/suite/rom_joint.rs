@@ -241,12 +241,37 @@ fn basis_is_bit_identical_with_one_or_two_threads_on_5mm() {
     assert_eq!(bits(&sa.dh_de), bits(&sb.dh_de));
 }
 
-/// The certificate's GMRES reference (ROM as coarse space, real Cholesky preconditioner)
-/// against the sparse-LU reference on the 10 mm joint. The worst validation point is
-/// near-resonant and lightly damped (E'' = 0.01 MPa, 21.8 Hz), where Z is so ill-conditioned
-/// that the LU's own residual is ~1e-8 ||b||; GMRES at residual 1e-9 and 1e-10 gives the same
-/// certificate (so it has converged there), and the LU's differs from it by a few 1e-8,
-/// well below the 1e-6 tolerance.
+/// The certificate (its GMRES reference: systems queued per factor, blocked kernels over
+/// fixed chunks) gives the same bits with one or two threads, 4 x 4 FRFs on the 10 mm joint.
+#[test]
+fn certificate_is_bit_identical_with_one_or_two_threads_on_10mm() {
+    let model = joint(0.010);
+    let inputs = all_inputs(&model);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| build_rom(&model, &inputs, &RomParams::default()).unwrap())
+    };
+    let ((ra, ca), (rb, cb)) = (run(1), run(2));
+    assert!(ca.passed && ca.reference == "GMRES");
+    assert_eq!(ca.max_rel_error.to_bits(), cb.max_rel_error.to_bits());
+    assert_eq!(
+        ca.reference_residual.map(f64::to_bits),
+        cb.reference_residual.map(f64::to_bits)
+    );
+    assert_eq!(ca.reference_iterations, cb.reference_iterations);
+    assert_eq!(ra.basis_size(), rb.basis_size());
+}
+
+/// The certificate's GMRES reference (ROM as coarse space, real Cholesky preconditioner,
+/// Arnoldi in the preconditioner's energy product) against the sparse-LU reference on the
+/// 10 mm joint. The worst validation point is near-resonant and lightly damped
+/// (E'' = 0.01 MPa, 21.8 Hz), where Z is so ill-conditioned that the LU's own residual is
+/// ~1e-8 ||b|| and the ROM's error there is known only to a few 1e-8 of the peak: the
+/// certificates from the LU and from GMRES at residuals 1e-9 and 1e-10 all pass and agree to
+/// 1e-7 (a tenth of the 1e-6 tolerance), and tightening GMRES moves it by less than 1e-8.
 #[test]
 fn gmres_reference_agrees_with_sparse_lu_at_10mm() {
     let model = joint(0.010);
@@ -272,11 +297,19 @@ fn gmres_reference_agrees_with_sparse_lu_at_10mm() {
     assert_eq!(c_lu.basis_size, c_9.basis_size);
     let (e_lu, e9, e10) = (c_lu.max_rel_error, c_9.max_rel_error, c_10.max_rel_error);
     assert!(
-        (e9 - e10).abs() <= 2e-9,
+        (e9 - e10).abs() <= 1e-8,
         "GMRES 1e-9 {e9:.3e} vs 1e-10 {e10:.3e}"
     );
+    for (name, e) in [("1e-9", e9), ("1e-10", e10)] {
+        assert!(
+            (e_lu - e).abs() <= 1e-7,
+            "LU {e_lu:.3e} vs GMRES {name} {e:.3e}"
+        );
+    }
+    // the energy product keeps the iteration count low (16 measured at 1e-9)
     assert!(
-        (e_lu - e10).abs() <= 1e-7,
-        "LU {e_lu:.3e} vs GMRES {e10:.3e}"
+        c_9.reference_iterations.unwrap() <= 25,
+        "{:?}",
+        c_9.reference_iterations
     );
 }
