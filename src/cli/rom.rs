@@ -1,5 +1,5 @@
 //! `rfmlab rom STUDY.toml [--band f0,f1] [--storage a,b] [--loss c,d] [--tolerance t]
-//! [--cert-moduli n] [--cert-lines n] [--json]`:
+//! [--cert-moduli n] [--cert-lines n] [--inputs all|excitation] [--json]`:
 //! build and certify the reduced-order model of a study's structure.
 
 use super::common::{build_model, load_study, parse_pair, print_json, spinner, Global};
@@ -29,8 +29,19 @@ pub struct RomArgs {
     /// Validation lines across the band (ends included).
     #[arg(long, default_value_t = RomParams::default().n_cert_lines)]
     pub cert_lines: usize,
+    /// Inputs of the certified FRFs: `all` observation points (the n x n FRF matrix, what
+    /// `rfmlab run` builds for mass loading and reciprocity), or the structure's
+    /// `excitation` point only (n FRFs, what `rfmlab simulate` builds).
+    #[arg(long, value_enum, default_value_t = Inputs::All)]
+    pub inputs: Inputs,
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Inputs {
+    All,
+    Excitation,
 }
 
 pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
@@ -39,7 +50,10 @@ pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
     let loss = parse_pair("--loss", &a.loss)?;
     let study = load_study(&a.study)?;
     let b = build_model(g, &study)?;
-    let inputs: Vec<usize> = (0..b.model.points.len()).collect();
+    let inputs: Vec<usize> = match a.inputs {
+        Inputs::All => (0..b.model.points.len()).collect(),
+        Inputs::Excitation => vec![b.excitation],
+    };
     let params = RomParams {
         band_hz: band,
         range: ModulusRange {
@@ -63,14 +77,17 @@ pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
             "band_hz": band,
             "range": params.range,
             "tolerance": a.tolerance,
+            "inputs": inputs.iter().map(|&i| b.model.points[i].id).collect::<Vec<_>>(),
             "seconds_total": secs,
             "certificate": cert,
         }));
     }
     println!(
-        "{}: {} DOFs -> {} basis vectors; max error {:.3e} (tolerance {:.0e}) on {} moduli x {} lines; {}",
+        "{}: {} DOFs, {} x {} FRFs -> {} basis vectors; max error {:.3e} (tolerance {:.0e}) on {} moduli x {} lines; {}",
         study.file.display(),
         b.model.n_dof(),
+        b.model.points.len(),
+        inputs.len(),
         cert.basis_size,
         cert.max_rel_error,
         a.tolerance,
