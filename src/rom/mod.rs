@@ -175,7 +175,8 @@ pub struct Certificate {
     /// The reference solver: "sparse LU" or "GMRES".
     #[serde(default)]
     pub reference: String,
-    /// GMRES: the largest final relative residual ||b - Z x|| / ||b|| and iteration count.
+    /// GMRES: the largest final relative residual ||b - Z x||_{P^-1} / ||b||_{P^-1} (energy norm of
+    /// the preconditioner P = K_b + e S) and the largest iteration count.
     #[serde(default)]
     pub reference_residual: Option<f64>,
     #[serde(default)]

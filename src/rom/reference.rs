@@ -55,7 +55,7 @@ use std::sync::Arc;
 pub struct ReferenceStats {
     /// Largest number of GMRES iterations over all validation points.
     pub max_iterations: usize,
-    /// Largest final relative residual ||b - Z x|| / ||b||.
+    /// Largest final relative residual ||b - Z x||_{P^-1} / ||b||_{P^-1}.
     pub max_residual: f64,
     /// Points that did not reach the tolerance within the iteration limit.
     pub not_converged: usize,
