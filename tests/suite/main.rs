@@ -12,6 +12,7 @@ mod spring_model;
 mod circle_fit;
 mod cli_errors;
 mod cli_inspect;
+mod cli_rom;
 mod cli_simulate;
 mod cli_structure_errors;
 mod correlation;
