@@ -88,24 +88,30 @@ impl Csr {
             .enumerate()
             .for_each(|(c, chunk)| {
                 let mut acc = vec![0.0; k];
-                rows_kernel(
-                    Ops::Single(self),
-                    c * SPARSE_CHUNK,
-                    &xt,
-                    k,
-                    &mut acc,
-                    &mut |r, acc| {
-                        chunk[r * k..][..k].copy_from_slice(&acc[..k]);
-                    },
-                );
+                rows_kernel(self, c * SPARSE_CHUNK, &xt, k, &mut acc, &mut |r, acc| {
+                    chunk[r * k..][..k].copy_from_slice(&acc[..k]);
+                });
             });
         let mut y = Mat::<f64>::zeros(self.nrows, k);
         from_row_major(&yt, y.as_mut());
         y
     }
+}
 
-    /// acc[t] += sum_p A[i, col_p] X[col_p, t] for t < k, X row-major with k columns; the
-    /// entries of row i are taken in storage order.
+/// A row-major sparse operand of the row kernels: one matrix, or several on one pattern.
+trait RowOp {
+    /// (rows, columns, operators).
+    fn dims(&self) -> (usize, usize, usize);
+    /// acc[o * k + t] += sum_p A_o[i, col_p] X[col_p, t] for every operator o and t < k,
+    /// X row-major with k columns; the entries of row i are taken in storage order.
+    fn row_acc(&self, i: usize, xt: &[f64], k: usize, acc: &mut [f64]);
+}
+
+impl RowOp for Csr {
+    fn dims(&self) -> (usize, usize, usize) {
+        (self.nrows, self.ncols, 1)
+    }
+
     #[inline(always)]
     fn row_acc(&self, i: usize, xt: &[f64], k: usize, acc: &mut [f64]) {
         let acc = &mut acc[..k];
@@ -135,7 +141,11 @@ pub struct MultiCsr {
 impl MultiCsr {
     /// The union of the row-major copies `ops` (all of one size).
     pub fn new(ops: &[Csr]) -> MultiCsr {
-        assert!(!ops.is_empty(), "MultiCsr: no operators");
+        assert!(
+            (1..=MAX_OPS).contains(&ops.len()),
+            "MultiCsr: 1 to {MAX_OPS} operators, got {}",
+            ops.len()
+        );
         let (nrows, ncols, n_ops) = (ops[0].nrows, ops[0].ncols, ops.len());
         assert!(
             ops.iter().all(|a| a.nrows == nrows && a.ncols == ncols),
@@ -177,49 +187,33 @@ impl MultiCsr {
         self.n_ops
     }
 
-    /// acc[o * k + t] += sum_p A_o[i, col_p] X[col_p, t], X row-major with k columns, in
-    /// tiles of `TILE` columns so that the accumulators of one tile stay in registers.
+    /// [`RowOp::row_acc`] for `N` operators, in tiles of `TILE` columns so that the
+    /// accumulators of one tile stay in registers.
     #[inline(always)]
-    fn row_acc(&self, i: usize, xt: &[f64], k: usize, acc: &mut [f64]) {
-        let no = self.n_ops;
+    fn row_acc_n<const N: usize>(&self, i: usize, xt: &[f64], k: usize, acc: &mut [f64]) {
         let entries = self.row_ptr[i]..self.row_ptr[i + 1];
         let full = k / TILE * TILE;
-        if no == 3 {
-            // the common case (M, K_b, S): fixed-size accumulators
-            for t0 in (0..full).step_by(TILE) {
-                let mut a = [[0.0f64; TILE]; 3];
-                for p in entries.clone() {
-                    let x: &[f64; TILE] = xt[self.col_idx[p] * k + t0..][..TILE]
-                        .try_into()
-                        .expect("tile");
-                    let v = &self.val[p * 3..p * 3 + 3];
-                    for o in 0..3 {
-                        for t in 0..TILE {
-                            a[o][t] += v[o] * x[t];
-                        }
+        for t0 in (0..full).step_by(TILE) {
+            let mut a = [[0.0f64; TILE]; N];
+            for p in entries.clone() {
+                let x: &[f64; TILE] = xt[self.col_idx[p] * k + t0..][..TILE]
+                    .try_into()
+                    .expect("tile");
+                let v: &[f64; N] = self.val[p * N..][..N].try_into().expect("values");
+                for o in 0..N {
+                    for t in 0..TILE {
+                        a[o][t] += v[o] * x[t];
                     }
-                }
-                for (o, ao) in a.iter().enumerate() {
-                    acc[o * k + t0..][..TILE].copy_from_slice(ao);
                 }
             }
-        } else {
-            for t0 in (0..full).step_by(TILE) {
-                for p in entries.clone() {
-                    let x = &xt[self.col_idx[p] * k + t0..][..TILE];
-                    for o in 0..no {
-                        let v = self.val[p * no + o];
-                        for (y, &xv) in acc[o * k + t0..][..TILE].iter_mut().zip(x) {
-                            *y += v * xv;
-                        }
-                    }
-                }
+            for (o, ao) in a.iter().enumerate() {
+                acc[o * k + t0..][..TILE].copy_from_slice(ao);
             }
         }
         for p in entries {
             let x = &xt[self.col_idx[p] * k..][..k];
-            for o in 0..no {
-                let v = self.val[p * no + o];
+            for o in 0..N {
+                let v = self.val[p * N + o];
                 for t in full..k {
                     acc[o * k + t] += v * x[t];
                 }
@@ -228,54 +222,53 @@ impl MultiCsr {
     }
 }
 
+impl RowOp for MultiCsr {
+    fn dims(&self) -> (usize, usize, usize) {
+        (self.nrows, self.ncols, self.n_ops)
+    }
+
+    #[inline(always)]
+    fn row_acc(&self, i: usize, xt: &[f64], k: usize, acc: &mut [f64]) {
+        match self.n_ops {
+            1 => self.row_acc_n::<1>(i, xt, k, acc),
+            2 => self.row_acc_n::<2>(i, xt, k, acc),
+            3 => self.row_acc_n::<3>(i, xt, k, acc),
+            4 => self.row_acc_n::<4>(i, xt, k, acc),
+            _ => self.row_acc_n::<MAX_OPS>(i, xt, k, acc),
+        }
+    }
+}
+
 /// Columns per register tile of [`MultiCsr`]'s row kernel.
 const TILE: usize = 8;
+/// Most operators a [`MultiCsr`] holds (M, K_b, S, C_b, D_b).
+const MAX_OPS: usize = 5;
 
 /// For each row i of a chunk of `SPARSE_CHUNK` rows starting at `i0` (clipped to the matrix),
 /// the products of row i of every operator with X (row-major, k columns) are formed in
 /// `acc` (operator o in `acc[o * k..][..k]`) and handed to `emit(i - i0, acc)`.
 #[inline(always)]
-fn rows_generic(
-    ops: Ops<'_>,
+fn rows_generic<T: RowOp>(
+    ops: &T,
     i0: usize,
     xt: &[f64],
     k: usize,
     acc: &mut [f64],
     emit: &mut dyn FnMut(usize, &[f64]),
 ) {
-    match ops {
-        Ops::Single(a) => {
-            let i1 = (i0 + SPARSE_CHUNK).min(a.nrows);
-            for i in i0..i1 {
-                let ao = &mut acc[..k];
-                ao.iter_mut().for_each(|v| *v = 0.0);
-                a.row_acc(i, xt, k, ao);
-                emit(i - i0, acc);
-            }
-        }
-        Ops::Multi(a) => {
-            let i1 = (i0 + SPARSE_CHUNK).min(a.nrows);
-            for i in i0..i1 {
-                let ao = &mut acc[..a.n_ops * k];
-                ao.iter_mut().for_each(|v| *v = 0.0);
-                a.row_acc(i, xt, k, ao);
-                emit(i - i0, acc);
-            }
-        }
+    let (nrows, _, n_ops) = ops.dims();
+    for i in i0..(i0 + SPARSE_CHUNK).min(nrows) {
+        let ao = &mut acc[..n_ops * k];
+        ao.iter_mut().for_each(|v| *v = 0.0);
+        ops.row_acc(i, xt, k, ao);
+        emit(i - i0, acc);
     }
-}
-
-/// The operand of the row kernels.
-#[derive(Clone, Copy)]
-enum Ops<'a> {
-    Single(&'a Csr),
-    Multi(&'a MultiCsr),
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
-unsafe fn rows_avx512(
-    ops: Ops<'_>,
+unsafe fn rows_avx512<T: RowOp>(
+    ops: &T,
     i0: usize,
     xt: &[f64],
     k: usize,
@@ -287,8 +280,8 @@ unsafe fn rows_avx512(
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn rows_avx2(
-    ops: Ops<'_>,
+unsafe fn rows_avx2<T: RowOp>(
+    ops: &T,
     i0: usize,
     xt: &[f64],
     k: usize,
@@ -301,18 +294,15 @@ unsafe fn rows_avx2(
 /// [`rows_generic`] on the widest available instruction set. The arithmetic is elementwise
 /// (no reduction is reordered, and Rust never contracts a * b + c into an FMA), so every path
 /// gives the same bits.
-fn rows_kernel(
-    ops: Ops<'_>,
+fn rows_kernel<T: RowOp>(
+    ops: &T,
     i0: usize,
     xt: &[f64],
     k: usize,
     acc: &mut [f64],
     emit: &mut dyn FnMut(usize, &[f64]),
 ) {
-    let (ncols, n_ops) = match ops {
-        Ops::Single(a) => (a.ncols, 1),
-        Ops::Multi(a) => (a.ncols, a.n_ops),
-    };
+    let (_, ncols, n_ops) = ops.dims();
     assert!(ncols * k <= xt.len() && acc.len() >= n_ops * k);
     #[cfg(target_arch = "x86_64")]
     {
@@ -347,26 +337,19 @@ pub fn combine_mul(ops: &MultiCsr, coefs: &[&[C64]], xt: &[f64], wt: &mut [f64])
         .enumerate()
         .for_each(|(c, chunk)| {
             let mut acc = vec![0.0; ops.n_ops * k];
-            rows_kernel(
-                Ops::Multi(ops),
-                c * SPARSE_CHUNK,
-                xt,
-                k,
-                &mut acc,
-                &mut |r, acc| {
-                    let w = &mut chunk[r * k..][..k];
-                    for (a, co) in coefs.iter().enumerate() {
-                        let (mut re, mut im) = (0.0, 0.0);
-                        for (o, c) in co.iter().enumerate() {
-                            let (x, y) = (acc[o * k + 2 * a], acc[o * k + 2 * a + 1]);
-                            re += c.re * x - c.im * y;
-                            im += c.re * y + c.im * x;
-                        }
-                        w[2 * a] = re;
-                        w[2 * a + 1] = im;
+            rows_kernel(ops, c * SPARSE_CHUNK, xt, k, &mut acc, &mut |r, acc| {
+                let w = &mut chunk[r * k..][..k];
+                for (a, co) in coefs.iter().enumerate() {
+                    let (mut re, mut im) = (0.0, 0.0);
+                    for (o, c) in co.iter().enumerate() {
+                        let (x, y) = (acc[o * k + 2 * a], acc[o * k + 2 * a + 1]);
+                        re += c.re * x - c.im * y;
+                        im += c.re * y + c.im * x;
                     }
-                },
-            );
+                    w[2 * a] = re;
+                    w[2 * a + 1] = im;
+                }
+            });
         });
 }
 
