@@ -33,6 +33,7 @@ pub mod data;
 pub mod experiment;
 pub mod fe;
 pub mod frf;
+pub mod inference;
 pub mod iem;
 pub mod linalg;
 pub mod material;
