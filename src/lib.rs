@@ -9,6 +9,8 @@
 //! | [`fe`] | 20-node hexahedra, structured mesher, sparse assembly of M, K_b, S; Matrix Market import |
 //! | [`material`] | constitutive models E*(w; p) with analytic Jacobians (Models 1-5, fractional Zener, generalized Maxwell) |
 //! | [`frf`] | the FRF engine interface and the full-model sweep with sensitivities (paper eq. 44-47) |
+//! | [`forward`] | the forward model: engine + law + H1 measurement model -> predicted H1 and its Jacobian |
+//! | [`inference`] | priors, likelihood, MAP (argmin multistart), samplers (NUTS, TMCMC), diagnostics |
 //! | [`modes`] | complex modes of (K_b + E* S, M), sparse real eigensolver |
 //! | [`rom`] | certified reduced-order model and the pencil sweep |
 //! | [`data`] | measured FRF data model, UFF58 and CSV readers and writers |
@@ -32,9 +34,10 @@ pub mod correlation;
 pub mod data;
 pub mod experiment;
 pub mod fe;
+pub mod forward;
 pub mod frf;
-pub mod inference;
 pub mod iem;
+pub mod inference;
 pub mod linalg;
 pub mod material;
 pub mod modal;

@@ -2,8 +2,8 @@
 
 use super::common::{print_json, Global, InputError};
 use rfmlab::runner::{Event, RunError, RunOptions};
-use std::cell::RefCell;
 use std::path::PathBuf;
+use std::sync::Mutex;
 
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
@@ -41,7 +41,7 @@ fn wrap(e: RunError) -> anyhow::Error {
 
 pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
     let study = super::common::load_study(&a.study)?;
-    let bar: RefCell<Option<indicatif::ProgressBar>> = RefCell::new(None);
+    let bar: Mutex<Option<indicatif::ProgressBar>> = Mutex::new(None);
     let progress = |ev: Event| match ev {
         Event::Start { step, total } => {
             let pb = if total > 0 {
@@ -49,17 +49,17 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
             } else {
                 super::common::spinner(g, &step)
             };
-            if let Some(old) = bar.replace(Some(pb)) {
+            if let Some(old) = bar.lock().unwrap_or_else(|e| e.into_inner()).replace(pb) {
                 old.finish_and_clear();
             }
         }
         Event::Advance => {
-            if let Some(pb) = bar.borrow().as_ref() {
+            if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
                 pb.inc(1);
             }
         }
         Event::Finish => {
-            if let Some(pb) = bar.replace(None) {
+            if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
                 pb.finish_and_clear();
             }
         }
@@ -77,7 +77,7 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
         rom_cache,
     };
     let summary = rfmlab::runner::run_study(&study, &opts, &progress).map_err(wrap)?;
-    if let Some(pb) = bar.replace(None) {
+    if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
         pb.finish_and_clear();
     }
     if a.json {

@@ -9,6 +9,10 @@
 
 use rand::rngs::StdRng;
 
+pub mod likelihood;
+pub mod map;
+pub mod prior;
+
 /// Why a density evaluation failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DensityError {
@@ -42,6 +46,29 @@ pub trait Posterior: Sync {
     fn sample_prior(&self, rng: &mut StdRng) -> Vec<f64>;
     /// Physical values (SI) of the coordinates `x`, in the order of [`Posterior::names`].
     fn constrained(&self, x: &[f64]) -> Vec<f64>;
+
+    /// `ln |det dp/dx|`, the transform's log-Jacobian inside [`Posterior::log_prior`], with its
+    /// gradient. The MAP in the physical parameters maximises `log_posterior - log_jacobian`
+    /// (the mode does not depend on the coordinates chosen for sampling). Default 0 (the
+    /// coordinates are the physical values).
+    fn log_jacobian(&self, _x: &[f64], grad: Option<&mut [f64]>) -> f64 {
+        if let Some(g) = grad {
+            g.iter_mut().for_each(|v| *v = 0.0);
+        }
+        0.0
+    }
+
+    /// Prior quantiles `u in (0, 1)^d` mapped to unconstrained coordinates (for space-filling
+    /// designs). Default: the standard logistic quantile `ln(u / (1 - u))` per coordinate;
+    /// posteriors with their own priors override it.
+    fn prior_quantile(&self, u: &[f64]) -> Vec<f64> {
+        u.iter()
+            .map(|u| {
+                let u = u.clamp(1e-12, 1.0 - 1e-12);
+                (u / (1.0 - u)).ln()
+            })
+            .collect()
+    }
 
     /// Log posterior density up to `log Z`, with its gradient when `grad` is given.
     fn log_posterior(&self, x: &[f64], grad: Option<&mut [f64]>) -> Result<f64, DensityError> {

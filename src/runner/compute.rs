@@ -156,7 +156,7 @@ pub fn analyse_level(
     engine: &dyn FrfEngine,
     level: &LevelData,
     laws: &[Box<dyn ConstitutiveModel>],
-    progress: &dyn Fn(Event),
+    progress: &(dyn Fn(Event) + Sync),
 ) -> Result<LevelResults, RunError> {
     let params = rfm_params(study);
     let col = &level.column;
@@ -183,18 +183,10 @@ pub fn analyse_level(
         .map(|m| C64::new(m.initial[0], m.initial[1]))
         .unwrap_or(DEFAULT_E0);
 
-    let leak = study
-        .measurements
-        .as_ref()
-        .and_then(|m| m.estimator.as_ref())
-        .map(|estimator| Leakage {
-            estimator,
-            engine,
-            data_band_hz: (
-                level.freq_hz.first().copied().unwrap_or(0.0),
-                level.freq_hz.last().copied().unwrap_or(0.0),
-            ),
-        });
+    let leak = super::bayes::measurement_model(study, level)?.map(|measurement| Leakage {
+        engine,
+        measurement,
+    });
     let leak = leak.as_ref();
     let constant = |p: &[f64], _w: f64| C64::new(p[0], p[1]);
 

@@ -2,7 +2,8 @@
 //!
 //! A measured H1 with a window of length T is not the structure's FRF at the line but its
 //! window-kernel average, `E[H1](f_k) = int H S_F |W((f - f_k) T)|^2 df / int S_F |W|^2 df`
-//! ([`crate::experiment::leakage_bias`]). At a mode as damped as the joint's first (eta 0.2 at
+//! over the band where the force had power ([`crate::forward::measurement`], the same
+//! operator the likelihood uses). At a mode as damped as the joint's first (eta 0.2 at
 //! 22 Hz, half-power bandwidth 4.4 Hz) a 1 s Hann window lowers the peak by about 6 % and
 //! widens it, so a circle fit reads a loss factor about 16 % too high. When the study states
 //! its estimator (`[measurements.estimator]`), each identification is wrapped in a fixed point:
@@ -12,28 +13,27 @@
 
 use super::RunError;
 use crate::common::C64;
-use crate::experiment::plant::EnginePlant;
-use crate::experiment::{leakage_bias, ChainParams, KernelParams};
+use crate::forward::{MeasurementModel, Observation};
 use crate::frf::FrfEngine;
 use crate::rfm::MeasuredColumn;
-use crate::study::Estimator;
 
 /// Fixed-point passes stop when the largest relative change of the parameters is below this.
 pub const PASS_TOLERANCE: f64 = 1e-6;
 /// At most this many corrected passes after the uncorrected first fit.
 pub const MAX_PASSES: usize = 12;
 
-/// The estimator of a study applied to one level's data.
+/// The study's measurement model applied to one level's data.
 pub struct Leakage<'a> {
-    pub estimator: &'a Estimator,
     pub engine: &'a dyn FrfEngine,
-    /// First and last line of the level's data (Hz): the excitation band.
-    pub data_band_hz: (f64, f64),
+    /// The H1 estimator's expectation on the level's lines ([`crate::forward::measurement`]).
+    pub measurement: MeasurementModel,
 }
 
 impl Leakage<'_> {
     /// The leakage bias `E[H1] - H` of the model with modulus curve `modulus` (Pa, of w in
-    /// rad/s) on the lines and outputs of `col`, flattened `[line][k]` like its accelerance.
+    /// rad/s) on the lines and outputs of `col`, flattened `[line][k]` like its accelerance:
+    /// the forward model's ([`Observation::bias_for_modulus`]). `col` may be a band of the
+    /// level's lines; the operator is restricted to those lines.
     pub fn bias(
         &self,
         col: &MeasuredColumn,
@@ -48,52 +48,25 @@ impl Leakage<'_> {
             .iter()
             .map(|w| w / std::f64::consts::TAU)
             .collect();
-        let (Some(&lo), Some(&hi)) = (lines_hz.first(), lines_hz.last()) else {
+        if lines_hz.is_empty() {
             return Ok(Vec::new());
-        };
-        let df = 1.0 / self.estimator.block_s;
-        let kernel = KernelParams {
-            grid_step_hz: df / 8.0,
-            half_width_hz: 12.0 * df,
-        };
-        // The force reaches the structure over the data's band; only the kernel's reach
-        // around the lines matters.
-        let band_hz = (
-            (lo - kernel.half_width_hz).max(self.data_band_hz.0).min(lo),
-            (hi + kernel.half_width_hz).min(self.data_band_hz.1).max(hi),
-        );
-        // Lines on the analyser's grid: k / block_s exactly.
-        let lines_hz: Vec<f64> = lines_hz.iter().map(|f| (f / df).round() * df).collect();
-        let chain = ChainParams {
-            band_hz,
-            fs_hz: self.estimator.fs_hz,
-            block_s: self.estimator.block_s,
-            window: self.estimator.window,
-            shaker: self.estimator.shaker,
-            lines_hz,
-            kernel,
-            ..ChainParams::default()
-        };
-        let input_col = self
-            .engine
-            .inputs()
-            .iter()
-            .position(|&j| j == col.input)
-            .ok_or_else(|| fail(format!("point index {} is not an engine input", col.input)))?;
-        let plant = EnginePlant {
-            engine: self.engine,
-            modulus,
-            input_col,
-            drive_output: col.input,
-        };
-        let b = leakage_bias(&plant, &chain).map_err(|e| fail(e.to_string()))?;
-        let mut out = Vec::with_capacity(col.accelerance.len());
-        for l in 0..col.n_lines() {
-            for &i in &col.outputs {
-                out.push(b[i][l]);
-            }
         }
-        Ok(out)
+        let m = MeasurementModel::new(
+            self.measurement.spec,
+            &lines_hz,
+            &crate::forward::MeasurementParams::default(),
+        )
+        .map_err(|e| fail(e.to_string()))?;
+        let obs = Observation::new(
+            self.engine,
+            &col.omega_rad_s,
+            col.input,
+            &col.outputs,
+            Some(m),
+        )
+        .map_err(|e| fail(e.to_string()))?;
+        obs.bias_for_modulus(modulus)
+            .map_err(|e| fail(e.to_string()))
     }
 
     /// `col` with `bias` subtracted from its accelerance.

@@ -20,8 +20,10 @@
 //! into place (then the old one is deleted). A failed or interrupted run therefore leaves the
 //! earlier results untouched (at worst a stray `.tmp-*` folder).
 
+mod bayes;
 mod compute;
 mod leakage;
+mod sample;
 pub mod write;
 
 pub use compute::{
@@ -133,6 +135,10 @@ pub struct LevelData {
     pub column: crate::rfm::MeasuredColumn,
     /// The law that made simulated data, from `measurements.truth`.
     pub truth: Option<LevelTruth>,
+    /// Ordinary coherence per value, `[line * n_out + k]`, when every channel has it.
+    pub coherence: Option<Vec<f64>>,
+    /// Number of averaged blocks of the H1 estimate, when the file says.
+    pub n_averages: Option<u32>,
 }
 
 /// The constitutive law and parameters (in the law's order, SI) that made a simulated level.
@@ -338,7 +344,20 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
             }
         }
         let freq_hz: Vec<f64> = lines.iter().map(|&l| lvl.freq_hz[l]).collect();
+        let coherence = if chans.iter().all(|(ch, _)| ch.coherence.is_some()) {
+            let mut c = vec![0.0; lines.len() * n_out];
+            for (ll, &l) in lines.iter().enumerate() {
+                for (k, (ch, _)) in chans.iter().enumerate() {
+                    c[ll * n_out + k] = ch.coherence.as_ref().map_or(f64::NAN, |v| v[l]);
+                }
+            }
+            Some(c)
+        } else {
+            None
+        };
         out.push(LevelData {
+            coherence,
+            n_averages: lvl.n_averages,
             name: level.name.clone(),
             column: crate::rfm::MeasuredColumn {
                 omega_rad_s: freq_hz.iter().map(|f| TWO_PI * f).collect(),
@@ -362,7 +381,8 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
 /// model's LU sweep (both are certified over the same range).
 struct RomEngine {
     rom: crate::rom::ReducedModel,
-    pencil: crate::rom::PencilSweep,
+    /// Prepared pencils: the band's lines, and the measurement model's fine grid per level.
+    pencils: Vec<crate::rom::PencilSweep>,
 }
 
 impl FrfEngine for RomEngine {
@@ -379,14 +399,15 @@ impl FrfEngine for RomEngine {
         with_derivatives: bool,
         out: &mut Sweep,
     ) -> Result<(), FrfError> {
-        let same = omega_rad_s.len() == self.pencil.omega_rad_s().len()
-            && omega_rad_s
-                .iter()
-                .zip(self.pencil.omega_rad_s())
-                .all(|(a, b)| a.to_bits() == b.to_bits());
-        if same {
-            self.pencil
-                .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
+        let same = |p: &crate::rom::PencilSweep| {
+            omega_rad_s.len() == p.omega_rad_s().len()
+                && omega_rad_s
+                    .iter()
+                    .zip(p.omega_rad_s())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+        };
+        if let Some(p) = self.pencils.iter().find(|p| same(p)) {
+            p.sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
         } else {
             self.rom
                 .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
@@ -494,9 +515,21 @@ fn build_engine(
             };
             // Prepare the pencil for the first level's grid (all levels normally share it).
             let omega = &levels[0].column.omega_rad_s;
-            let pencil = rom
+            let mut pencils = vec![rom
                 .prepare(omega)
-                .map_err(|e| RunError::Engine(e.to_string()))?;
+                .map_err(|e| RunError::Engine(e.to_string()))?];
+            // The measurement model's fine grid of each level (the likelihood's sweep).
+            for level in levels {
+                if let Some(m) = bayes::measurement_model(study, level)? {
+                    let fine = m.fine_omega();
+                    if !pencils.iter().any(|p| p.omega_rad_s() == fine.as_slice()) {
+                        pencils.push(
+                            rom.prepare(&fine)
+                                .map_err(|e| RunError::Engine(e.to_string()))?,
+                        );
+                    }
+                }
+            }
             let note = format!(
                 "engine: ROM with {} basis vectors over {:.1}..{:.1} Hz, E' {:.3e}..{:.3e} Pa, E'' {:.3e}..{:.3e} Pa; certificate max relative error {:.2e} (tolerance {:.1e}){}",
                 cert.basis_size,
@@ -513,7 +546,7 @@ fn build_engine(
                 (Some(f), true) => format!(" (loaded from the ROM cache {})", f.display()),
                 _ => String::new(),
             };
-            Ok((Box::new(RomEngine { rom, pencil }), note))
+            Ok((Box::new(RomEngine { rom, pencils }), note))
         }
     }
 }
@@ -624,7 +657,7 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
 pub fn run_study(
     study: &Study,
     opts: &RunOptions,
-    progress: &dyn Fn(Event),
+    progress: &(dyn Fn(Event) + Sync),
 ) -> Result<RunSummary, RunError> {
     let t0 = Instant::now();
     let mut timings: Vec<(String, f64)> = Vec::new();

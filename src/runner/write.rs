@@ -816,7 +816,7 @@ pub(super) fn write_results(
     timings: &[(String, f64)],
     engine_note: &str,
     t0: Instant,
-    progress: &dyn Fn(Event),
+    progress: &(dyn Fn(Event) + Sync),
 ) -> Result<Vec<String>, RunError> {
     let tmp = sibling(out_dir, &format!("tmp-{}", std::process::id()));
     if tmp.exists() {

@@ -127,6 +127,8 @@ pub struct Estimator {
     pub block_s: f64,
     pub fs_hz: f64,
     pub shaker: Option<crate::experiment::Shaker>,
+    /// Band (Hz) over which the force had power; `None`: baseband, 0 Hz to the last line.
+    pub force_band_hz: Option<(f64, f64)>,
 }
 
 /// A constitutive model to identify, with initial values in the model's parameter order (SI).
@@ -217,6 +219,8 @@ pub struct Study {
     pub models: Vec<ModelSpec>,
     pub solver: Solver,
     pub analyses: Analyses,
+    /// The `[inference]` section, when the study asks for posteriors.
+    pub inference: Option<inference::Inference>,
 }
 
 mod validate;
@@ -242,3 +246,4 @@ pub(crate) fn resolve(file: &Path, p: &str) -> PathBuf {
 
 pub mod build;
 pub mod experiment;
+pub mod inference;

@@ -15,6 +15,8 @@ pub struct RawStudy {
     pub models: Vec<RawModel>,
     pub solver: Option<RawSolver>,
     pub analyses: Option<RawAnalyses>,
+    /// Bayesian inference (see [`super::inference`]).
+    pub inference: Option<super::inference::RawInference>,
 }
 
 #[derive(Debug, Deserialize, Default)]

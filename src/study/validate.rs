@@ -91,6 +91,10 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
     for (i, m) in raw.models.iter().enumerate() {
         models.push(model(&ctx, i, m, &level_names)?);
     }
+    let inference = match &raw.inference {
+        None => None,
+        Some(r) => Some(super::inference::inference(&ctx, r, &models, &level_names)?),
+    };
     let sha256 = {
         let mut h = Sha256::new();
         h.update(text.as_bytes());
@@ -115,6 +119,7 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
         models,
         solver,
         analyses,
+        inference,
     })
 }
 
@@ -545,6 +550,7 @@ fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measure
                 block_s,
                 fs_hz,
                 shaker,
+                force_band_hz: None,
             })
         }
     };

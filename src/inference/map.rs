@@ -1,0 +1,514 @@
+//! The maximum a posteriori point by a multistart search, and the Laplace approximation there.
+//!
+//! 1. Starts: the caller's initial point (the study's initial values) plus `n_starts`
+//!    space-filling points over the prior (a Latin hypercube in prior quantiles, mapped to
+//!    unconstrained coordinates).
+//! 2. From each start, L-BFGS (argmin's `LBFGS` with a More-Thuente line search) on
+//!    `-log p(x | data)` in unconstrained coordinates, with the analytic gradient.
+//! 3. The best end point is polished by Newton steps on a central-difference Hessian of the
+//!    analytic gradient (backtracking on the objective) until the gradient's Newton decrement
+//!    is below `polish_tol`.
+//! 4. Laplace (Tierney & Kadane 1986): with `A` the Hessian of `-log p` at the MAP `x*`,
+//!    `log Z ~ log L(x*) + log pi(x*) + (d/2) ln 2 pi - (1/2) ln det A`, covariance `A^-1`
+//!    in unconstrained coordinates and `D A^-1 D` (D = diag dp/dx) for the physical
+//!    parameters (delta method).
+//!
+//! Every start's end point, objective, iteration count and stop reason are kept: the raw
+//! material of the initial-value sensitivity study. Starts run in parallel (rayon); results
+//! are collected in start order, so they do not depend on the thread count.
+
+use super::{unit_rng, DensityError, Posterior};
+use argmin::core::{CostFunction, Executor, Gradient, State};
+use argmin::solver::linesearch::MoreThuenteLineSearch;
+use argmin::solver::quasinewton::LBFGS;
+use rand::RngExt;
+use rayon::prelude::*;
+
+/// Settings of the multistart search.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MapParams {
+    /// Space-filling starts besides the caller's. Default 16.
+    pub n_starts: usize,
+    /// L-BFGS iterations per start. Default 200.
+    pub max_iters: u64,
+    /// L-BFGS memory. Default 7.
+    pub memory: usize,
+    /// Gradient-norm tolerance of L-BFGS. Default 1e-6.
+    pub tol_grad: f64,
+    /// Newton decrement (`g^T A^-1 g / 2`) below which polishing stops. Default 1e-10.
+    pub polish_tol: f64,
+    /// Seed of the space-filling design.
+    pub seed: u64,
+}
+
+impl Default for MapParams {
+    fn default() -> Self {
+        MapParams {
+            n_starts: 16,
+            max_iters: 200,
+            memory: 7,
+            tol_grad: 1e-6,
+            polish_tol: 1e-10,
+            seed: 0,
+        }
+    }
+}
+
+/// One start of the search.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StartResult {
+    pub index: usize,
+    /// "initial" for the caller's start, "design" for space-filling ones.
+    pub kind: &'static str,
+    pub start_x: Vec<f64>,
+    pub end_x: Vec<f64>,
+    /// `-log p(x | data)` up to `log Z` at the end point (infinite when it failed).
+    pub objective: f64,
+    pub iterations: u64,
+    pub stop_reason: String,
+}
+
+/// The Laplace approximation at the mode of the density in unconstrained coordinates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Laplace {
+    pub x: Vec<f64>,
+    /// Physical values at the MAP.
+    pub physical: Vec<f64>,
+    pub log_likelihood: f64,
+    pub log_prior: f64,
+    /// Covariance in unconstrained coordinates, row-major d x d.
+    pub cov_x: Vec<f64>,
+    /// Covariance of the physical values (delta method), row-major d x d.
+    pub cov_physical: Vec<f64>,
+    pub log_evidence: f64,
+    /// Whether the Hessian was positive definite (else the covariance is not usable).
+    pub positive_definite: bool,
+}
+
+impl Laplace {
+    pub fn dim(&self) -> usize {
+        self.x.len()
+    }
+    /// Physical standard deviations.
+    pub fn sd_physical(&self) -> Vec<f64> {
+        let d = self.dim();
+        (0..d)
+            .map(|i| self.cov_physical[i * d + i].max(0.0).sqrt())
+            .collect()
+    }
+}
+
+/// What the search found.
+#[derive(Clone, Debug)]
+pub struct MapResult {
+    pub starts: Vec<StartResult>,
+    /// Index into `starts` of the best end point (before polishing).
+    pub best: usize,
+    /// The MAP (mode of the posterior density of the physical parameters), unconstrained.
+    pub map_x: Vec<f64>,
+    /// The MAP's physical values.
+    pub map_physical: Vec<f64>,
+    pub laplace: Laplace,
+    /// Newton polishing steps taken.
+    pub polish_steps: usize,
+    /// Density evaluations (with gradient) spent.
+    pub evaluations: usize,
+}
+
+/// Errors of the search.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum MapError {
+    #[error("no start reached a finite posterior density; first failure: {0}")]
+    NoFiniteStart(String),
+    #[error(transparent)]
+    Density(#[from] DensityError),
+}
+
+/// `-log p(x | data)` (physical-space MAP objective) divided by `scale`: the log posterior of
+/// a few thousand FRF values spans many decades between the prior box and the optimum, and
+/// L-BFGS's first step is the raw gradient, so the search works on `f / |f(x_0)|`.
+struct Objective<'a> {
+    post: &'a dyn Posterior,
+    count: &'a std::sync::atomic::AtomicUsize,
+    scale: f64,
+}
+
+/// `log p(x | data)` without (`physical`) or with the transform's log-Jacobian, and its gradient.
+fn objective(
+    post: &dyn Posterior,
+    x: &[f64],
+    grad: Option<&mut [f64]>,
+    physical: bool,
+) -> Result<f64, DensityError> {
+    match grad {
+        None => {
+            let v = post.log_posterior(x, None)?;
+            Ok(if physical {
+                v - post.log_jacobian(x, None)
+            } else {
+                v
+            })
+        }
+        Some(g) => {
+            let v = post.log_posterior(x, Some(g))?;
+            if !physical {
+                return Ok(v);
+            }
+            let mut gj = vec![0.0; x.len()];
+            let j = post.log_jacobian(x, Some(&mut gj));
+            g.iter_mut().zip(&gj).for_each(|(a, b)| *a -= b);
+            Ok(v - j)
+        }
+    }
+}
+
+impl Objective<'_> {
+    fn value_grad(&self, x: &[f64]) -> Result<(f64, Vec<f64>), DensityError> {
+        self.count
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let mut g = vec![0.0; x.len()];
+        let v = objective(self.post, x, Some(&mut g), true)?;
+        g.iter_mut().for_each(|v| *v = -*v / self.scale);
+        Ok((-v / self.scale, g))
+    }
+}
+
+impl CostFunction for Objective<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, x: &Self::Param) -> Result<f64, argmin::core::Error> {
+        self.count
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        match objective(self.post, x, None, true) {
+            Ok(v) if v.is_finite() => Ok(-v / self.scale),
+            // A huge finite cost makes the line search back off (argmin stops on NaN/inf).
+            Ok(_) | Err(DensityError::Recoverable(_)) => Ok(1e300),
+            Err(e) => Err(argmin::core::Error::msg(e.to_string())),
+        }
+    }
+}
+
+impl Gradient for Objective<'_> {
+    type Param = Vec<f64>;
+    type Gradient = Vec<f64>;
+    fn gradient(&self, x: &Self::Param) -> Result<Vec<f64>, argmin::core::Error> {
+        match self.value_grad(x) {
+            Ok((_, g)) if g.iter().all(|v| v.is_finite()) => Ok(g),
+            Ok(_) | Err(DensityError::Recoverable(_)) => Ok(vec![0.0; x.len()]),
+            Err(e) => Err(argmin::core::Error::msg(e.to_string())),
+        }
+    }
+}
+
+/// A Latin hypercube of `n` points in `(0, 1)^d` (one RNG, so it is reproducible).
+pub fn latin_hypercube(n: usize, d: usize, seed: u64) -> Vec<Vec<f64>> {
+    let mut rng = unit_rng(seed, 0x4C48_5300);
+    let mut pts = vec![vec![0.0; d]; n];
+    for j in 0..d {
+        let mut perm: Vec<usize> = (0..n).collect();
+        for i in (1..n).rev() {
+            let k = rng.random_range(0..=i);
+            perm.swap(i, k);
+        }
+        for i in 0..n {
+            let u: f64 = rng.random::<f64>();
+            pts[i][j] = (perm[i] as f64 + u) / n as f64;
+        }
+    }
+    pts
+}
+
+/// Run one L-BFGS search from `x0`.
+fn search(
+    post: &dyn Posterior,
+    x0: &[f64],
+    p: &MapParams,
+    count: &std::sync::atomic::AtomicUsize,
+) -> (Vec<f64>, f64, u64, String) {
+    let f0 = objective(post, x0, None, true).unwrap_or(f64::NAN);
+    if !f0.is_finite() {
+        return (
+            x0.to_vec(),
+            f64::INFINITY,
+            0,
+            "failed: the posterior density is not finite at the start".into(),
+        );
+    }
+    let scale = f0.abs().max(1.0);
+    let obj = Objective { post, count, scale };
+    let ls = MoreThuenteLineSearch::new();
+    let solver = match LBFGS::new(ls, p.memory).with_tolerance_grad(p.tol_grad) {
+        Ok(s) => s,
+        Err(e) => return (x0.to_vec(), f64::INFINITY, 0, format!("failed: {e}")),
+    };
+    let solver = match solver.with_tolerance_cost(1e-12) {
+        Ok(s) => s,
+        Err(e) => return (x0.to_vec(), f64::INFINITY, 0, format!("failed: {e}")),
+    };
+    let res = Executor::new(obj, solver)
+        .configure(|s| s.param(x0.to_vec()).max_iters(p.max_iters))
+        .run();
+    match res {
+        Ok(r) => {
+            let st = r.state();
+            let x = st.get_best_param().cloned().unwrap_or_else(|| x0.to_vec());
+            let reason = st
+                .get_termination_reason()
+                .map(|t| t.text().to_string())
+                .unwrap_or_else(|| "unknown".into());
+            (x, st.get_best_cost() * scale, st.get_iter(), reason)
+        }
+        Err(e) => (x0.to_vec(), f64::INFINITY, 0, format!("failed: {e}")),
+    }
+}
+
+/// Central-difference Hessian of `-log p(x | data)` (in x, Jacobian included) from the
+/// analytic gradient (symmetrised).
+pub fn hessian(post: &dyn Posterior, x: &[f64]) -> Result<Vec<f64>, DensityError> {
+    hessian_of(post, x, false)
+}
+
+fn hessian_of(post: &dyn Posterior, x: &[f64], physical: bool) -> Result<Vec<f64>, DensityError> {
+    let d = x.len();
+    let mut h = vec![0.0; d * d];
+    let mut xp = x.to_vec();
+    let mut gp = vec![0.0; d];
+    let mut gm = vec![0.0; d];
+    for j in 0..d {
+        let e = 1e-5 * (1.0 + x[j].abs());
+        xp[j] = x[j] + e;
+        objective(post, &xp, Some(&mut gp), physical)?;
+        xp[j] = x[j] - e;
+        objective(post, &xp, Some(&mut gm), physical)?;
+        xp[j] = x[j];
+        for i in 0..d {
+            h[i * d + j] = -(gp[i] - gm[i]) / (2.0 * e);
+        }
+    }
+    for i in 0..d {
+        for j in 0..i {
+            let s = 0.5 * (h[i * d + j] + h[j * d + i]);
+            h[i * d + j] = s;
+            h[j * d + i] = s;
+        }
+    }
+    Ok(h)
+}
+
+/// Cholesky of a symmetric d x d matrix (row-major); None when not positive definite.
+pub fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
+    let mut l = vec![0.0; d * d];
+    for i in 0..d {
+        for j in 0..=i {
+            let mut s = a[i * d + j];
+            for k in 0..j {
+                s -= l[i * d + k] * l[j * d + k];
+            }
+            if i == j {
+                if !(s > 0.0) {
+                    return None;
+                }
+                l[i * d + i] = s.sqrt();
+            } else {
+                l[i * d + j] = s / l[j * d + j];
+            }
+        }
+    }
+    Some(l)
+}
+
+/// Solve `L L^T x = b`.
+pub fn chol_solve(l: &[f64], d: usize, b: &[f64]) -> Vec<f64> {
+    let mut y = b.to_vec();
+    for i in 0..d {
+        for k in 0..i {
+            y[i] -= l[i * d + k] * y[k];
+        }
+        y[i] /= l[i * d + i];
+    }
+    for i in (0..d).rev() {
+        for k in i + 1..d {
+            y[i] -= l[k * d + i] * y[k];
+        }
+        y[i] /= l[i * d + i];
+    }
+    y
+}
+
+/// Inverse of a positive definite matrix from its Cholesky factor.
+pub fn chol_inverse(l: &[f64], d: usize) -> Vec<f64> {
+    let mut inv = vec![0.0; d * d];
+    for j in 0..d {
+        let mut e = vec![0.0; d];
+        e[j] = 1.0;
+        let c = chol_solve(l, d, &e);
+        for i in 0..d {
+            inv[i * d + j] = c[i];
+        }
+    }
+    inv
+}
+
+/// Laplace approximation at `x` (assumed the MAP).
+pub fn laplace_at(post: &dyn Posterior, x: &[f64]) -> Result<Laplace, DensityError> {
+    let d = x.len();
+    let a = hessian(post, x)?;
+    let lp = post.log_prior(x, None);
+    let ll = post.log_likelihood(x, None)?;
+    let (cov_x, logdet, pd) = match cholesky(&a, d) {
+        Some(l) => {
+            let logdet: f64 = (0..d).map(|i| 2.0 * l[i * d + i].ln()).sum();
+            (chol_inverse(&l, d), logdet, true)
+        }
+        None => (vec![f64::NAN; d * d], f64::NAN, false),
+    };
+    // Jacobian of the physical values by central differences of the transform.
+    let phys = post.constrained(x);
+    let mut dp = vec![0.0; d];
+    let mut xp = x.to_vec();
+    for i in 0..d {
+        let e = 1e-6 * (1.0 + x[i].abs());
+        xp[i] = x[i] + e;
+        let a1 = post.constrained(&xp)[i];
+        xp[i] = x[i] - e;
+        let a0 = post.constrained(&xp)[i];
+        xp[i] = x[i];
+        dp[i] = (a1 - a0) / (2.0 * e);
+    }
+    let cov_physical = (0..d * d)
+        .map(|k| cov_x[k] * dp[k / d] * dp[k % d])
+        .collect();
+    Ok(Laplace {
+        x: x.to_vec(),
+        physical: phys,
+        log_likelihood: ll,
+        log_prior: lp,
+        cov_x,
+        cov_physical,
+        log_evidence: ll + lp + 0.5 * d as f64 * std::f64::consts::TAU.ln() - 0.5 * logdet,
+        positive_definite: pd,
+    })
+}
+
+/// Newton polishing from `x` of the physical-space MAP objective (`physical`) or of the
+/// density in x (returns the polished point and the steps taken).
+fn polish(
+    post: &dyn Posterior,
+    x: &[f64],
+    tol: f64,
+    physical: bool,
+) -> Result<(Vec<f64>, usize), DensityError> {
+    let d = x.len();
+    let mut x = x.to_vec();
+    let mut g = vec![0.0; d];
+    let mut f = -objective(post, &x, Some(&mut g), physical)?;
+    let mut steps = 0;
+    for _ in 0..20 {
+        let a = hessian_of(post, &x, physical)?;
+        let Some(l) = cholesky(&a, d) else { break };
+        // g holds the gradient of log p: the Newton step on -log p is A^-1 g.
+        let s = chol_solve(&l, d, &g);
+        let dec = 0.5 * s.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>();
+        if dec < tol {
+            break;
+        }
+        let mut t = 1.0;
+        let mut improved = false;
+        for _ in 0..30 {
+            let xn: Vec<f64> = x.iter().zip(&s).map(|(a, b)| a + t * b).collect();
+            let mut gn = vec![0.0; d];
+            if let Ok(v) = objective(post, &xn, Some(&mut gn), physical) {
+                if v.is_finite() && -v <= f {
+                    x = xn;
+                    g = gn;
+                    f = -v;
+                    improved = true;
+                    break;
+                }
+            }
+            t *= 0.5;
+        }
+        steps += 1;
+        if !improved {
+            break;
+        }
+    }
+    Ok((x, steps))
+}
+
+/// The multistart search: `initial` (unconstrained, e.g. the study's initial values) plus a
+/// Latin hypercube over the prior.
+pub fn find_map(
+    post: &dyn Posterior,
+    initial: Option<&[f64]>,
+    params: &MapParams,
+    progress: &(dyn Fn() + Sync),
+) -> Result<MapResult, MapError> {
+    let d = post.dim();
+    let mut starts: Vec<(&'static str, Vec<f64>)> = Vec::new();
+    if let Some(x) = initial {
+        starts.push(("initial", x.to_vec()));
+    }
+    // Design points: prior quantiles through a probe draw of each coordinate's quantile map.
+    let design = latin_hypercube(params.n_starts, d, params.seed);
+    for u in design {
+        starts.push(("design", quantiles_to_x(post, &u)));
+    }
+    let count = std::sync::atomic::AtomicUsize::new(0);
+    let results: Vec<StartResult> = starts
+        .par_iter()
+        .enumerate()
+        .map(|(i, (kind, x0))| {
+            let (end_x, objective, iterations, stop_reason) = search(post, x0, params, &count);
+            progress();
+            StartResult {
+                index: i,
+                kind,
+                start_x: x0.clone(),
+                end_x,
+                objective: if objective >= 1e300 {
+                    f64::INFINITY
+                } else {
+                    objective
+                },
+                iterations,
+                stop_reason,
+            }
+        })
+        .collect();
+    let best = results
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| r.objective.is_finite())
+        .min_by(|a, b| a.1.objective.total_cmp(&b.1.objective))
+        .map(|(i, _)| i)
+        .ok_or_else(|| {
+            MapError::NoFiniteStart(
+                results
+                    .first()
+                    .map(|r| r.stop_reason.clone())
+                    .unwrap_or_default(),
+            )
+        })?;
+    let (x, polish_steps) = polish(post, &results[best].end_x, params.polish_tol, true)?;
+    // Laplace at the mode of the density in x (where it is closest to Gaussian); it is next
+    // to the physical MAP, differing only by the transform's Jacobian.
+    let (xl, _) = polish(post, &x, params.polish_tol, false)?;
+    let laplace = laplace_at(post, &xl)?;
+    Ok(MapResult {
+        starts: results,
+        best,
+        map_x: x.clone(),
+        map_physical: post.constrained(&x),
+        laplace,
+        polish_steps,
+        evaluations: count.load(std::sync::atomic::Ordering::Relaxed),
+    })
+}
+
+/// Map prior quantiles `u` (one per coordinate) to unconstrained coordinates. Uses the
+/// posterior's own prior draws is not possible through the trait, so this inverts
+/// `sample_prior` by a quantile function when the posterior offers one.
+fn quantiles_to_x(post: &dyn Posterior, u: &[f64]) -> Vec<f64> {
+    post.prior_quantile(u)
+}

@@ -1,0 +1,449 @@
+//! The likelihood, priors and MAP on the small dense chain (exact FRFs, no ROM):
+//! * the log-likelihood gradient (analytic FRF sensitivities through the measurement model and
+//!   the prior transforms) against central finite differences, for every noise model;
+//! * with the deterministic fit's weights, the maximum likelihood is the RFM fixed point;
+//! * the measurement model's prediction is linear in H: E[H1] of the sum is the sum;
+//! * the multistart search finds the same optimum from every start on a well-posed problem,
+//!   and the Laplace covariance matches the inverse Fisher information.
+
+use crate::spring_model::chain;
+use rfmlab::common::C64;
+use rfmlab::experiment::Window;
+use rfmlab::forward::{EstimatorSpec, ForwardModel, MeasurementModel, MeasurementParams};
+use rfmlab::inference::likelihood::{
+    ErrorLaw, FrfData, FrfLikelihood, FrfPosterior, NoiseModel, Scale,
+};
+use rfmlab::inference::map::{find_map, MapParams};
+use rfmlab::inference::prior::Prior;
+use rfmlab::inference::Posterior;
+use rfmlab::material::{ConstitutiveModel, Model3};
+use rfmlab::rfm::{rfm_global, Denominator, DenseEngine, MeasuredColumn, RfmParams};
+use std::f64::consts::TAU;
+
+const MEASURED: [usize; 4] = [1, 3, 5, 7];
+const TRUTH: [f64; 3] = [4.7121e6, 5.5573e6, 6.0491e3];
+
+fn engine() -> DenseEngine {
+    let (m, k, s) = chain();
+    DenseEngine::new(
+        m,
+        k,
+        s,
+        MEASURED.iter().map(|&d| vec![(d, 1.0)]).collect(),
+        (0..MEASURED.len()).collect(),
+    )
+    .unwrap()
+}
+
+/// xorshift64* + Box-Muller.
+struct Normal(u64);
+impl Normal {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+    fn next(&mut self) -> f64 {
+        let (u, v) = (self.uniform(), self.uniform());
+        (-2.0 * u.ln()).sqrt() * (TAU * v).cos()
+    }
+}
+
+/// Noisy data of Model 3 (relative complex noise `sigma` per value), with coherence values.
+fn data(eng: &DenseEngine, lines_hz: &[f64], sigma: f64, seed: u64) -> (MeasuredColumn, Vec<f64>) {
+    let omega: Vec<f64> = lines_hz.iter().map(|f| TAU * f).collect();
+    let fm = ForwardModel::new(eng, &Model3, &omega, 1, &[0, 1, 2, 3], None).unwrap();
+    let h = fm.exact(&TRUTH, false).unwrap().values;
+    let mut rng = Normal(seed);
+    let acc: Vec<C64> = h
+        .iter()
+        .map(|v| v * (1.0 + C64::new(rng.next(), rng.next()) * (sigma / 2f64.sqrt())))
+        .collect();
+    let coh: Vec<f64> = (0..acc.len())
+        .map(|_| 0.9 + 0.099 * rng.uniform())
+        .collect();
+    (
+        MeasuredColumn {
+            omega_rad_s: omega,
+            input: 1,
+            outputs: vec![0, 1, 2, 3],
+            accelerance: acc,
+        },
+        coh,
+    )
+}
+
+fn posterior<'a>(
+    eng: &'a DenseEngine,
+    col: &MeasuredColumn,
+    coh: &[f64],
+    noise: NoiseModel,
+    measurement: Option<MeasurementModel>,
+    priors: Vec<Prior>,
+) -> FrfPosterior<'a> {
+    let fm =
+        ForwardModel::new(eng, &Model3, &col.omega_rad_s, 1, &col.outputs, measurement).unwrap();
+    let data = FrfData {
+        freq_hz: col.omega_rad_s.iter().map(|w| w / TAU).collect(),
+        n_out: 4,
+        values: col.accelerance.clone(),
+        coherence: Some(coh.to_vec()),
+    };
+    let lik = FrfLikelihood::new(fm, data, noise, &[1, 2, 3, 4]).unwrap();
+    FrfPosterior::new(lik, priors).unwrap()
+}
+
+fn law_priors() -> Vec<Prior> {
+    vec![
+        Prior::LogUniform { lo: 1e6, hi: 3e7 },
+        Prior::LogNormal {
+            median: 5e6,
+            sigma_ln: 1.0,
+        },
+        Prior::TruncatedNormal {
+            mean: 6e3,
+            sd: 3e3,
+            lo: 1e2,
+            hi: 5e4,
+        },
+    ]
+}
+
+fn check_gradient(post: &dyn Posterior, x: &[f64], what: &str) {
+    let d = post.dim();
+    let mut g = vec![0.0; d];
+    post.log_likelihood(x, Some(&mut g)).unwrap();
+    let mut gp = vec![0.0; d];
+    post.log_prior(x, Some(&mut gp));
+    for i in 0..d {
+        let e = 1e-6 * (1.0 + x[i].abs());
+        let mut a = x.to_vec();
+        let mut b = x.to_vec();
+        a[i] += e;
+        b[i] -= e;
+        let fd = (post.log_likelihood(&a, None).unwrap() - post.log_likelihood(&b, None).unwrap())
+            / (2.0 * e);
+        let scale = fd.abs().max(g[i].abs()).max(1.0);
+        assert!(
+            (fd - g[i]).abs() < 2e-5 * scale,
+            "{what}: d logL/dx_{i} analytic {} vs FD {fd}",
+            g[i]
+        );
+        let fdp = (post.log_prior(&a, None) - post.log_prior(&b, None)) / (2.0 * e);
+        assert!(
+            (fdp - gp[i]).abs() < 1e-6 * fdp.abs().max(1.0),
+            "{what}: d log prior/dx_{i} {} vs FD {fdp}",
+            gp[i]
+        );
+    }
+}
+
+#[test]
+fn log_likelihood_gradient_matches_finite_differences_for_every_noise_model() {
+    let eng = engine();
+    let lines: Vec<f64> = (1..=120).map(|k| k as f64 * 2.0).collect();
+    let (col, coh) = data(&eng, &lines, 0.03, 7);
+    let mm = MeasurementModel::new(
+        EstimatorSpec {
+            window: Window::Hann,
+            block_s: 0.5,
+            fs_hz: 1024.0,
+            force_band_hz: (0.0, 240.0),
+            shaker: None,
+        },
+        &lines,
+        &MeasurementParams::default(),
+    )
+    .unwrap();
+    let coherence = Scale::Coherence {
+        n_averages: 150.0,
+        floor: 1e-4,
+    };
+    let inferred = Scale::Inferred {
+        bands_hz: vec![0.0, 100.0, 300.0],
+    };
+    let cases = [
+        (
+            "coherence, gaussian",
+            coherence.clone(),
+            ErrorLaw::Gaussian,
+            0.0,
+        ),
+        (
+            "coherence + model error",
+            coherence.clone(),
+            ErrorLaw::Gaussian,
+            0.01,
+        ),
+        (
+            "inferred per band",
+            inferred.clone(),
+            ErrorLaw::Gaussian,
+            0.0,
+        ),
+        (
+            "student-t nu fixed",
+            coherence,
+            ErrorLaw::StudentT { nu: Some(4.0) },
+            0.0,
+        ),
+        (
+            "student-t inferred scale and nu",
+            inferred,
+            ErrorLaw::StudentT { nu: None },
+            0.005,
+        ),
+    ];
+    for (what, scale, errors, model_error) in cases {
+        for with_mm in [false, true] {
+            let noise = NoiseModel {
+                scale: scale.clone(),
+                errors: errors.clone(),
+                model_error,
+            };
+            let n_noise = match (&noise.scale, &noise.errors) {
+                (Scale::Inferred { .. }, ErrorLaw::StudentT { nu: None }) => 9,
+                (Scale::Inferred { .. }, _) => 8,
+                _ => 0,
+            };
+            let mut priors = law_priors();
+            for i in 0..n_noise {
+                priors.push(if i == 8 {
+                    Prior::LogUniform { lo: 1.0, hi: 100.0 }
+                } else {
+                    Prior::LogUniform { lo: 1e-4, hi: 1.0 }
+                });
+            }
+            let post = posterior(&eng, &col, &coh, noise, with_mm.then(|| mm.clone()), priors);
+            assert_eq!(post.dim(), 3 + n_noise, "{what}");
+            // A point off the optimum (so the gradient is not zero).
+            let mut phys = vec![5.3e6, 4.9e6, 7.1e3];
+            phys.extend((0..n_noise).map(|i| if i == 8 { 6.0 } else { 0.02 + 0.003 * i as f64 }));
+            let x = post.unconstrained(&phys);
+            check_gradient(&post, &x, &format!("{what}, measurement model {with_mm}"));
+        }
+    }
+}
+
+#[test]
+fn maximum_likelihood_with_the_rfm_weights_is_the_rfm_fixed_point() {
+    let eng = engine();
+    let lines: Vec<f64> = (1..=250).map(|k| 2.0 * k as f64).collect();
+    let (col, coh) = data(&eng, &lines, 0.03, 11);
+    let start = [5.0e6, 4.0e6, 4.0e3];
+    let rfm = rfm_global(
+        &eng,
+        &col,
+        &Model3,
+        &start,
+        &RfmParams {
+            tol_rel_change: 1e-13,
+            max_iterations: 200,
+            denominator: Denominator::Analytical,
+            ..RfmParams::default()
+        },
+    )
+    .unwrap();
+    // The RFM's weights at its fixed point: |dH'/dE*|^2 per value.
+    let fm = ForwardModel::new(&eng, &Model3, &col.omega_rad_s, 1, &col.outputs, None).unwrap();
+    let (_, dh) = fm
+        .obs
+        .accelerance_with(
+            &col.omega_rad_s,
+            &col.omega_rad_s
+                .iter()
+                .map(|&w| Model3.modulus(&rfm.params, w))
+                .collect::<Vec<_>>(),
+            true,
+        )
+        .unwrap();
+    let variances: Vec<f64> = dh.iter().map(|g| g.norm_sqr()).collect();
+    // Flat (uniform) priors: the MAP in the physical parameters is the maximum likelihood.
+    let priors = vec![
+        Prior::Uniform { lo: 1e5, hi: 5e7 },
+        Prior::Uniform { lo: 1e5, hi: 5e7 },
+        Prior::Uniform { lo: 10.0, hi: 1e5 },
+    ];
+    let post = posterior(
+        &eng,
+        &col,
+        &coh,
+        NoiseModel {
+            scale: Scale::Fixed { variances },
+            errors: ErrorLaw::Gaussian,
+            model_error: 0.0,
+        },
+        None,
+        priors,
+    );
+    let x0 = post.unconstrained(&start);
+    let r = find_map(
+        &post,
+        Some(&x0),
+        &MapParams {
+            n_starts: 3,
+            ..MapParams::default()
+        },
+        &|| {},
+    )
+    .unwrap();
+    let off_truth = r
+        .map_physical
+        .iter()
+        .zip(TRUTH)
+        .map(|(a, b)| ((a - b) / b).abs())
+        .fold(0.0, f64::max);
+    let gap = r
+        .map_physical
+        .iter()
+        .zip(&rfm.params)
+        .map(|(a, b)| ((a - b) / b).abs())
+        .fold(0.0, f64::max);
+    println!(
+        "MAP {:?} RFM {:?}: gap {gap:.2e}, distance to truth {off_truth:.2e}",
+        r.map_physical, rfm.params
+    );
+    assert!(
+        off_truth > 1e-3,
+        "noise must move the optimum off the truth"
+    );
+    assert!(gap < 1e-7, "MAP vs RFM fixed point: {gap:e}");
+}
+
+#[test]
+fn multistart_agrees_and_laplace_covariance_is_the_inverse_fisher_information() {
+    let eng = engine();
+    let lines: Vec<f64> = (1..=150).map(|k| 2.0 * k as f64).collect();
+    let (col, coh) = data(&eng, &lines, 0.02, 3);
+    let post = posterior(
+        &eng,
+        &col,
+        &coh,
+        NoiseModel {
+            scale: Scale::Coherence {
+                n_averages: 100.0,
+                floor: 1e-4,
+            },
+            errors: ErrorLaw::Gaussian,
+            model_error: 0.0,
+        },
+        None,
+        vec![
+            Prior::LogUniform { lo: 1e6, hi: 3e7 },
+            Prior::LogUniform { lo: 1e6, hi: 3e7 },
+            Prior::LogUniform { lo: 6e2, hi: 6e4 },
+        ],
+    );
+    let r = find_map(
+        &post,
+        None,
+        &MapParams {
+            n_starts: 12,
+            seed: 5,
+            ..MapParams::default()
+        },
+        &|| {},
+    )
+    .unwrap();
+    let best = r.starts[r.best].objective;
+    let reached = r
+        .starts
+        .iter()
+        .filter(|s| (s.objective - best).abs() < 1e-6 * best.abs().max(1.0))
+        .count();
+    println!(
+        "{} of {} starts reach the optimum; Laplace log Z {:.3}",
+        reached,
+        r.starts.len(),
+        r.laplace.log_evidence
+    );
+    assert!(
+        reached * 2 >= r.starts.len(),
+        "only {reached} starts reached the optimum"
+    );
+    // Gauss-Newton Fisher information in x: J^T V^-1 J (2 real parts per complex value).
+    let lp = &r.laplace;
+    assert!(lp.positive_definite);
+    let x = &lp.x;
+    let p = post.physical(x);
+    let pred = post.likelihood.forward.predict(&p, true).unwrap();
+    let v = post.likelihood.variances(&[]);
+    let d = 3;
+    let mut fisher = vec![0.0; d * d];
+    for a in 0..d {
+        for b in 0..d {
+            let s: f64 = (0..v.len())
+                .map(|o| (pred.jac[a][o].conj() * pred.jac[b][o]).re / v[o])
+                .sum();
+            fisher[a * d + b] = s * post.priors[a].dp_dx(x[a]) * post.priors[b].dp_dx(x[b]);
+        }
+    }
+    // Laplace covariance (which also holds the tiny prior curvature) vs the inverse Fisher.
+    let l = rfmlab::inference::map::cholesky(&fisher, d).unwrap();
+    let inv = rfmlab::inference::map::chol_inverse(&l, d);
+    for i in 0..d {
+        let rel = (lp.cov_x[i * d + i] / inv[i * d + i] - 1.0).abs();
+        assert!(
+            rel < 0.05,
+            "variance {i}: Laplace {} vs Fisher {}",
+            lp.cov_x[i * d + i],
+            inv[i * d + i]
+        );
+    }
+    // And the truth within 4 sd of the MAP for every parameter (2 % noise, 600 values).
+    let sd = lp.sd_physical();
+    for i in 0..d {
+        let z = (r.map_physical[i] - TRUTH[i]) / sd[i];
+        assert!(z.abs() < 4.0, "parameter {i}: z = {z}");
+    }
+}
+
+#[test]
+fn measurement_prediction_is_linear_in_the_frf_and_reaches_the_mirror() {
+    let eng = engine();
+    let lines: Vec<f64> = (1..=60).map(|k| k as f64).collect();
+    let omega: Vec<f64> = lines.iter().map(|f| TAU * f).collect();
+    let spec = |lo: f64| EstimatorSpec {
+        window: Window::Hann,
+        block_s: 1.0,
+        fs_hz: 256.0,
+        force_band_hz: (lo, 60.0),
+        shaker: None,
+    };
+    let m0 = MeasurementModel::new(spec(0.0), &lines, &MeasurementParams::default()).unwrap();
+    let m1 = MeasurementModel::new(spec(1.0), &lines, &MeasurementParams::default()).unwrap();
+    let f0 = ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(m0)).unwrap();
+    let f1 = ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(m1)).unwrap();
+    let exact = f0.exact(&TRUTH, false).unwrap().values;
+    let e0 = f0.predict(&TRUTH, true).unwrap();
+    let e1 = f1.predict(&TRUTH, false).unwrap().values;
+    // Away from the band edges the force band does not matter.
+    for o in 4 * 20..4 * 40 {
+        assert!((e0.values[o] - e1[o]).norm() < 1e-9 * exact[o].norm());
+    }
+    // At 1 Hz it does: the mirror and the force below the first line change E[H1].
+    let d = (e0.values[0] - e1[0]).norm() / exact[0].norm();
+    assert!(d > 1e-2, "force band at the 1 Hz line: {d}");
+    // Jacobian of the prediction by finite differences.
+    for k in 0..3 {
+        let mut a = TRUTH.to_vec();
+        let mut b = TRUTH.to_vec();
+        let e = 1e-6 * TRUTH[k];
+        a[k] += e;
+        b[k] -= e;
+        let pa = f0.predict(&a, false).unwrap().values;
+        let pb = f0.predict(&b, false).unwrap().values;
+        for o in (0..pa.len()).step_by(13) {
+            let fd = (pa[o] - pb[o]) / (2.0 * e);
+            // Central differences of relative step 1e-6 carry rounding of about
+            // 1e-16 cond(Z) |H| / (1e-6 p): where the FRF barely depends on p_k that is the limit.
+            assert!(
+                (fd - e0.jac[k][o]).norm()
+                    < 1e-6 * e0.jac[k][o].norm() + 1e-7 * e0.values[o].norm() / TRUTH[k],
+                "param {k} obs {o}: {fd} vs {}",
+                e0.jac[k][o]
+            );
+        }
+    }
+}
