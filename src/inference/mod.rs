@@ -9,6 +9,9 @@
 
 use rand::rngs::StdRng;
 
+pub mod diagnostics;
+pub mod loo;
+
 /// Why a density evaluation failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DensityError {
