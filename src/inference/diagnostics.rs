@@ -27,12 +27,14 @@
 //!   * quantile `p`: ESS of the split indicator `x <= q_p`.
 //! * **MCSE**: of the mean `sd(x) / sqrt(ESS_mean)`; of the sd, with `d = (x - mean x)^2`,
 //!   `sqrt((mean(d^2) - mean(d)^2) / ESS_mean(d) / mean(d) / 4)`; of a quantile `p`, with
-//!   `a = ESS_p p + 1`, `b = ESS_p (1-p) + 1` and the sorted draws `x_(i)`,
-//!   `(x_(i2) - x_(i1)) / 2` where `i1,2 = rint(S * Beta^-1(0.1586553 | 0.8413447; a, b) - 1)`.
+//!   `a = ESS_p p + 1`, `b = ESS_p (1-p) + 1`, `u1,2 = Beta^-1(0.1586553 | 0.8413447; a, b)` and
+//!   the sorted draws `x_(1..S)`: `(x_(min(ceil(S u2), S)) - x_(max(floor(S u1), 1))) / 2` (the
+//!   +-1 sd interval of the quantile's order statistic).
 //! * **Quantiles** interpolate linearly between order statistics at `(S - 1) p` (numpy's
 //!   default); the **HDI** at probability `P` is the narrowest interval `[x_(i), x_(i+K)]`,
 //!   `K = floor(P S)` (first one on ties), over all chains pooled (unimodal).
-//! * **E-BFMI** of one chain of NUTS energies `E`: `mean((E_t - E_{t-1})^2) / var(E)` (ddof 0).
+//! * **E-BFMI** of one chain of NUTS energies `E_1..E_N`:
+//!   `sum_{t>1} (E_t - E_{t-1})^2 / sum_t (E_t - mean E)^2`.
 //!
 //! Invalid input in ArviZ's sense (any NaN, fewer than 4 draws, R-hat with one chain) gives NaN,
 //! as ArviZ does; only malformed input (no chains, ragged chains, a probability outside (0, 1))
@@ -541,16 +543,12 @@ fn mcse_quantile_c(c: &Chains, p: f64) -> f64 {
     let (a, b) = (ess * p + 1.0, ess * (1.0 - p) + 1.0);
     let s = sorted(&c.x);
     let size = s.len() as f64;
-    let lo = beta_ppf(0.158_655_3, a, b) * size - 1.0;
-    let hi = beta_ppf(0.841_344_7, a, b) * size - 1.0;
-    // np.nanmax((lo, 0)) and np.nanmin((hi, size - 1)), rounded half to even.
-    let lo = if lo.is_nan() { 0.0 } else { lo.max(0.0) };
-    let hi = if hi.is_nan() {
-        size - 1.0
-    } else {
-        hi.min(size - 1.0)
-    };
-    (s[hi.round_ties_even() as usize] - s[lo.round_ties_even() as usize]) / 2.0
+    // 1-based order statistics max(floor(S a1), 1) and min(ceil(S a2), S).
+    let lo = (beta_ppf(0.158_655_3, a, b) * size).floor();
+    let hi = (beta_ppf(0.841_344_7, a, b) * size).ceil();
+    let lo = if lo.is_nan() { 1.0 } else { lo.max(1.0) };
+    let hi = if hi.is_nan() { size } else { hi.min(size) };
+    (s[hi as usize - 1] - s[lo as usize - 1]) / 2.0
 }
 
 /// MCSE of the mean: `sd / sqrt(ESS_mean)` (`az.mcse(method="mean")`).
@@ -597,7 +595,7 @@ fn hdi_sorted(s: &[f64], p: f64, has_nan: bool) -> Result<(f64, f64), Diagnostic
     Ok((s[best], s[best + k]))
 }
 
-/// E-BFMI of each chain of NUTS energies (`az.bfmi`): `mean(diff(E)^2) / var(E)`.
+/// E-BFMI of each chain of NUTS energies (`az.bfmi`): `sum diff(E)^2 / sum (E - mean E)^2`.
 /// NaN for a chain of fewer than 2 draws.
 pub fn bfmi(energy: &[Vec<f64>]) -> Result<Vec<f64>, DiagnosticsError> {
     let c = Chains::from_draws(energy)?;
@@ -607,9 +605,9 @@ pub fn bfmi(energy: &[Vec<f64>]) -> Result<Vec<f64>, DiagnosticsError> {
             if e.len() < 2 {
                 return f64::NAN;
             }
-            let num =
-                e.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum::<f64>() / (e.len() - 1) as f64;
-            num / var(e, 0)
+            let num = e.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum::<f64>();
+            let mu = mean(e);
+            num / e.iter().map(|v| (v - mu).powi(2)).sum::<f64>()
         })
         .collect())
 }
