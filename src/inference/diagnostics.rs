@@ -196,7 +196,7 @@ fn norm_ppf(p: f64) -> f64 {
         -3.969683028665376e1,
         2.209460984245205e2,
         -2.759285104469687e2,
-        1.383577518672690e2,
+        1.383_577_518_672_69e2,
         -3.066479806614716e1,
         2.506628277459239,
     ];
@@ -301,7 +301,7 @@ fn beta_cf(a: f64, b: f64, x: f64) -> f64 {
 
 /// Quantile `p` of the Beta(a, b) distribution, by bisection of `I_x(a, b)` to full precision.
 fn beta_ppf(p: f64, a: f64, b: f64) -> f64 {
-    if !(a > 0.0 && b > 0.0) || !(0.0..=1.0).contains(&p) {
+    if !(a > 0.0 && b > 0.0 && (0.0..=1.0).contains(&p)) {
         return f64::NAN;
     }
     let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
