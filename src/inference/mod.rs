@@ -9,7 +9,9 @@
 
 use rand::rngs::StdRng;
 
+pub mod diagnostics;
 pub mod likelihood;
+pub mod loo;
 pub mod map;
 pub mod prior;
 

@@ -98,3 +98,45 @@ pub fn check_parquet(py: &Path, dir: &Path) -> (serde_json::Value, String) {
     let summary = serde_json::from_str(&stdout).unwrap();
     (summary, stdout)
 }
+
+/// The interpreter for the ArviZ reference of the MCMC diagnostics, when it imports arviz. None
+/// (with a skip notice naming `test`) when it does not; panics instead when `CI` is set.
+pub fn python_for_arviz(test: &str) -> Option<PathBuf> {
+    let py = interpreter();
+    let ok = Command::new(&py)
+        .args(["-c", "import arviz"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if ok {
+        return Some(py);
+    }
+    let msg = format!(
+        "Python with arviz not found at '{}' (set RFMLAB_PYTHON, or: \
+         .venv/bin/pip install -r scripts/requirements.txt)",
+        py.display()
+    );
+    if std::env::var_os("CI").is_some() {
+        panic!("{msg}");
+    }
+    eprintln!("SKIPPED {test}: {msg}");
+    None
+}
+
+/// scripts/arviz_reference.py on `input` (written to a temporary JSON file): ArviZ's report.
+pub fn arviz_reference(py: &Path, input: &serde_json::Value) -> serde_json::Value {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("draws.json");
+    std::fs::write(&path, serde_json::to_vec(input).unwrap()).unwrap();
+    let out = Command::new(py)
+        .arg(script("arviz_reference.py"))
+        .arg(&path)
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "arviz_reference.py failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("arviz_reference.py printed JSON")
+}
