@@ -9,6 +9,17 @@
 
 use rand::rngs::StdRng;
 
+pub mod checkpoint;
+pub mod nuts;
+pub mod sampling;
+pub mod stepping_stone;
+pub mod tmcmc;
+
+pub use nuts::{sample_nuts, ChainDraws, NutsParams, NutsRun};
+pub use sampling::{no_progress, Progress, SamplerError};
+pub use stepping_stone::{stepping_stone, SteppingStoneParams, SteppingStoneRun};
+pub use tmcmc::{sample_tmcmc, TmcmcParams, TmcmcRun, TmcmcStage};
+
 /// Why a density evaluation failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DensityError {
