@@ -221,7 +221,10 @@ mod tests {
         let mut d = Decoder::new(e.bytes());
         assert_eq!(d.u64(), Some(7));
         let back = d.f64s().unwrap();
-        assert!(back.iter().zip(&floats).all(|(a, b)| a.to_bits() == b.to_bits()));
+        assert!(back
+            .iter()
+            .zip(&floats)
+            .all(|(a, b)| a.to_bits() == b.to_bits()));
         assert_eq!(d.rows(), Some(vec![vec![1.5], vec![]]));
         assert_eq!(d.bools(), Some(vec![true, false]));
         assert_eq!(d.u64s(), Some(vec![3, 4]));
@@ -250,6 +253,9 @@ mod tests {
         let missing = dir.path().join("no").join("such").join("c.bin");
         let err = write_atomic(&missing, &[0; 32], &[]).unwrap_err();
         let msg = err.to_string();
-        assert!(msg.contains("checkpoint create failed") && msg.contains("no"), "{msg}");
+        assert!(
+            msg.contains("checkpoint create failed") && msg.contains("no"),
+            "{msg}"
+        );
     }
 }

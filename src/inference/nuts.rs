@@ -24,7 +24,7 @@ use nuts_rs::{Chain, CpuLogpFunc, CpuMath, CpuMathError, DiagNutsSettings, HasDi
 use rayon::prelude::*;
 
 use super::checkpoint::{self, Decoder, Encoder};
-use super::sampling::{nonzero, in_range, Progress, SamplerError};
+use super::sampling::{in_range, nonzero, Progress, SamplerError};
 use super::{unit_rng, DensityError, Posterior};
 
 /// NUTS settings.
@@ -220,11 +220,7 @@ impl CpuLogpFunc for NutsDensity<'_> {
     }
 }
 
-fn validate(
-    post: &dyn Posterior,
-    starts: &[Vec<f64>],
-    p: &NutsParams,
-) -> Result<(), SamplerError> {
+fn validate(post: &dyn Posterior, starts: &[Vec<f64>], p: &NutsParams) -> Result<(), SamplerError> {
     nonzero("chains", p.chains)?;
     nonzero("draws", p.draws as usize)?;
     nonzero("max_tree_depth", p.max_tree_depth as usize)?;
@@ -250,25 +246,57 @@ fn validate(
                 dim,
             });
         }
-        let mut g = vec![0.0; dim];
-        match post.log_posterior(s, Some(&mut g)) {
+    }
+    Ok(())
+}
+
+/// The start nuts-rs is given: `start` itself, unless a gradient component is exactly zero
+/// there (a start at the MAP, or on a symmetry plane), which nuts-rs rejects because it
+/// initialises the diagonal mass matrix from the gradient; those coordinates are then moved by
+/// `1e-6 max(1, |x_k|)` (up to three times, tenfold each time). Deterministic.
+fn usable_start(
+    post: &dyn Posterior,
+    index: usize,
+    start: &[f64],
+) -> Result<Vec<f64>, SamplerError> {
+    let mut x = start.to_vec();
+    let mut g = vec![0.0; x.len()];
+    let mut step = 1e-6;
+    for attempt in 0..4 {
+        match post.log_posterior(&x, Some(&mut g)) {
             Err(DensityError::Fatal(m)) => return Err(SamplerError::Fatal(m)),
             Err(e @ DensityError::Recoverable(_)) => {
-                return Err(SamplerError::NonFiniteStart {
+                return Err(SamplerError::BadStart {
                     index,
                     detail: e.to_string(),
                 })
             }
             Ok(v) if !v.is_finite() || g.iter().any(|g| !g.is_finite()) => {
-                return Err(SamplerError::NonFiniteStart {
+                return Err(SamplerError::BadStart {
                     index,
                     detail: format!("log posterior {v}, gradient {g:?}"),
                 })
             }
-            Ok(_) => {}
+            Ok(_) if g.iter().all(|&g| g != 0.0) => return Ok(x),
+            Ok(_) if attempt == 3 => {
+                return Err(SamplerError::BadStart {
+                    index,
+                    detail: format!(
+                        "gradient {g:?} has a zero component even after nudging the start"
+                    ),
+                })
+            }
+            Ok(_) => {
+                for (xk, gk) in x.iter_mut().zip(&g) {
+                    if *gk == 0.0 {
+                        *xk += step * xk.abs().max(1.0);
+                    }
+                }
+                step *= 10.0;
+            }
         }
     }
-    Ok(())
+    unreachable!("the loop returns on its last attempt")
 }
 
 /// The key of a NUTS run: everything its draws depend on except the posterior itself.
@@ -304,21 +332,28 @@ fn run_chain(
     p: &NutsParams,
     progress: &(dyn Fn(Progress) + Sync),
 ) -> Result<ChainDraws, SamplerError> {
-    let mut settings = DiagNutsSettings::default();
-    settings.num_tune = p.tune;
-    settings.num_draws = p.draws;
-    settings.maxdepth = p.max_tree_depth;
-    settings.num_chains = p.chains;
-    settings.seed = p.seed;
+    let mut settings = DiagNutsSettings {
+        num_tune: p.tune,
+        num_draws: p.draws,
+        maxdepth: p.max_tree_depth,
+        num_chains: p.chains,
+        seed: p.seed,
+        ..DiagNutsSettings::default()
+    };
     settings.adapt_options.step_size_settings.target_accept = p.target_accept;
 
     let fatal = RefCell::new(None);
     let nuts_err = |e: anyhow::Error, fatal: &RefCell<Option<String>>| match fatal.take() {
         Some(m) => SamplerError::Fatal(m),
-        None => SamplerError::Nuts {
-            chain,
-            message: format!("{e:#}"),
-        },
+        None => {
+            // nuts-rs embeds the Debug form (with a backtrace) of some inner errors: keep the text.
+            let message = format!("{e:#}");
+            let message = match message.find("\n\nStack backtrace:") {
+                Some(i) => message[..i].to_string(),
+                None => message,
+            };
+            SamplerError::Nuts { chain, message }
+        }
     };
     let math = CpuMath::new(NutsDensity {
         post,
@@ -349,9 +384,7 @@ fn run_chain(
     };
     let total = p.tune + p.draws;
     for it in 0..total {
-        let (x, _, stats, prog) = sampler
-            .expanded_draw()
-            .map_err(|e| nuts_err(e, &fatal))?;
+        let (x, _, stats, prog) = sampler.expanded_draw().map_err(|e| nuts_err(e, &fatal))?;
         if it < p.tune {
             out.tune_divergences += prog.diverging as u64;
         } else {
@@ -415,7 +448,13 @@ pub fn sample_nuts(
                     }
                 }
             }
-            let draws = run_chain(post, c, &starts[c], params, progress)?;
+            let draws = run_chain(
+                post,
+                c,
+                &usable_start(post, c, &starts[c])?,
+                params,
+                progress,
+            )?;
             if let Some(dir) = checkpoint {
                 let mut e = Encoder::new();
                 draws.encode(&mut e);
@@ -472,7 +511,9 @@ mod tests {
                 return Err(DensityError::Fatal("engine exploded".into()));
             }
             if let Some(g) = grad {
-                g.iter_mut().zip(x).for_each(|(g, x)| *g = -(x - 1.0) / 0.25);
+                g.iter_mut()
+                    .zip(x)
+                    .for_each(|(g, x)| *g = -(x - 1.0) / 0.25);
             }
             Ok(x.iter().map(|x| -0.5 * (x - 1.0) * (x - 1.0) / 0.25).sum())
         }
@@ -501,19 +542,87 @@ mod tests {
         };
         let p = small();
         let e = sample_nuts(&t, &[vec![0.0; 2]], &p, None, &no_progress).unwrap_err();
-        assert!(matches!(e, SamplerError::StartCount { got: 1, chains: 2 }), "{e}");
-        let e = sample_nuts(&t, &[vec![0.0; 2], vec![0.0; 3]], &p, None, &no_progress)
-            .unwrap_err();
-        assert!(matches!(e, SamplerError::StartDim { index: 1, got: 3, dim: 2 }), "{e}");
-        let e = sample_nuts(&t, &[vec![0.0; 2], vec![f64::NAN, 0.0]], &p, None, &no_progress)
-            .unwrap_err();
-        assert!(matches!(e, SamplerError::NonFiniteStart { index: 1, .. }), "{e}");
-        let zero = NutsParams { chains: 0, ..p.clone() };
+        assert!(
+            matches!(e, SamplerError::StartCount { got: 1, chains: 2 }),
+            "{e}"
+        );
+        let e = sample_nuts(&t, &[vec![0.0; 2], vec![0.0; 3]], &p, None, &no_progress).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                SamplerError::StartDim {
+                    index: 1,
+                    got: 3,
+                    dim: 2
+                }
+            ),
+            "{e}"
+        );
+        let e = sample_nuts(
+            &t,
+            &[vec![0.0; 2], vec![f64::NAN, 0.0]],
+            &p,
+            None,
+            &no_progress,
+        )
+        .unwrap_err();
+        assert!(matches!(e, SamplerError::BadStart { index: 1, .. }), "{e}");
+        let zero = NutsParams {
+            chains: 0,
+            ..p.clone()
+        };
         let e = sample_nuts(&t, &[], &zero, None, &no_progress).unwrap_err();
         assert_eq!(e.to_string(), "chains must be at least 1 (got 0)");
         let zero = NutsParams { draws: 0, ..p };
         let e = sample_nuts(&t, &vec![vec![0.0; 2]; 2], &zero, None, &no_progress).unwrap_err();
         assert_eq!(e.to_string(), "draws must be at least 1 (got 0)");
+    }
+
+    /// Standard normal posterior (flat likelihood): the gradient vanishes at 0.
+    struct StdNormal;
+
+    impl Posterior for StdNormal {
+        fn dim(&self) -> usize {
+            2
+        }
+        fn names(&self) -> Vec<String> {
+            vec!["a".into(), "b".into()]
+        }
+        fn log_prior(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
+            if let Some(g) = grad {
+                g.iter_mut().zip(x).for_each(|(g, x)| *g = -x);
+            }
+            x.iter().map(|x| -0.5 * x * x).sum()
+        }
+        fn log_likelihood(&self, _: &[f64], grad: Option<&mut [f64]>) -> Result<f64, DensityError> {
+            if let Some(g) = grad {
+                g.fill(0.0);
+            }
+            Ok(0.0)
+        }
+        fn sample_prior(&self, rng: &mut StdRng) -> Vec<f64> {
+            (0..2).map(|_| StandardNormal.sample(rng)).collect()
+        }
+        fn constrained(&self, x: &[f64]) -> Vec<f64> {
+            x.to_vec()
+        }
+    }
+
+    #[test]
+    fn a_start_at_the_mode_where_the_gradient_vanishes_is_nudged() {
+        let x = usable_start(&StdNormal, 0, &[0.0, 0.3]).unwrap();
+        assert_eq!(x, vec![1e-6, 0.3]);
+        // nuts-rs alone rejects such a start ("Invalid initial point"); through sample_nuts
+        // it samples.
+        let run = sample_nuts(
+            &StdNormal,
+            &vec![vec![0.0; 2]; 2],
+            &small(),
+            None,
+            &no_progress,
+        )
+        .unwrap();
+        assert_eq!(run.chains[1].len(), 50);
     }
 
     #[test]
@@ -535,8 +644,14 @@ mod tests {
             d: 3,
             fatal_beyond: f64::INFINITY,
         };
-        let run = sample_nuts(&t, &[vec![0.0; 3], vec![0.5; 3]], &small(), None, &no_progress)
-            .unwrap();
+        let run = sample_nuts(
+            &t,
+            &[vec![0.0; 3], vec![0.5; 3]],
+            &small(),
+            None,
+            &no_progress,
+        )
+        .unwrap();
         assert_eq!(run.chains.len(), 2);
         for c in &run.chains {
             assert_eq!(c.len(), 50);

@@ -60,9 +60,10 @@ pub enum SamplerError {
         /// The posterior's dimension.
         dim: usize,
     },
-    /// A start where the log posterior (or its gradient) is not finite.
-    #[error("the log posterior at start {index} is not finite ({detail}): choose starts inside the support, e.g. prior draws or the MAP")]
-    NonFiniteStart {
+    /// A start where NUTS cannot begin: the log posterior or its gradient is not finite there,
+    /// or a gradient component stays exactly zero (nuts-rs initialises the mass matrix from it).
+    #[error("start {index} is not usable ({detail}): choose starts inside the support, e.g. prior draws or jittered MAP points")]
+    BadStart {
         /// Index of the start.
         index: usize,
         /// The value or the density's message.
@@ -360,7 +361,8 @@ pub(crate) fn move_population(
         }
         accepted_total += accepted;
         let rate = accepted as f64 / n as f64;
-        *scale = (s * ((rate - target_accept) / ((round + 1) as f64).sqrt()).exp()).clamp(1e-4, 1e2);
+        *scale =
+            (s * ((rate - target_accept) / ((round + 1) as f64).sqrt()).exp()).clamp(1e-4, 1e2);
     }
     Ok(MoveStats {
         acceptance: accepted_total as f64 / (n * steps.max(1)) as f64,

@@ -506,7 +506,11 @@ pub fn sample_tmcmc(
     }
 
     let names = post.names();
-    let constrained = st.particles.iter().map(|q| post.constrained(&q.x)).collect();
+    let constrained = st
+        .particles
+        .iter()
+        .map(|q| post.constrained(&q.x))
+        .collect();
     Ok(TmcmcRun {
         names,
         constrained,
@@ -526,10 +530,16 @@ mod tests {
 
     #[test]
     fn next_beta_hits_the_target_coefficient_of_variation() {
-        let ll: Vec<f64> = (0..500).map(|i| -0.5 * (i as f64 * 0.01).powi(2) * 50.0).collect();
+        let ll: Vec<f64> = (0..500)
+            .map(|i| -0.5 * (i as f64 * 0.01).powi(2) * 50.0)
+            .collect();
         let b = next_beta(&ll, 0.0, 1.0);
         assert!(b > 0.0 && b < 1.0);
-        assert!((weights_cov(&ll, b) - 1.0).abs() < 1e-9, "{}", weights_cov(&ll, b));
+        assert!(
+            (weights_cov(&ll, b) - 1.0).abs() < 1e-9,
+            "{}",
+            weights_cov(&ll, b)
+        );
         // A flat likelihood goes straight to the posterior.
         assert_eq!(next_beta(&[-3.0; 10], 0.4, 1.0), 1.0);
         // Dead particles (-inf) have zero weight and do not break the search.
@@ -594,6 +604,9 @@ mod tests {
             target_accept: 1.5,
             ..TmcmcParams::default()
         };
-        assert!(validate(&p).unwrap_err().to_string().contains("target_accept = 1.5"));
+        assert!(validate(&p)
+            .unwrap_err()
+            .to_string()
+            .contains("target_accept = 1.5"));
     }
 }

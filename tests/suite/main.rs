@@ -26,6 +26,7 @@ mod fe_element;
 mod fe_joint;
 mod frf_full;
 mod iem;
+mod inference_samplers;
 mod material;
 mod matrix_market;
 mod modes;
