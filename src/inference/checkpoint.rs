@@ -8,7 +8,8 @@
 //! Writes go to a temporary file in the same directory, which is then renamed over the target:
 //! a reader sees either the old file or the new one, never a torn one. A file whose key differs
 //! from the current run's (other settings, seed, starts or dimension) or that cannot be decoded
-//! is ignored and later overwritten, never mixed into a result.
+//! is ignored (left in place; file names carry the key, so runs with other settings use other
+//! files), never mixed into a result.
 //!
 //! The key cannot see the posterior itself (the data, the forward model): give each posterior
 //! its own checkpoint directory.
