@@ -9,11 +9,21 @@
 
 use rand::rngs::StdRng;
 
+pub mod checkpoint;
 pub mod diagnostics;
 pub mod likelihood;
 pub mod loo;
 pub mod map;
+pub mod nuts;
 pub mod prior;
+pub mod sampling;
+pub mod stepping_stone;
+pub mod tmcmc;
+
+pub use nuts::{sample_nuts, ChainDraws, NutsParams, NutsRun};
+pub use sampling::{no_progress, Progress, SamplerError};
+pub use stepping_stone::{stepping_stone, SteppingStoneParams, SteppingStoneRun};
+pub use tmcmc::{sample_tmcmc, TmcmcParams, TmcmcRun, TmcmcStage};
 
 /// Why a density evaluation failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

@@ -28,6 +28,7 @@ mod frf_full;
 mod iem;
 mod inference_diagnostics;
 mod inference_likelihood;
+mod inference_samplers;
 mod material;
 mod matrix_market;
 mod modes;
