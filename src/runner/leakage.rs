@@ -12,8 +12,8 @@
 
 use super::RunError;
 use crate::common::C64;
+use crate::experiment::leakage_bias;
 use crate::experiment::plant::EnginePlant;
-use crate::experiment::{leakage_bias, ChainParams, KernelParams};
 use crate::frf::FrfEngine;
 use crate::rfm::MeasuredColumn;
 use crate::study::Estimator;
@@ -48,32 +48,10 @@ impl Leakage<'_> {
             .iter()
             .map(|w| w / std::f64::consts::TAU)
             .collect();
-        let (Some(&lo), Some(&hi)) = (lines_hz.first(), lines_hz.last()) else {
+        if lines_hz.is_empty() {
             return Ok(Vec::new());
-        };
-        let df = 1.0 / self.estimator.block_s;
-        let kernel = KernelParams {
-            grid_step_hz: df / 8.0,
-            half_width_hz: 12.0 * df,
-        };
-        // The force reaches the structure over the data's band; only the kernel's reach
-        // around the lines matters.
-        let band_hz = (
-            (lo - kernel.half_width_hz).max(self.data_band_hz.0).min(lo),
-            (hi + kernel.half_width_hz).min(self.data_band_hz.1).max(hi),
-        );
-        // Lines on the analyser's grid: k / block_s exactly.
-        let lines_hz: Vec<f64> = lines_hz.iter().map(|f| (f / df).round() * df).collect();
-        let chain = ChainParams {
-            band_hz,
-            fs_hz: self.estimator.fs_hz,
-            block_s: self.estimator.block_s,
-            window: self.estimator.window,
-            shaker: self.estimator.shaker,
-            lines_hz,
-            kernel,
-            ..ChainParams::default()
-        };
+        }
+        let chain = self.estimator.chain(&lines_hz, self.data_band_hz);
         let input_col = self
             .engine
             .inputs()

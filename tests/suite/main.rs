@@ -28,6 +28,7 @@ mod frf_full;
 mod iem;
 mod material;
 mod matrix_market;
+mod measurement_model;
 mod modes;
 mod output;
 mod paper_joint;
