@@ -27,7 +27,7 @@ pub const MAX_PASSES: usize = 12;
 pub struct Leakage<'a> {
     pub estimator: &'a Estimator,
     pub engine: &'a dyn FrfEngine,
-    /// First and last line of the level's data (Hz): the excitation band.
+    /// First and last line of the level's data (Hz): the default force band is (0, last line].
     pub data_band_hz: (f64, f64),
 }
 

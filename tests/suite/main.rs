@@ -41,3 +41,4 @@ mod runner;
 mod uff_fuzz;
 mod uff_real_files;
 mod uff_roundtrip;
+mod virtual_experiment;
