@@ -25,11 +25,24 @@ impl Plant for EnginePlant<'_> {
     fn drive_channel(&self) -> usize {
         self.drive_output
     }
+    /// At 0 Hz (the lower edge of a baseband force band) the accelerance `-w^2 H` of the
+    /// grounded structure is 0; the engine is not asked for it.
     fn accelerance(&self, freq_hz: &[f64]) -> Result<Vec<Vec<C64>>, ExperimentError> {
         let omega: Vec<f64> = freq_hz
             .iter()
             .map(|f| 2.0 * std::f64::consts::PI * f)
             .collect();
+        if freq_hz.first() == Some(&0.0) {
+            let zero = C64::new(0.0, 0.0);
+            if freq_hz.len() == 1 {
+                return Ok(vec![vec![zero]; self.n_channels()]);
+            }
+            let rest = self.accelerance(&freq_hz[1..])?;
+            return Ok(rest
+                .into_iter()
+                .map(|c| std::iter::once(zero).chain(c).collect())
+                .collect());
+        }
         let modulus: Vec<C64> = omega.iter().map(|&w| (self.modulus)(w)).collect();
         let s = self
             .engine

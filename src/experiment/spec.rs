@@ -96,6 +96,9 @@ pub struct ChainParams {
     /// Default 3.3 N (the paper's Level 1; Level 2 is 46.2 N).
     pub force_rms_n: f64,
     /// Excitation band (Hz), flat shaker-force spectrum inside, nothing outside. Default (1, 500).
+    /// `lo = 0` is a baseband source, the open band `(0, hi]`: no DC, but the force just above
+    /// DC and its negative-frequency mirror leak into the lowest lines (the time-domain mode
+    /// leaves the DC bin empty; the expected-value quadrature integrates through 0 Hz).
     pub band_hz: (f64, f64),
     /// Sampling rate (Hz). Default 2048.
     pub fs_hz: f64,
@@ -220,11 +223,11 @@ impl ChainParams {
             return Err(bad("n_averages", "must be at least 1".into()));
         }
         let (lo, hi) = self.band_hz;
-        if !(lo.is_finite() && hi.is_finite() && lo > 0.0 && hi > lo && hi < 0.5 * self.fs_hz) {
+        if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo && hi < 0.5 * self.fs_hz) {
             return Err(bad(
                 "band_hz",
                 format!(
-                    "({lo}, {hi}) must satisfy 0 < lo < hi < fs/2 = {} Hz",
+                    "({lo}, {hi}) must satisfy 0 <= lo < hi < fs/2 = {} Hz",
                     0.5 * self.fs_hz
                 ),
             ));
@@ -244,7 +247,12 @@ impl ChainParams {
         let mut line_bins = Vec::with_capacity(self.lines_hz.len());
         for &f in &self.lines_hz {
             let k = (f / df).round();
-            if !f.is_finite() || (f / df - k).abs() > 1e-6 || f < lo - 1e-9 || f > hi + 1e-9 {
+            if !f.is_finite()
+                || (f / df - k).abs() > 1e-6
+                || f < lo - 1e-9
+                || f > hi + 1e-9
+                || k < 1.0
+            {
                 return Err(ExperimentError::LineNotOnGrid {
                     line_hz: f,
                     df_hz: df,

@@ -75,7 +75,8 @@ pub(crate) fn simulate(
     let record =
         |amp: &dyn Fn(usize) -> C64, noise: f64, stream_kind: u64, index: u64| -> Vec<f64> {
             let mut spec = vec![C64::new(0.0, 0.0); l];
-            for j in 0..=(j_hi - j_lo) {
+            // A baseband band (lo = 0) leaves the DC bin empty: a zero-mean force.
+            for j in usize::from(j_lo == 0)..=(j_hi - j_lo) {
                 let a = amp(j);
                 spec[j_lo + j] = a;
                 spec[l - j_lo - j] = a.conj();

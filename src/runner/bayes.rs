@@ -85,7 +85,7 @@ pub fn estimator_spec(estimator: &Estimator, freq_hz: &[f64]) -> EstimatorSpec {
         window: estimator.window,
         block_s: estimator.block_s,
         fs_hz: estimator.fs_hz,
-        force_band_hz: estimator.force_band_hz.unwrap_or((0.0, hi.max(lo))),
+        force_band_hz: estimator.force_band((lo, hi)),
         shaker: estimator.shaker,
     }
 }

@@ -127,8 +127,19 @@ pub struct Estimator {
     pub block_s: f64,
     pub fs_hz: f64,
     pub shaker: Option<crate::experiment::Shaker>,
-    /// Band (Hz) over which the force had power; `None`: baseband, 0 Hz to the last line.
+    /// Band `(lo, hi]` (Hz) over which the force drives the structure (`force_band_hz`).
+    /// `None`: a baseband random source, `(0, last data line]`: the analyser's source fills its
+    /// span from DC (excluded) to the top line. The force below the first line and its
+    /// negative-frequency mirror leak into the lowest lines, so this matters there.
     pub force_band_hz: Option<(f64, f64)>,
+}
+
+impl Estimator {
+    /// The force band used with data whose lines span `data_band_hz`: the declared one, or
+    /// `(0, data_band_hz.1]`.
+    pub fn force_band(&self, data_band_hz: (f64, f64)) -> (f64, f64) {
+        self.force_band_hz.unwrap_or((0.0, data_band_hz.1))
+    }
 }
 
 /// A constitutive model to identify, with initial values in the model's parameter order (SI).

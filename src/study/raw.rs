@@ -144,6 +144,8 @@ pub struct RawEstimator {
     pub block_s: f64,
     pub fs_hz: Option<f64>,
     pub shaker: Option<RawEstimatorShaker>,
+    /// Band `[lo, hi]` (Hz) the force drives, `(lo, hi]`; default `[0, last data line]`.
+    pub force_band_hz: Option<Vec<f64>>,
 }
 
 #[derive(Debug, Deserialize)]

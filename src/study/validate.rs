@@ -545,12 +545,44 @@ fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measure
                     )?,
                 }),
             };
+            let force_band_hz = match &e.force_band_hz {
+                None => None,
+                Some(b) => {
+                    let k = format!("{key}.force_band_hz");
+                    let &[lo, hi] = b.as_slice() else {
+                        return Err(ctx.err(k, format!("{b:?} is not a band: give [f_low, f_high] in Hz, e.g. [0.0, 500.0] for a baseband random source")));
+                    };
+                    if !(lo.is_finite() && hi.is_finite() && lo >= 0.0 && hi > lo) {
+                        return Err(ctx.err(
+                            k,
+                            format!("[{lo}, {hi}] is not a band: give 0 <= f_low < f_high in Hz"),
+                        ));
+                    }
+                    if hi >= 0.5 * fs_hz {
+                        return Err(ctx.err(
+                            k,
+                            format!(
+                                "f_high = {hi} Hz must be below fs_hz / 2 = {} Hz",
+                                0.5 * fs_hz
+                            ),
+                        ));
+                    }
+                    let df = 1.0 / block_s;
+                    if [lo, hi]
+                        .iter()
+                        .any(|e| (e / df - (e / df).round()).abs() > 1e-6)
+                    {
+                        return Err(ctx.err(k, format!("edges [{lo}, {hi}] must be multiples of the line spacing 1 / block_s = {df} Hz")));
+                    }
+                    Some((lo, hi))
+                }
+            };
             Some(Estimator {
                 window,
                 block_s,
                 fs_hz,
                 shaker,
-                force_band_hz: None,
+                force_band_hz,
             })
         }
     };

@@ -173,6 +173,25 @@ fn bad_study_files_exit_2_naming_file_and_key_and_keep_earlier_results() {
         &with_meas("[measurements.estimator]\nwindow = \"hann\"\nblock_s = 1.0\nfs_hz = 1000.5\n"),
         &["measurements.estimator.fs_hz", "whole number of samples"],
     );
+    for (name, band, words) in [
+        ("force_band_len", "[500.0]", "is not a band"),
+        ("force_band_order", "[500.0, 1.0]", "0 <= f_low < f_high"),
+        ("force_band_nyquist", "[0.0, 1024.0]", "fs_hz / 2"),
+        (
+            "force_band_grid",
+            "[0.5, 500.0]",
+            "multiples of the line spacing",
+        ),
+    ] {
+        expect_input_error(
+            &s,
+            name,
+            &with_meas(&format!(
+                "[measurements.estimator]\nwindow = \"hann\"\nblock_s = 1.0\nforce_band_hz = {band}\n"
+            )),
+            &["measurements.estimator.force_band_hz", words],
+        );
+    }
     expect_input_error(
         &s,
         "missing_truth",

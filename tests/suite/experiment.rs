@@ -433,3 +433,30 @@ fn bad_settings_are_errors() {
         assert!(!e.to_string().is_empty());
     }
 }
+
+/// A baseband force band (0, hi]: the time-domain record leaves DC empty, and the noise-free H1
+/// at the lowest lines (where the force below the first line and its mirror leak in) matches
+/// the expected value that integrates through 0 Hz, within the leakage random error.
+#[test]
+fn baseband_force_band_time_domain_matches_expectation_at_low_lines() {
+    let plant = ModalPlant::joint();
+    let chain = ChainParams {
+        band_hz: (0.0, 60.0),
+        lines_hz: (1..=60).map(f64::from).collect(),
+        mode: Mode::TimeDomain,
+        seed: 3,
+        ..ChainParams::default()
+    };
+    let lev = simulate_level(&plant, &chain).unwrap();
+    for (i, c) in lev.truth.channels.iter().enumerate() {
+        for l in 0..5 {
+            let d = rel(lev.channels[i].values[l], c.expected_h1[l]);
+            assert!(
+                d < 5.0 * c.random_error[l] + 1e-3,
+                "channel {i} line {} Hz: {d} vs random error {}",
+                lev.truth.freq_hz[l],
+                c.random_error[l]
+            );
+        }
+    }
+}

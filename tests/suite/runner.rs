@@ -223,7 +223,7 @@ fn leakage_model_removes_the_h1_estimator_bias() {
 [[analyses.band_constant]]\ncenter_hz = 22.0\nwidth_hz = 10.0\n\
 [[analyses.iem]]\ncenter_hz = 22.0\nwidth_hz = 10.0\n";
     let estimator = "[measurements.estimator]\nwindow = \"hann\"\nblock_s = 1.0\nfs_hz = 2048.0\n\
-shaker = { armature_mass = 0.02, stinger_stiffness = 5.0e5 }\n";
+shaker = { armature_mass = 0.02, stinger_stiffness = 5.0e5 }\nforce_band_hz = [1.0, 100.0]\n";
     // (IEM E', E'' rel. error, band E', E'' rel. error, worst Model 4 parameter rel. error)
     let run = |with_model: bool| {
         let out = dir.path().join(format!("out{with_model}"));
