@@ -91,6 +91,8 @@ pub struct LevelResults {
     pub iem: Vec<IemBandResult>,
     pub global: Vec<GlobalResult>,
     pub sensitivity: Option<SensitivityCurves>,
+    /// Posteriors of the `[inference]` models at this level.
+    pub posteriors: Vec<super::bayes::PosteriorResult>,
 }
 
 fn analysis(name: impl Into<String>, e: impl std::fmt::Display) -> RunError {
@@ -522,5 +524,6 @@ pub fn analyse_level(
         iem,
         global,
         sensitivity,
+        posteriors: Vec::new(),
     })
 }

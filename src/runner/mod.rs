@@ -20,11 +20,12 @@
 //! into place (then the old one is deleted). A failed or interrupted run therefore leaves the
 //! earlier results untouched (at worst a stray `.tmp-*` folder).
 
-mod bayes;
+pub mod bayes;
 mod compute;
 mod leakage;
 mod sample;
 pub mod write;
+mod write_bayes;
 
 pub use compute::{
     BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,
@@ -686,9 +687,21 @@ pub fn run_study(
     lap("engine", &mut t);
     let mut results = Vec::new();
     for level in &levels {
-        let r = compute::analyse_level(study, &built, engine.as_ref(), level, &laws, progress)?;
-        results.push(r);
+        let mut r = compute::analyse_level(study, &built, engine.as_ref(), level, &laws, progress)?;
         lap(&format!("analyses {}", level.name), &mut t);
+        if let Some(inf) = &study.inference {
+            r.posteriors = bayes::infer_level(
+                study,
+                inf,
+                engine.as_ref(),
+                level,
+                &laws,
+                &r.global,
+                progress,
+            )?;
+            lap(&format!("inference {}", level.name), &mut t);
+        }
+        results.push(r);
     }
     let out_dir = opts
         .output_dir

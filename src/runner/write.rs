@@ -74,20 +74,20 @@ struct Tables {
 
 /// Column builders (push rows, then turn into a Table).
 #[derive(Default)]
-struct Cols {
+pub(super) struct Cols {
     str_cols: Vec<(String, Vec<String>)>,
     f64_cols: Vec<(String, String, Vec<f64>)>,
     i64_cols: Vec<(String, Vec<i64>)>,
 }
 
 impl Cols {
-    fn s(&mut self, name: &str, v: String) {
+    pub(super) fn s(&mut self, name: &str, v: String) {
         match self.str_cols.iter_mut().find(|c| c.0 == name) {
             Some(c) => c.1.push(v),
             None => self.str_cols.push((name.to_string(), vec![v])),
         }
     }
-    fn f(&mut self, name: &str, unit: &str, v: f64) {
+    pub(super) fn f(&mut self, name: &str, unit: &str, v: f64) {
         match self.f64_cols.iter_mut().find(|c| c.0 == name) {
             Some(c) => c.2.push(v),
             None => self
@@ -95,13 +95,13 @@ impl Cols {
                 .push((name.to_string(), unit.to_string(), vec![v])),
         }
     }
-    fn i(&mut self, name: &str, v: i64) {
+    pub(super) fn i(&mut self, name: &str, v: i64) {
         match self.i64_cols.iter_mut().find(|c| c.0 == name) {
             Some(c) => c.1.push(v),
             None => self.i64_cols.push((name.to_string(), vec![v])),
         }
     }
-    fn table(self, name: &str) -> Result<Table, RunError> {
+    pub(super) fn table(self, name: &str) -> Result<Table, RunError> {
         let mut t = Table::new(name);
         for (n, v) in self.str_cols {
             t.push_str(n, v)?;
@@ -849,6 +849,11 @@ pub(super) fn write_results(
         ] {
             dir.write_table(table)?;
         }
+        let posts: Vec<&super::bayes::PosteriorResult> =
+            results.iter().flat_map(|r| r.posteriors.iter()).collect();
+        for table in super::write_bayes::tables(levels, &posts)? {
+            dir.write_table(&table)?;
+        }
         let figs = if figures {
             let f = draw_figures(dir.path(), levels, results)?;
             for (png, _) in &f {
@@ -859,7 +864,8 @@ pub(super) fn write_results(
         } else {
             Vec::new()
         };
-        let report = build_report(study, levels, results, &figs, engine_note);
+        let mut report = build_report(study, levels, results, &figs, engine_note);
+        super::write_bayes::report(&mut report, levels, &posts, &figs);
         dir.write_report(&report)?;
         let mut manifest = Manifest::new(&study.file, Some(study.seed));
         for (step, secs) in timings {

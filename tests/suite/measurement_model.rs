@@ -11,7 +11,8 @@
 
 use crate::python_checks::{python_for_scipy, script};
 use rfmlab::common::C64;
-use rfmlab::experiment::{leakage_bias, ExperimentError, Plant, Window};
+use rfmlab::experiment::{ExperimentError, Plant, Window};
+use rfmlab::forward::{EstimatorSpec, MeasurementModel, MeasurementParams};
 use rfmlab::study::Estimator;
 use std::f64::consts::PI;
 use std::process::Command;
@@ -127,7 +128,9 @@ fn run_mc(test: &str) -> Option<Reference> {
     })
 }
 
-/// rfmlab's expected H1 `[channel][line]` with `force_band_hz` declared or not (default).
+/// rfmlab's expected H1 `[channel][line]` with `force_band_hz` declared or not (default): the
+/// forward model's measurement operator (the one every fit and the likelihood use) applied to
+/// the plant's accelerance on its fine grid.
 fn predicted(r: &Reference, force_band_hz: Option<(f64, f64)>) -> Vec<Vec<C64>> {
     let est = Estimator {
         window: Window::Hann,
@@ -137,13 +140,21 @@ fn predicted(r: &Reference, force_band_hz: Option<(f64, f64)>) -> Vec<Vec<C64>> 
         force_band_hz,
     };
     let data_band = (r.lines_hz[0], *r.lines_hz.last().unwrap());
-    let chain = est.chain(&r.lines_hz, data_band);
-    let bias = leakage_bias(&r.plant, &chain).unwrap();
-    let exact = r.plant.accelerance(&r.lines_hz).unwrap();
-    exact
-        .iter()
-        .zip(&bias)
-        .map(|(h, b)| h.iter().zip(b).map(|(h, b)| h + b).collect())
+    let m = MeasurementModel::new(
+        EstimatorSpec {
+            window: est.window,
+            block_s: est.block_s,
+            fs_hz: est.fs_hz,
+            force_band_hz: est.force_band(data_band),
+            shaker: None,
+        },
+        &r.lines_hz,
+        &MeasurementParams::default(),
+    )
+    .unwrap();
+    let fine = r.plant.accelerance(&m.fine_hz).unwrap();
+    fine.iter()
+        .map(|h| MeasurementModel::apply(&m.rows, h, 1))
         .collect()
 }
 
