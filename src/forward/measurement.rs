@@ -47,19 +47,20 @@ pub struct EstimatorSpec {
 /// Settings of the discretisation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MeasurementParams {
-    /// Fine-grid points per line spacing. Default 8 (the kernel average of the joint's FRFs
-    /// changes by less than 1e-6 relative from 8 to 32).
+    /// Fine-grid points per line spacing. Default 4 (with the default half width, E[H1] of the
+    /// joint's kind of FRF moves by 2.6e-6 of its peak against 32 points over 32 line
+    /// spacings: `default_discretisation_is_converged`).
     pub points_per_line: usize,
-    /// Half width of the kernel kept around each line, in line spacings. Default 12 (the Hann
-    /// kernel falls as delta^-6: the dropped tail is below 1e-8 of its integral).
+    /// Half width of the kernel kept around each line, in line spacings. Default 8 (the Hann
+    /// kernel falls as delta^-6).
     pub half_width_lines: f64,
 }
 
 impl Default for MeasurementParams {
     fn default() -> Self {
         MeasurementParams {
-            points_per_line: 8,
-            half_width_lines: 12.0,
+            points_per_line: 4,
+            half_width_lines: 8.0,
         }
     }
 }
@@ -335,6 +336,45 @@ mod tests {
             odd(&with0)
         );
         assert!(odd(&from1).im > 1.05, "{}", odd(&from1));
+    }
+
+    /// The default discretisation against a fine one on the joint's kind of FRF (a heavily
+    /// damped mode at 22 Hz, eta 0.2, and a light one at 390 Hz, eta 0.05, as accelerances):
+    /// the difference is below 1e-5 of the peak at every line (2.6e-6 measured; the H1 random
+    /// error at coherence 0.999 with 190 averages is 1.6e-3 of |H|).
+    #[test]
+    fn default_discretisation_is_converged() {
+        let lines: Vec<f64> = (1..=500).map(|k| k as f64).collect();
+        let h = |f: f64| -> C64 {
+            let w = std::f64::consts::TAU * f;
+            [(22.0, 0.2, 1.0), (390.0, 0.05, 0.3)]
+                .iter()
+                .map(|&(fr, eta, a): &(f64, f64, f64)| {
+                    let wr = std::f64::consts::TAU * fr;
+                    -w * w * a / C64::new(wr * wr - w * w, eta * wr * wr)
+                })
+                .sum()
+        };
+        let eval = |p: &MeasurementParams| {
+            let m = MeasurementModel::new(spec((0.0, 500.0)), &lines, p).unwrap();
+            let fine: Vec<C64> = m.fine_hz.iter().map(|&f| h(f)).collect();
+            MeasurementModel::apply(&m.rows, &fine, 1)
+        };
+        let coarse = eval(&MeasurementParams::default());
+        let fine = eval(&MeasurementParams {
+            points_per_line: 32,
+            half_width_lines: 32.0,
+        });
+        let peak = lines.iter().map(|&f| h(f).norm()).fold(0.0, f64::max);
+        let worst = coarse
+            .iter()
+            .zip(&fine)
+            .map(|(a, b)| (a - b).norm() / peak)
+            .fold(0.0, f64::max);
+        assert!(
+            worst < 1e-5,
+            "default vs fine discretisation: {worst:e} of the peak"
+        );
     }
 
     #[test]

@@ -19,6 +19,7 @@ pub mod prior;
 pub mod sampling;
 pub mod stepping_stone;
 pub mod tmcmc;
+pub mod whiten;
 
 pub use nuts::{sample_nuts, ChainDraws, NutsParams, NutsRun};
 pub use sampling::{no_progress, Progress, SamplerError};

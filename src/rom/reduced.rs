@@ -33,6 +33,21 @@ pub struct ReducedModel {
 }
 
 impl ReducedModel {
+    /// The same reduced model with fewer inputs (`inputs` must be among its inputs): the basis
+    /// and certificate are unchanged, a sweep then computes only those columns (the
+    /// likelihood needs the excitation column alone).
+    pub fn with_inputs(&self, inputs: &[usize]) -> Result<ReducedModel, RomError> {
+        if let Some(j) = inputs.iter().find(|j| !self.inputs.contains(j)) {
+            return Err(RomError::Params(format!(
+                "input {j} is not an input of the reduced model ({:?})",
+                self.inputs
+            )));
+        }
+        let mut r = self.clone();
+        r.inputs = inputs.to_vec();
+        Ok(r)
+    }
+
     /// Basis size n_r.
     pub fn basis_size(&self) -> usize {
         self.n_r

@@ -451,7 +451,7 @@ fn build_engine(
     built: &BuiltModel,
     levels: &[LevelData],
     rom_cache: Option<&Path>,
-) -> Result<(Box<dyn FrfEngine>, String), RunError> {
+) -> Result<(Box<dyn FrfEngine>, String, Option<Box<dyn FrfEngine>>), RunError> {
     let mut inputs: Vec<usize> = Vec::new();
     for l in levels {
         for &k in l
@@ -477,6 +477,7 @@ fn build_engine(
                 .map_err(|e| RunError::Engine(e.to_string()))?,
             ),
             format!("engine: full model, {} DOFs", built.model.n_dof()),
+            None,
         )),
         Engine::Rom => {
             let lo = levels
@@ -516,21 +517,39 @@ fn build_engine(
             };
             // Prepare the pencil for the first level's grid (all levels normally share it).
             let omega = &levels[0].column.omega_rad_s;
-            let mut pencils = vec![rom
+            let pencils = vec![rom
                 .prepare(omega)
                 .map_err(|e| RunError::Engine(e.to_string()))?];
-            // The measurement model's fine grid of each level (the likelihood's sweep).
-            for level in levels {
-                if let Some(m) = bayes::measurement_model(study, level)? {
-                    let fine = m.fine_omega();
-                    if !pencils.iter().any(|p| p.omega_rad_s() == fine.as_slice()) {
-                        pencils.push(
-                            rom.prepare(&fine)
-                                .map_err(|e| RunError::Engine(e.to_string()))?,
-                        );
+            // The likelihood's engine: the excitation column only, prepared on each level's
+            // lines and, with a measurement model, on its fine grid.
+            let lik_engine = match &study.inference {
+                None => None,
+                Some(_) => {
+                    let lik_rom = rom
+                        .with_inputs(&[built.excitation])
+                        .map_err(|e| RunError::Engine(e.to_string()))?;
+                    let mut lp: Vec<crate::rom::PencilSweep> = Vec::new();
+                    for level in levels {
+                        let mut grids = vec![level.column.omega_rad_s.clone()];
+                        if let Some(m) = bayes::measurement_model(study, level)? {
+                            grids.push(m.fine_omega());
+                        }
+                        for g in grids {
+                            if !lp.iter().any(|p| p.omega_rad_s() == g.as_slice()) {
+                                lp.push(
+                                    lik_rom
+                                        .prepare(&g)
+                                        .map_err(|e| RunError::Engine(e.to_string()))?,
+                                );
+                            }
+                        }
                     }
+                    Some(Box::new(RomEngine {
+                        rom: lik_rom,
+                        pencils: lp,
+                    }) as Box<dyn FrfEngine>)
                 }
-            }
+            };
             let note = format!(
                 "engine: ROM with {} basis vectors over {:.1}..{:.1} Hz, E' {:.3e}..{:.3e} Pa, E'' {:.3e}..{:.3e} Pa; certificate max relative error {:.2e} (tolerance {:.1e}){}",
                 cert.basis_size,
@@ -547,7 +566,7 @@ fn build_engine(
                 (Some(f), true) => format!(" (loaded from the ROM cache {})", f.display()),
                 _ => String::new(),
             };
-            Ok((Box::new(RomEngine { rom, pencils }), note))
+            Ok((Box::new(RomEngine { rom, pencils }), note, lik_engine))
         }
     }
 }
@@ -660,6 +679,22 @@ pub fn run_study(
     opts: &RunOptions,
     progress: &(dyn Fn(Event) + Sync),
 ) -> Result<RunSummary, RunError> {
+    // `solver.threads`: a pool of that size for the whole run (results do not depend on it).
+    if let Some(t) = study.solver.threads {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .map_err(|e| RunError::Engine(format!("thread pool of {t} threads: {e}")))?;
+        return pool.install(|| run_study_here(study, opts, progress));
+    }
+    run_study_here(study, opts, progress)
+}
+
+fn run_study_here(
+    study: &Study,
+    opts: &RunOptions,
+    progress: &(dyn Fn(Event) + Sync),
+) -> Result<RunSummary, RunError> {
     let t0 = Instant::now();
     let mut timings: Vec<(String, f64)> = Vec::new();
     let mut lap = |name: &str, t: &mut Instant| {
@@ -682,7 +717,8 @@ pub fn run_study(
         step: "building the FRF engine".into(),
         total: 0,
     });
-    let (engine, engine_note) = build_engine(study, &built, &levels, opts.rom_cache.as_deref())?;
+    let (engine, engine_note, lik_engine) =
+        build_engine(study, &built, &levels, opts.rom_cache.as_deref())?;
     progress(Event::Finish);
     lap("engine", &mut t);
     let mut results = Vec::new();
@@ -693,7 +729,7 @@ pub fn run_study(
             r.posteriors = bayes::infer_level(
                 study,
                 inf,
-                engine.as_ref(),
+                lik_engine.as_deref().unwrap_or(engine.as_ref()),
                 level,
                 &laws,
                 &r.global,

@@ -6,6 +6,7 @@ use super::bayes::{Draws, SamplerResult};
 use super::{Event, LevelData, RunError};
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::{cholesky, MapResult};
+use crate::inference::whiten::Whitened;
 use crate::inference::{
     sample_nuts, sample_tmcmc, unit_rng, NutsParams, Posterior, Progress, TmcmcParams,
 };
@@ -111,10 +112,36 @@ pub fn run_samplers(
             ),
             total: per_chain * n.chains as u64,
         });
-        let starts = dispersed_starts(map, n.chains, seed);
+        // Sample in coordinates whitened by the Laplace approximation (x = m + L z): the
+        // posteriors are narrow and correlated in x, nearly isotropic in z.
+        let lp = &map.laplace;
+        let whitened = if lp.positive_definite {
+            cholesky(&lp.cov_x, d).and_then(|l| Whitened::new(post, lp.x.clone(), l))
+        } else {
+            None
+        };
+        let target: &dyn Posterior = match &whitened {
+            Some(w) => w,
+            None => post,
+        };
+        let starts = match &whitened {
+            // Twice the Laplace spread around its mode: z ~ N(0, 4 I).
+            Some(_) => (0..n.chains)
+                .map(|c| {
+                    let mut rng = unit_rng(seed, START_STREAM + c as u64);
+                    (0..d)
+                        .map(|_| {
+                            let v: f64 = StandardNormal.sample(&mut rng);
+                            2.0 * v
+                        })
+                        .collect()
+                })
+                .collect(),
+            None => dispersed_starts(map, n.chains, seed),
+        };
         let dir = checkpoint_dir(study, level, model, "nuts");
         let t0 = Instant::now();
-        let run = sample_nuts(post, &starts, &params, Some(&dir), &|p| match p {
+        let run = sample_nuts(target, &starts, &params, Some(&dir), &|p| match p {
             Progress::NutsDraws { .. } => progress(Event::Advance),
             Progress::NutsChainLoaded { .. } => {
                 for _ in 0..per_chain {

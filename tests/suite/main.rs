@@ -9,6 +9,7 @@ mod rom_model;
 mod runner_common;
 mod spring_model;
 
+mod bayes_run;
 mod circle_fit;
 mod cli_errors;
 mod cli_inspect;
