@@ -25,8 +25,9 @@ const WIDTH: u32 = 1000;
 const CHI2_2_95: f64 = 5.991;
 /// At most this many points of a chain's trace are drawn (min/max per bin beyond).
 const TRACE_MAX_POINTS: usize = 1600;
-/// At most this many draws are scattered in a pair panel (regular thinning beyond).
-const PAIR_MAX_POINTS: usize = 2000;
+/// At most this many draws are scattered in all pair panels together (regular thinning
+/// beyond), with 500 to 2000 per panel: keeps the SVG of an 8-parameter corner plot small.
+const PAIR_MAX_POINTS_TOTAL: usize = 6000;
 
 /// One group of posterior draws of E*(f) for [`posterior_bands_figure`] (e.g. one excitation
 /// level), drawn in its own colour.
@@ -255,7 +256,8 @@ pub fn pair_figure(
         });
     }
     // Scatter: regular thinning of the pooled draws.
-    let stride = n.div_ceil(PAIR_MAX_POINTS).max(1);
+    let per_panel = (PAIR_MAX_POINTS_TOTAL / (d * (d - 1) / 2).max(1)).clamp(500, 2000);
+    let stride = n.div_ceil(per_panel).max(1);
     let mut cells = Vec::new();
     for i in 1..d {
         for j in 0..i {
@@ -282,8 +284,9 @@ pub fn pair_figure(
         }
     }
     let panel = (900 / d as u32).clamp(140, 450);
-    let side = (5.5 * FS) as u32 + panel * d as u32 + 24;
-    let height = side + 90;
+    // Label areas + d squares; title and legend strip (about 62 px) above.
+    let side = (6.0 * FS) as u32 + panel * d as u32 + 30;
+    let height = panel * d as u32 + (3.2 * FS) as u32 + 80;
     let job = PairJob {
         title,
         params: &params,
@@ -291,7 +294,7 @@ pub fn pair_figure(
         has_map: params.iter().any(|p| p.map.is_some()),
         has_laplace: laplace_cov.is_some(),
     };
-    draw::write_png_svg(&stem_of(path_png), (side.max(560), height), &job).map(|_| ())
+    draw::write_png_svg(&stem_of(path_png), (side.max(560), height.max(400)), &job).map(|_| ())
 }
 
 /// Posterior bands of E'(f) (upper panel) and E''(f) (lower panel) of one set of draws:
@@ -1122,14 +1125,26 @@ impl Render for PairJob<'_> {
         let p = ((w as i32 - y_area - 16) / d)
             .min((h as i32 - x_area - 4) / d)
             .max(20);
-        let xs: Vec<i32> = (1..d).map(|k| y_area + k * p).collect();
-        let ys: Vec<i32> = (1..d).map(|k| k * p).collect();
+        let m = 3;
+        // Exact p x p plotting squares: the spare width / height goes to an extra (unused)
+        // column and row at the right and bottom.
+        let xs: Vec<i32> = (1..=d)
+            .map(|k| y_area + k * p + if k == d { 12 - m } else { 0 })
+            .collect();
+        let ys: Vec<i32> = (1..=d)
+            .map(|k| k * p + if k == d { x_area } else { 0 })
+            .collect();
         let cells = body.split_by_breakpoints(xs, ys);
         let small = p < 220;
-        let ticks = if small { 3 } else { 5 };
+        let ticks = if small {
+            3
+        } else if p < 320 {
+            4
+        } else {
+            5
+        };
         let tick_font = if small { 0.85 * FS } else { FS };
-        let m = 3;
-        let idx = |i: usize, j: usize| i * d as usize + j;
+        let idx = |i: usize, j: usize| i * (d as usize + 1) + j;
         let last = d as usize - 1;
         let chart_on = |i: usize, j: usize, xr: (f64, f64), yr: (f64, f64)| {
             ChartBuilder::on(&cells[idx(i, j)])
@@ -1239,11 +1254,11 @@ impl Render for PairJob<'_> {
                     .map_err(err)?;
             }
         }
-        // Above the diagonal: the sample correlation.
-        let font = ("sans-serif", 1.2 * FS)
+        // Above the diagonal: the sample correlation, centred by its measured size (the
+        // text anchor is not honoured by every backend).
+        let font: TextStyle = ("sans-serif", 1.2 * FS)
             .into_font()
-            .color(&RGBColor(80, 80, 80))
-            .pos(Pos::new(HPos::Center, VPos::Center));
+            .color(&RGBColor(80, 80, 80));
         for cell in self.cells {
             let a = &cells[idx(cell.j, cell.i)];
             let (aw, ah) = a.dim_in_pixel();
@@ -1251,11 +1266,15 @@ impl Render for PairJob<'_> {
                 Some(r) => format!("\u{3c1} = {r:.2}"),
                 None => "\u{3c1} = n/a".to_string(),
             };
-            // The upper panels have no label areas: centre on the plotting square.
-            let x0 = if cell.j == 0 { y_area } else { 0 };
-            let cx = x0 + (aw as i32 - x0) / 2;
-            a.draw_text(&text, &font, (cx, ah as i32 / 2))
-                .map_err(err)?;
+            let (tw, th) = a.estimate_text_size(&text, &font).map_err(err)?;
+            let right = if cell.i == last { 12 } else { m };
+            let cx = (aw as i32 - right + m) / 2;
+            a.draw_text(
+                &text,
+                &font,
+                (cx - tw as i32 / 2, (ah as i32 - th as i32) / 2),
+            )
+            .map_err(err)?;
         }
         Ok(())
     }
