@@ -29,6 +29,10 @@ const TRACE_MAX_POINTS: usize = 1600;
 /// beyond), with 500 to 2000 per panel: keeps the SVG of an 8-parameter corner plot small.
 const PAIR_MAX_POINTS_TOTAL: usize = 6000;
 
+/// Points drawn over the bands: `(label, freq_hz, E' (Pa), E'' (Pa))`, e.g. the per-line RFM
+/// estimates of one level.
+pub type Overlay = (String, Vec<f64>, Vec<f64>, Vec<f64>);
+
 /// One group of posterior draws of E*(f) for [`posterior_bands_figure`] (e.g. one excitation
 /// level), drawn in its own colour.
 #[derive(Clone, Debug, PartialEq)]
@@ -306,7 +310,7 @@ pub fn posterior_band_figure(
     freq_hz: &[f64],
     storage: &[Vec<f64>],
     loss: &[Vec<f64>],
-    overlays: &[(String, Vec<f64>, Vec<f64>, Vec<f64>)],
+    overlays: &[Overlay],
     title: &str,
 ) -> Result<(), PlotError> {
     let group = BandGroup {
@@ -325,7 +329,7 @@ pub fn posterior_band_figure(
 pub fn posterior_bands_figure(
     path_png: &Path,
     groups: &[BandGroup],
-    overlays: &[(String, Vec<f64>, Vec<f64>, Vec<f64>)],
+    overlays: &[Overlay],
     title: &str,
 ) -> Result<(), PlotError> {
     if groups.is_empty() {
