@@ -15,7 +15,7 @@ use crate::output::{check_parent, commit, temp_sibling, write_atomic_bytes};
 static FONT_BYTES: &[u8] = include_bytes!("../../assets/DejaVuSans.ttf");
 static FONT: OnceLock<Result<(), String>> = OnceLock::new();
 
-fn ensure_font() -> Result<(), PlotError> {
+pub(crate) fn ensure_font() -> Result<(), PlotError> {
     FONT.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, FONT_BYTES)
             .map_err(|_| "DejaVuSans.ttf is not a valid TrueType font".to_string())
@@ -25,7 +25,7 @@ fn ensure_font() -> Result<(), PlotError> {
 }
 
 /// Colours given to curves without an explicit one, in order (black first: measured data).
-const PALETTE: [(u8, u8, u8); 10] = [
+pub(crate) const PALETTE: [(u8, u8, u8); 10] = [
     (0, 0, 0),
     (31, 119, 180),
     (214, 39, 40),
@@ -197,7 +197,7 @@ fn segments(c: &Curve, log_x: bool, log_y: bool, wrap_deg: bool) -> Vec<Vec<(f64
 }
 
 /// Range of `v` padded for display; `None` when empty.
-fn padded_range(mut it: impl Iterator<Item = f64>, log: bool) -> Option<(f64, f64)> {
+pub(crate) fn padded_range(mut it: impl Iterator<Item = f64>, log: bool) -> Option<(f64, f64)> {
     let first = it.next()?;
     let (lo, hi) = it.fold((first, first), |(a, b), v| (a.min(v), b.max(v)));
     Some(if log {
@@ -217,7 +217,7 @@ fn padded_range(mut it: impl Iterator<Item = f64>, log: bool) -> Option<(f64, f6
 }
 
 /// Short tick labels: plain decimals for moderate magnitudes, else scientific.
-fn fmt_tick(v: &f64) -> String {
+pub(crate) fn fmt_tick(v: &f64) -> String {
     let a = v.abs();
     if a == 0.0 {
         return "0".to_string();
@@ -318,7 +318,7 @@ fn prepare(specs: &[PanelSpec], log_x: bool) -> Result<(Vec<Panel>, (f64, f64)),
     Ok((panels, x_range))
 }
 
-fn append_ext(stem: &Path, ext: &str) -> PathBuf {
+pub(crate) fn append_ext(stem: &Path, ext: &str) -> PathBuf {
     let mut s = stem.as_os_str().to_owned();
     s.push(".");
     s.push(ext);
@@ -343,9 +343,6 @@ pub(crate) fn figure(
         560
     };
     let size = (params.width_px.max(200), height.max(150));
-    let png = append_ext(stem, "png");
-    let svg = append_ext(stem, "svg");
-    check_parent(&png)?;
     let job = Job {
         title,
         x_label,
@@ -354,6 +351,24 @@ pub(crate) fn figure(
         log_x: params.log_x,
         font_px: params.font_px.max(6),
     };
+    write_png_svg(stem, size, &job)
+}
+
+/// Something that can draw itself on any plotters backend (PNG and SVG share one renderer).
+pub(crate) trait Render {
+    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
+}
+
+/// Renders `job` to `<stem>.png` and `<stem>.svg` of `size` pixels, each written atomically.
+pub(crate) fn write_png_svg<R: Render>(
+    stem: &Path,
+    size: (u32, u32),
+    job: &R,
+) -> Result<FigureFiles, PlotError> {
+    ensure_font()?;
+    let png = append_ext(stem, "png");
+    let svg = append_ext(stem, "svg");
+    check_parent(&png)?;
 
     // PNG: rendered into a temporary sibling (keeping the .png extension, which the encoder
     // needs), then moved over the target.
@@ -392,11 +407,11 @@ struct Job<'a> {
     font_px: u32,
 }
 
-fn err<E: std::fmt::Display>(e: E) -> String {
+pub(crate) fn err<E: std::fmt::Display>(e: E) -> String {
     e.to_string()
 }
 
-impl Job<'_> {
+impl Render for Job<'_> {
     fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
         let fs = f64::from(self.font_px);
         root.fill(&WHITE).map_err(err)?;
@@ -421,7 +436,9 @@ impl Job<'_> {
         }
         Ok(())
     }
+}
 
+impl Job<'_> {
     fn panel<DB, XS, YS>(
         &self,
         area: &DrawingArea<DB, Shift>,

@@ -19,6 +19,8 @@ pub enum PlotError {
     },
     #[error("panel '{panel}' has no finite point to draw (all values NaN/inf{})", if *.log_axis { " or not positive on a log axis" } else { "" })]
     NoFiniteData { panel: String, log_axis: bool },
+    #[error("figure '{figure}': {reason}")]
+    InvalidInput { figure: String, reason: String },
     #[error("cannot load the embedded font: {0}")]
     Font(String),
     #[error("cannot render '{}': {message}", path.display())]

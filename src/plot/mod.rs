@@ -11,6 +11,7 @@
 
 mod draw;
 mod error;
+pub mod posterior;
 
 use std::path::{Path, PathBuf};
 

@@ -264,3 +264,364 @@ fn bad_inputs_are_errors_not_panics() {
     )
     .unwrap();
 }
+
+// ---------------------------------------------------------------------------------------------
+// Posterior figures (trace, pair, bands)
+// ---------------------------------------------------------------------------------------------
+
+use rfmlab::plot::posterior::{
+    pair_figure, posterior_band_figure, posterior_bands_figure, trace_figure, BandGroup,
+};
+use rfmlab::plot::FigureFiles;
+
+/// Deterministic standard normals (splitmix64 + Box-Muller).
+struct Normals(u64);
+
+impl Normals {
+    fn uniform(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+    fn next(&mut self) -> f64 {
+        let (u, v) = (self.uniform(), self.uniform());
+        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+    }
+}
+
+fn files_of(stem: &Path) -> FigureFiles {
+    FigureFiles {
+        png: stem.with_extension("png"),
+        svg: stem.with_extension("svg"),
+    }
+}
+
+/// Correlated Gaussian draws `[param][draw]` with mean `mu` and covariance `L L'`.
+fn gaussian_draws(mu: &[f64], l: &[Vec<f64>], n: usize, seed: u64) -> Vec<Vec<f64>> {
+    let d = mu.len();
+    let mut g = Normals(seed);
+    let mut out = vec![Vec::with_capacity(n); d];
+    for _ in 0..n {
+        let z: Vec<f64> = (0..d).map(|_| g.next()).collect();
+        for i in 0..d {
+            out[i].push(mu[i] + (0..=i).map(|k| l[i][k] * z[k]).sum::<f64>());
+        }
+    }
+    out
+}
+
+#[test]
+fn plot_trace_figure_writes_png_and_svg() {
+    let dir = out_dir("posterior_trace");
+    let names: Vec<String> = ["E0 (MPa)", "h (MPa)", "E1 (MPa)", "eta1 (kPa s)"]
+        .map(String::from)
+        .to_vec();
+    let centres = [5.52, 0.61, 3.0, 20.0];
+    let scales = [0.01, 0.02, 0.15, 1.5];
+    // AR(1) chains, the third chain starting away and converging.
+    let mut g = Normals(7);
+    let draws: Vec<Vec<Vec<f64>>> = (0..names.len())
+        .map(|p| {
+            (0..4)
+                .map(|c| {
+                    let mut x = if c == 2 { 4.0 } else { 0.0 };
+                    (0..1500)
+                        .map(|_| {
+                            x = 0.8 * x + 0.6 * g.next();
+                            centres[p] + scales[p] * x
+                        })
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    let stem = dir.join("trace");
+    trace_figure(
+        &dir.join("trace.png"),
+        &names,
+        &draws,
+        "Traces level 1 (Model 4)",
+    )
+    .unwrap();
+    let files = files_of(&stem);
+    let png = std::fs::read(&files.png).unwrap();
+    assert_eq!(png_size(&png).0, 1000);
+    assert!(png_size(&png).1 > 600);
+    check_files(
+        &files,
+        "Traces level 1 (Model 4)",
+        png_size(&png),
+        &[
+            "E0 (MPa)",
+            "eta1 (kPa s)",
+            "chain 1",
+            "chain 4",
+            "Draw",
+            "Density",
+        ],
+    );
+    // One parameter, one chain with a NaN and a constant chain still plot.
+    trace_figure(
+        &dir.join("trace_single"),
+        &names[..1],
+        &[vec![vec![1.0, f64::NAN, 1.2, 1.1], vec![1.05; 4]]],
+        "single",
+    )
+    .unwrap();
+    assert!(dir.join("trace_single.png").exists());
+}
+
+#[test]
+fn plot_pair_figure_with_map_and_laplace() {
+    let dir = out_dir("posterior_pair");
+    let names: Vec<String> = ["E0 (MPa)", "h (MPa)", "E1 (MPa)", "eta1 (kPa s)"]
+        .map(String::from)
+        .to_vec();
+    let mu = [5.52, 0.61, 3.0, 20.0];
+    let l = vec![
+        vec![0.01, 0.0, 0.0, 0.0],
+        vec![0.012, 0.016, 0.0, 0.0],
+        vec![-0.05, 0.02, 0.12, 0.0],
+        vec![0.3, 0.0, -0.9, 0.8],
+    ];
+    let draws = gaussian_draws(&mu, &l, 4000, 11);
+    // Laplace covariance L L' (exact here), MAP slightly off the mean.
+    let d = mu.len();
+    let mut cov = vec![0.0; d * d];
+    for i in 0..d {
+        for j in 0..d {
+            cov[i * d + j] = (0..d).map(|k| l[i][k] * l[j][k]).sum();
+        }
+    }
+    let map = [5.525, 0.605, 2.98, 20.2];
+    pair_figure(
+        &dir.join("pair.png"),
+        &names,
+        &draws,
+        Some(&map),
+        Some(&cov),
+        "Posterior level 1 (Model 4)",
+    )
+    .unwrap();
+    let files = files_of(&dir.join("pair"));
+    let png = std::fs::read(&files.png).unwrap();
+    let size = png_size(&png);
+    assert!(size.0 >= 560 && size.1 >= 560, "{size:?}");
+    check_files(
+        &files,
+        "Posterior level 1 (Model 4)",
+        size,
+        &[
+            "E0 (MPa)",
+            "eta1 (kPa s)",
+            "MAP",
+            "Laplace",
+            "posterior draws",
+        ],
+    );
+    // d = 1 without MAP/Laplace, and d = 8 with a covariance that is not positive definite in
+    // one block (no ellipse there, no error).
+    pair_figure(
+        &dir.join("pair_d1"),
+        &names[..1],
+        &draws[..1],
+        None,
+        None,
+        "d1",
+    )
+    .unwrap();
+    let names8: Vec<String> = (1..=8).map(|k| format!("theta{k}")).collect();
+    let l8: Vec<Vec<f64>> = (0..8)
+        .map(|i| {
+            (0..8)
+                .map(|k| {
+                    if k == i {
+                        1.0
+                    } else if k < i {
+                        0.3
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let draws8 = gaussian_draws(&[0.0; 8], &l8, 3000, 5);
+    let mut cov8 = vec![0.0; 64];
+    for i in 0..8 {
+        for j in 0..8 {
+            cov8[i * 8 + j] = (0..8).map(|k| l8[i][k] * l8[j][k]).sum();
+        }
+    }
+    cov8[8 + 7] = 50.0; // block (1, 7) not positive definite
+    cov8[7 * 8 + 1] = 50.0;
+    pair_figure(
+        &dir.join("pair_d8"),
+        &names8,
+        &draws8,
+        Some(&[0.0; 8]),
+        Some(&cov8),
+        "d8",
+    )
+    .unwrap();
+    let svg = std::fs::read_to_string(dir.join("pair_d8.svg")).unwrap();
+    assert!(svg.contains("theta8"));
+}
+
+fn model4(f: f64, scale: f64) -> (f64, f64) {
+    let (e0, h, e1, eta1) = (5.5e6 * scale, 0.6e6 * scale, 3.0e6, 2.0e4);
+    let w = 2.0 * std::f64::consts::PI * f;
+    let z = rfmlab::common::C64::new(e0, h) + J * w * eta1 * e1 / (e1 + J * w * eta1);
+    (z.re, z.im)
+}
+
+/// Draws `[draw][line]` of E' and E'' around Model 4 with parameter-like scatter.
+fn modulus_draws(freq: &[f64], scale: f64, seed: u64) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    let mut g = Normals(seed);
+    let (mut s, mut l) = (Vec::new(), Vec::new());
+    for _ in 0..400 {
+        let (a, b) = (1.0 + 0.02 * g.next(), 1.0 + 0.06 * g.next());
+        s.push(freq.iter().map(|&f| a * model4(f, scale).0).collect());
+        l.push(freq.iter().map(|&f| b * model4(f, scale).1).collect());
+    }
+    (s, l)
+}
+
+#[test]
+fn plot_posterior_bands_one_and_two_levels() {
+    let dir = out_dir("posterior_bands");
+    let freq: Vec<f64> = (1..=100).map(|k| 5.0 * f64::from(k)).collect();
+    let lines: Vec<f64> = (10..=40).chain(370..=420).map(f64::from).collect();
+    let est = |scale: f64, k0: usize| {
+        let (s, l): (Vec<f64>, Vec<f64>) = lines
+            .iter()
+            .enumerate()
+            .map(|(k, &f)| {
+                let r = 1.0 + 0.04 * ((((k + k0) * 31) % 9) as f64 - 4.0) / 4.0;
+                let (a, b) = model4(f, scale);
+                (a * r, b * r)
+            })
+            .unzip();
+        (s, l)
+    };
+    let (s1, l1) = modulus_draws(&freq, 1.0, 3);
+    let (e1s, e1l) = est(1.0, 0);
+    let overlays1 = vec![("per-line RFM".to_string(), lines.clone(), e1s, e1l)];
+    posterior_band_figure(
+        &dir.join("bands_level1.png"),
+        &freq,
+        &s1,
+        &l1,
+        &overlays1,
+        "E* posterior level 1",
+    )
+    .unwrap();
+    check_files(
+        &files_of(&dir.join("bands_level1")),
+        "E* posterior level 1",
+        (1000, 860),
+        &[
+            "per-line RFM",
+            "posterior: median",
+            "(MPa)",
+            "Frequency (Hz)",
+        ],
+    );
+
+    let (s2, l2) = modulus_draws(&freq, 0.8, 4);
+    let (e2s, e2l) = est(0.8, 3);
+    let groups = [
+        BandGroup {
+            label: "level 1".to_string(),
+            freq_hz: freq.clone(),
+            storage: s1,
+            loss: l1,
+        },
+        BandGroup {
+            label: "level 2".to_string(),
+            freq_hz: freq.clone(),
+            storage: s2,
+            loss: l2,
+        },
+    ];
+    let mut overlays2 = overlays1.clone();
+    overlays2[0].0 = "RFM level 1".to_string();
+    overlays2.push(("RFM level 2".to_string(), lines.clone(), e2s, e2l));
+    posterior_bands_figure(
+        &dir.join("bands_levels"),
+        &groups,
+        &overlays2,
+        "E* posterior, two levels",
+    )
+    .unwrap();
+    check_files(
+        &files_of(&dir.join("bands_levels")),
+        "E* posterior, two levels",
+        (1000, 860),
+        &["level 1: median", "level 2: median", "RFM level 2"],
+    );
+}
+
+#[test]
+fn plot_posterior_bad_inputs_are_errors_not_panics() {
+    let dir = out_dir("posterior_errors");
+    let p = dir.join("bad.png");
+    let names = vec!["a".to_string(), "b".to_string()];
+    let is_input = |e: &PlotError| matches!(e, PlotError::InvalidInput { .. });
+
+    // Trace: zero draws, no chains, names/draws mismatch, chain count mismatch, all NaN.
+    let e = trace_figure(&p, &names[..1], &[vec![vec![]]], "t").unwrap_err();
+    assert!(is_input(&e) && e.to_string().contains("no draws"), "{e}");
+    let e = trace_figure(&p, &names[..1], &[vec![]], "t").unwrap_err();
+    assert!(is_input(&e), "{e}");
+    let e = trace_figure(&p, &names, &[vec![vec![1.0]]], "t").unwrap_err();
+    assert!(is_input(&e), "{e}");
+    let e = trace_figure(&p, &[], &[], "t").unwrap_err();
+    assert!(is_input(&e), "{e}");
+    let e = trace_figure(
+        &p,
+        &names,
+        &[vec![vec![1.0]], vec![vec![1.0], vec![2.0]]],
+        "t",
+    )
+    .unwrap_err();
+    assert!(is_input(&e), "{e}");
+    let e = trace_figure(&p, &names[..1], &[vec![vec![f64::NAN]]], "t").unwrap_err();
+    assert!(matches!(e, PlotError::NoFiniteData { .. }), "{e}");
+
+    // Pair: zero draws, unequal draw counts, wrong MAP / covariance sizes.
+    let e = pair_figure(&p, &names, &[vec![], vec![]], None, None, "t").unwrap_err();
+    assert!(is_input(&e), "{e}");
+    let e = pair_figure(&p, &names, &[vec![1.0, 2.0], vec![1.0]], None, None, "t").unwrap_err();
+    assert!(is_input(&e), "{e}");
+    let two = [vec![1.0, 2.0], vec![1.0, 3.0]];
+    let e = pair_figure(&p, &names, &two, Some(&[1.0]), None, "t").unwrap_err();
+    assert!(is_input(&e), "{e}");
+    let e = pair_figure(&p, &names, &two, None, Some(&[1.0, 0.0, 0.0]), "t").unwrap_err();
+    assert!(is_input(&e), "{e}");
+    let e = pair_figure(&p, &[], &[], None, None, "t").unwrap_err();
+    assert!(is_input(&e), "{e}");
+
+    // Bands: zero draws, row length != frequency count, overlay lengths, no groups.
+    let f = vec![1.0, 2.0, 3.0];
+    let e = posterior_band_figure(&p, &f, &[], &[vec![1.0; 3]], &[], "t").unwrap_err();
+    assert!(is_input(&e) && e.to_string().contains("no draws"), "{e}");
+    let e = posterior_band_figure(&p, &f, &[vec![1.0; 2]], &[vec![1.0; 3]], &[], "t").unwrap_err();
+    assert!(matches!(e, PlotError::LengthMismatch { .. }), "{e}");
+    let bad_overlay = vec![("o".to_string(), vec![1.0, 2.0], vec![1.0], vec![1.0, 2.0])];
+    let e = posterior_band_figure(&p, &f, &[vec![1.0; 3]], &[vec![1.0; 3]], &bad_overlay, "t")
+        .unwrap_err();
+    assert!(matches!(e, PlotError::LengthMismatch { .. }), "{e}");
+    let e = posterior_band_figure(&p, &[], &[vec![]], &[vec![]], &[], "t").unwrap_err();
+    assert!(matches!(e, PlotError::EmptyCurve { .. }), "{e}");
+    let e = posterior_bands_figure(&p, &[], &[], "t").unwrap_err();
+    assert!(matches!(e, PlotError::NoCurves { .. }), "{e}");
+    let nan = vec![vec![f64::NAN; 3]];
+    let e = posterior_band_figure(&p, &f, &nan, &nan, &[], "t").unwrap_err();
+    assert!(matches!(e, PlotError::NoFiniteData { .. }), "{e}");
+    // Nothing was written for the failures.
+    assert!(!p.exists() && !dir.join("bad.svg").exists());
+}
