@@ -28,6 +28,7 @@ mod fe_joint;
 mod frf_full;
 mod iem;
 mod inference_diagnostics;
+mod inference_grid;
 mod inference_likelihood;
 mod inference_samplers;
 mod material;
