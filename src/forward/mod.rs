@@ -38,6 +38,10 @@ impl From<FrfError> for ForwardError {
     }
 }
 
+/// Accelerance `[line][k]`, its derivative in E' (empty unless asked) and the drive-point
+/// accelerance per line.
+pub type Columns = (Vec<C64>, Vec<C64>, Vec<C64>);
+
 /// A prediction at the lines: values `[line * n_out + k]` and, when asked, the Jacobian
 /// `jac[param][line * n_out + k]`.
 #[derive(Clone, Debug, Default)]
@@ -162,13 +166,34 @@ impl<'a> ForwardModel<'a> {
             .shaker
             .map(|_| m.weights_for_force(Some(&m.force_psd(&drive))));
         let rows = shaker_rows.as_ref().unwrap_or(&m.rows);
+        if fine.jac.is_empty() {
+            return Ok(Prediction {
+                values: MeasurementModel::apply(rows, &fine.values, n),
+                jac: Vec::new(),
+            });
+        }
+        // Values and Jacobian columns side by side, so that one pass over the kernel terms
+        // applies them all (contiguous inner loop).
+        let nc = n * (1 + fine.jac.len());
+        let n_fine = fine.values.len() / n;
+        let mut stacked = vec![C64::new(0.0, 0.0); n_fine * nc];
+        for j in 0..n_fine {
+            let row = &mut stacked[j * nc..(j + 1) * nc];
+            row[..n].copy_from_slice(&fine.values[j * n..(j + 1) * n]);
+            for (q, col) in fine.jac.iter().enumerate() {
+                row[n * (q + 1)..n * (q + 2)].copy_from_slice(&col[j * n..(j + 1) * n]);
+            }
+        }
+        let out = MeasurementModel::apply(rows, &stacked, nc);
+        let n_lines = rows.len();
+        let pick = |q: usize| -> Vec<C64> {
+            (0..n_lines)
+                .flat_map(|l| out[l * nc + n * q..l * nc + n * (q + 1)].iter().copied())
+                .collect()
+        };
         Ok(Prediction {
-            values: MeasurementModel::apply(rows, &fine.values, n),
-            jac: fine
-                .jac
-                .iter()
-                .map(|c| MeasurementModel::apply(rows, c, n))
-                .collect(),
+            values: pick(0),
+            jac: (1..=fine.jac.len()).map(pick).collect(),
         })
     }
 }
@@ -230,7 +255,7 @@ impl<'a> Observation<'a> {
         omega: &[f64],
         modulus: &[C64],
         derivs: bool,
-    ) -> Result<(Vec<C64>, Vec<C64>, Vec<C64>), ForwardError> {
+    ) -> Result<Columns, ForwardError> {
         let sw = self.engine.sweep(omega, modulus, derivs)?;
         let jpos = self
             .engine

@@ -269,13 +269,47 @@ pub fn hessian(post: &dyn Posterior, x: &[f64]) -> Result<Vec<f64>, DensityError
 }
 
 fn hessian_of(post: &dyn Posterior, x: &[f64], physical: bool) -> Result<Vec<f64>, DensityError> {
+    let steps: Vec<f64> = x.iter().map(|v| 1e-5 * (1.0 + v.abs())).collect();
+    hessian_steps(post, x, physical, &steps)
+}
+
+/// [`hessian`] with the Hessian's curvature scales used as difference steps: a first pass
+/// with steps `1e-5 (1 + |x|)`, then steps of `1e-3` posterior sd per coordinate. A posterior
+/// narrower than the first step (thousands of FRF values under a misspecified law) would
+/// otherwise be differenced across its own width.
+pub fn hessian_scaled(post: &dyn Posterior, x: &[f64]) -> Result<Vec<f64>, DensityError> {
+    let d = x.len();
+    let h = hessian_of(post, x, false)?;
+    let Some(l) = cholesky(&h, d) else {
+        return Ok(h);
+    };
+    let cov = chol_inverse(&l, d);
+    let steps: Vec<f64> = (0..d)
+        .map(|i| {
+            let sd = cov[i * d + i].sqrt();
+            if sd.is_finite() && sd > 0.0 {
+                (1e-3 * sd).min(1e-5 * (1.0 + x[i].abs()))
+            } else {
+                1e-5 * (1.0 + x[i].abs())
+            }
+        })
+        .collect();
+    hessian_steps(post, x, false, &steps)
+}
+
+fn hessian_steps(
+    post: &dyn Posterior,
+    x: &[f64],
+    physical: bool,
+    steps: &[f64],
+) -> Result<Vec<f64>, DensityError> {
     let d = x.len();
     let mut h = vec![0.0; d * d];
     let mut xp = x.to_vec();
     let mut gp = vec![0.0; d];
     let mut gm = vec![0.0; d];
     for j in 0..d {
-        let e = 1e-5 * (1.0 + x[j].abs());
+        let e = steps[j];
         xp[j] = x[j] + e;
         objective(post, &xp, Some(&mut gp), physical)?;
         xp[j] = x[j] - e;
@@ -295,7 +329,8 @@ fn hessian_of(post: &dyn Posterior, x: &[f64], physical: bool) -> Result<Vec<f64
     Ok(h)
 }
 
-/// Cholesky of a symmetric d x d matrix (row-major); None when not positive definite.
+/// Cholesky of a symmetric d x d matrix (row-major); None when not positive definite (or not
+/// finite).
 pub fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
     let mut l = vec![0.0; d * d];
     for i in 0..d {
@@ -305,7 +340,7 @@ pub fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
                 s -= l[i * d + k] * l[j * d + k];
             }
             if i == j {
-                if !(s > 0.0) {
+                if !(s > 0.0) || !s.is_finite() {
                     return None;
                 }
                 l[i * d + i] = s.sqrt();
@@ -352,7 +387,7 @@ pub fn chol_inverse(l: &[f64], d: usize) -> Vec<f64> {
 /// Laplace approximation at `x` (assumed the MAP).
 pub fn laplace_at(post: &dyn Posterior, x: &[f64]) -> Result<Laplace, DensityError> {
     let d = x.len();
-    let a = hessian(post, x)?;
+    let a = hessian_scaled(post, x)?;
     let lp = post.log_prior(x, None);
     let ll = post.log_likelihood(x, None)?;
     let (cov_x, logdet, pd) = match cholesky(&a, d) {

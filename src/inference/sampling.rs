@@ -262,26 +262,7 @@ pub(crate) fn cholesky_jittered(cov: &[f64], d: usize) -> Vec<f64> {
     l
 }
 
-fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; d * d];
-    for i in 0..d {
-        for j in 0..=i {
-            let mut s = a[i * d + j];
-            for k in 0..j {
-                s -= l[i * d + k] * l[j * d + k];
-            }
-            if i == j {
-                if !(s > 0.0) || !s.is_finite() {
-                    return None;
-                }
-                l[i * d + i] = s.sqrt();
-            } else {
-                l[i * d + j] = s / l[j * d + j];
-            }
-        }
-    }
-    Some(l)
-}
+use super::map::cholesky;
 
 /// Outcome of one round of population moves.
 #[derive(Debug, Clone, Copy, Default)]

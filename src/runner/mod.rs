@@ -445,13 +445,17 @@ fn modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange
     r
 }
 
+/// The run's FRF engine, its description, and the likelihood's engine (the excitation column
+/// only, when the study has an `[inference]` section and uses the ROM).
+type Engines = (Box<dyn FrfEngine>, String, Option<Box<dyn FrfEngine>>);
+
 /// Build the FRF engine with inputs = all measured points of every level.
 fn build_engine(
     study: &Study,
     built: &BuiltModel,
     levels: &[LevelData],
     rom_cache: Option<&Path>,
-) -> Result<(Box<dyn FrfEngine>, String, Option<Box<dyn FrfEngine>>), RunError> {
+) -> Result<Engines, RunError> {
     let mut inputs: Vec<usize> = Vec::new();
     for l in levels {
         for &k in l

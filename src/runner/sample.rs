@@ -103,7 +103,7 @@ pub fn run_samplers(
             target_accept: n.target_accept,
             ..NutsParams::default()
         };
-        let every = params.progress_every.max(1) as u64;
+        let every = params.progress_every.max(1);
         let per_chain = (n.tune + n.draws) as u64 / every;
         progress(Event::Start {
             step: format!(

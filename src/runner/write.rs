@@ -855,7 +855,10 @@ pub(super) fn write_results(
             dir.write_table(&table)?;
         }
         let figs = if figures {
-            let f = draw_figures(dir.path(), levels, results)?;
+            let mut f = draw_figures(dir.path(), levels, results)?;
+            let posts: Vec<&super::bayes::PosteriorResult> =
+                results.iter().flat_map(|r| r.posteriors.iter()).collect();
+            f.extend(super::write_bayes::figures(dir.path(), &posts)?);
             for (png, _) in &f {
                 dir.record(png);
                 dir.record(png.replace(".png", ".svg"));

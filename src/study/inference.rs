@@ -317,7 +317,7 @@ pub(super) fn inference(
     let rn = r.noise.as_ref();
     let nk = format!("{key}.noise");
     let model_error = rn.and_then(|n| n.model_error).unwrap_or(0.0);
-    if !(model_error >= 0.0 && model_error < 1.0) {
+    if !(0.0..1.0).contains(&model_error) {
         return Err(ctx.err(
             format!("{nk}.model_error"),
             format!("{model_error} must be in [0, 1): a relative error floor, e.g. 0.01"),

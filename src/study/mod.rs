@@ -140,46 +140,6 @@ impl Estimator {
     pub fn force_band(&self, data_band_hz: (f64, f64)) -> (f64, f64) {
         self.force_band_hz.unwrap_or((0.0, data_band_hz.1))
     }
-
-    /// The measurement chain whose expected H1 ([`crate::experiment::leakage_bias`]) the
-    /// identification fits on `lines_hz` (Hz, rounded to the analyser's grid `k / block_s`),
-    /// for data whose lines span `data_band_hz`. The force is flat (shaker-coloured when given)
-    /// over [`Estimator::force_band`], cut to the kernel's reach around the lines; the kernel
-    /// quadrature is 8 points per line spacing over +-12 line spacings (Hann: the dropped
-    /// tail is below 1e-8 of the kernel's integral).
-    pub fn chain(
-        &self,
-        lines_hz: &[f64],
-        data_band_hz: (f64, f64),
-    ) -> crate::experiment::ChainParams {
-        let df = 1.0 / self.block_s;
-        let kernel = crate::experiment::KernelParams {
-            grid_step_hz: df / 8.0,
-            half_width_hz: 12.0 * df,
-        };
-        let lines_hz: Vec<f64> = lines_hz.iter().map(|f| (f / df).round() * df).collect();
-        let (flo, fhi) = self.force_band(data_band_hz);
-        let (lo, hi) = match (lines_hz.first(), lines_hz.last()) {
-            (Some(&lo), Some(&hi)) => (lo, hi),
-            _ => (flo, fhi),
-        };
-        // Only the kernel's reach around the lines matters; the edges stay on the grid.
-        let reach = |f: f64| (f / df).round() * df;
-        let band_hz = (
-            reach(lo - kernel.half_width_hz).max(flo),
-            reach(hi + kernel.half_width_hz).min(fhi),
-        );
-        crate::experiment::ChainParams {
-            band_hz,
-            fs_hz: self.fs_hz,
-            block_s: self.block_s,
-            window: self.window,
-            shaker: self.shaker,
-            lines_hz,
-            kernel,
-            ..crate::experiment::ChainParams::default()
-        }
-    }
 }
 
 /// A constitutive model to identify, with initial values in the model's parameter order (SI).

@@ -126,7 +126,8 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
     for (p, vals) in ours.as_object().unwrap() {
         for c in ["r_hat", "ess_bulk", "ess_tail", "mcse_mean"] {
             let a = vals[c].as_f64().unwrap();
-            let b = group[p][c]
+            // draws.parquet names its columns in snake case (E0 -> e0).
+            let b = group[p.to_ascii_lowercase()][c]
                 .as_f64()
                 .unwrap_or_else(|| panic!("ArviZ has no {p}.{c}: {group}"));
             assert!(

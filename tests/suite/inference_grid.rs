@@ -17,7 +17,7 @@
 //! (2000 particles) means and sds within 3 MCSE of the grid; the Laplace, TMCMC and
 //! stepping-stone log evidences within 0.1 nats of the quadrature.
 
-use crate::spring_model::chain;
+use crate::spring_model::{measured_engine as engine, Normal};
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use rfmlab::common::C64;
@@ -37,38 +37,10 @@ use rfmlab::rfm::DenseEngine;
 use std::f64::consts::TAU;
 use std::time::Instant;
 
-const MEASURED: [usize; 4] = [1, 3, 5, 7];
 /// E0, h (Pa): loss factor 0.1, first resonance at 39.5 Hz.
 const TRUTH: [f64; 2] = [5.0e6, 5.0e5];
 const COHERENCE: f64 = 0.95;
 const N_AVERAGES: f64 = 50.0;
-
-fn engine() -> DenseEngine {
-    let (m, k, s) = chain();
-    DenseEngine::new(
-        m,
-        k,
-        s,
-        MEASURED.iter().map(|&d| vec![(d, 1.0)]).collect(),
-        (0..MEASURED.len()).collect(),
-    )
-    .unwrap()
-}
-
-/// xorshift64* + Box-Muller.
-struct Normal(u64);
-impl Normal {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn next(&mut self) -> f64 {
-        let (u, v) = (self.uniform(), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (TAU * v).cos()
-    }
-}
 
 /// The posterior: lines every 0.5 Hz over 32-47 Hz, 4 channels, input at point 1.
 fn posterior(eng: &DenseEngine) -> FrfPosterior<'_> {
@@ -205,7 +177,6 @@ fn corr(a: &[f64], b: &[f64]) -> f64 {
 }
 
 #[test]
-#[ignore = "stepping-stone (default settings) gives log Z 5.5 nats below the quadrature (NUTS, TMCMC, Laplace agree), and the run takes ~8 min on the shared 2-core machine; run with --ignored"]
 fn samplers_and_evidence_match_a_brute_force_grid_posterior() {
     let t_all = Instant::now();
     let eng = engine();
@@ -411,24 +382,36 @@ fn samplers_and_evidence_match_a_brute_force_grid_posterior() {
         grid.corr
     );
 
-    // ---- Stepping-stone.
+    // ---- Stepping-stone: only with RFMLAB_STEPPING_STONE set (5 minutes; with its default
+    // settings it is 3.4-5.5 nats below the quadrature here, a known open problem of the
+    // model-comparison issue: its random-walk chains lag the shrinking tempered target).
+    let run_ss = std::env::var_os("RFMLAB_STEPPING_STONE").is_some();
     let t = Instant::now();
-    let ss = stepping_stone(
-        &post,
-        &SteppingStoneParams {
-            seed: 5,
-            ..SteppingStoneParams::default()
-        },
-        &no_progress,
-    )
-    .unwrap();
-    println!(
-        "stepping-stone: log Z {:.4} +- {:.4}, {} likelihood calls ({:.2} s)",
-        ss.log_evidence,
-        ss.log_evidence_se,
-        ss.n_loglik,
-        t.elapsed().as_secs_f64()
-    );
+    let ss = if !run_ss {
+        None
+    } else {
+        Some(
+            stepping_stone(
+                &post,
+                &SteppingStoneParams {
+                    seed: 5,
+                    ..SteppingStoneParams::default()
+                },
+                &no_progress,
+            )
+            .unwrap(),
+        )
+    };
+    if let Some(ss) = &ss {
+        println!(
+            "stepping-stone: log Z {:.4} +- {:.4}, {} likelihood calls ({:.2} s)",
+            ss.log_evidence,
+            ss.log_evidence_se,
+            ss.n_loglik,
+            t.elapsed().as_secs_f64()
+        );
+    }
+    let ss_z = ss.as_ref().map_or(f64::NAN, |s| s.log_evidence);
 
     // ---- Evidence within 0.1 nats of the quadrature.
     println!(
@@ -438,14 +421,14 @@ fn samplers_and_evidence_match_a_brute_force_grid_posterior() {
         lap.log_evidence - grid.log_z,
         tm.log_evidence,
         tm.log_evidence - grid.log_z,
-        ss.log_evidence,
-        ss.log_evidence - grid.log_z
+        ss_z,
+        ss_z - grid.log_z
     );
-    for (what, v) in [
-        ("Laplace", lap.log_evidence),
-        ("TMCMC", tm.log_evidence),
-        ("stepping-stone", ss.log_evidence),
-    ] {
+    let mut checks = vec![("Laplace", lap.log_evidence), ("TMCMC", tm.log_evidence)];
+    if run_ss {
+        checks.push(("stepping-stone", ss_z));
+    }
+    for (what, v) in checks {
         assert!(
             (v - grid.log_z).abs() < 0.1,
             "{what} log Z {v} vs quadrature {}",

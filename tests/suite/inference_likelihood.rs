@@ -6,7 +6,7 @@
 //! * the multistart search finds the same optimum from every start on a well-posed problem,
 //!   and the Laplace covariance matches the inverse Fisher information.
 
-use crate::spring_model::chain;
+use crate::spring_model::{measured_engine as engine, Normal};
 use rfmlab::common::C64;
 use rfmlab::experiment::Window;
 use rfmlab::forward::{EstimatorSpec, ForwardModel, MeasurementModel, MeasurementParams};
@@ -20,35 +20,7 @@ use rfmlab::material::{ConstitutiveModel, Model3};
 use rfmlab::rfm::{rfm_global, Denominator, DenseEngine, MeasuredColumn, RfmParams};
 use std::f64::consts::TAU;
 
-const MEASURED: [usize; 4] = [1, 3, 5, 7];
 const TRUTH: [f64; 3] = [4.7121e6, 5.5573e6, 6.0491e3];
-
-fn engine() -> DenseEngine {
-    let (m, k, s) = chain();
-    DenseEngine::new(
-        m,
-        k,
-        s,
-        MEASURED.iter().map(|&d| vec![(d, 1.0)]).collect(),
-        (0..MEASURED.len()).collect(),
-    )
-    .unwrap()
-}
-
-/// xorshift64* + Box-Muller.
-struct Normal(u64);
-impl Normal {
-    fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    fn next(&mut self) -> f64 {
-        let (u, v) = (self.uniform(), self.uniform());
-        (-2.0 * u.ln()).sqrt() * (TAU * v).cos()
-    }
-}
 
 /// Noisy data of Model 3 (relative complex noise `sigma` per value), with coherence values.
 fn data(eng: &DenseEngine, lines_hz: &[f64], sigma: f64, seed: u64) -> (MeasuredColumn, Vec<f64>) {

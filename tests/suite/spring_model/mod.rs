@@ -33,3 +33,34 @@ pub fn chain() -> (Mat<f64>, Mat<f64>, Mat<f64>) {
     }
     (m, k, s)
 }
+
+/// DOFs of the chain measured in the inference tests (points 0-3), excited at point 1.
+pub const MEASURED: [usize; 4] = [1, 3, 5, 7];
+
+/// The chain as a dense FRF engine observed at [`MEASURED`], every point an input.
+pub fn measured_engine() -> rfmlab::rfm::DenseEngine {
+    let (m, k, s) = chain();
+    rfmlab::rfm::DenseEngine::new(
+        m,
+        k,
+        s,
+        MEASURED.iter().map(|&d| vec![(d, 1.0)]).collect(),
+        (0..MEASURED.len()).collect(),
+    )
+    .unwrap()
+}
+
+/// A seeded standard normal stream without extra dependencies (xorshift64* + Box-Muller).
+pub struct Normal(pub u64);
+impl Normal {
+    pub fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    }
+    pub fn next(&mut self) -> f64 {
+        let (u, v) = (self.uniform(), self.uniform());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+}
