@@ -1,9 +1,9 @@
 //! Criterion bench of the Bayesian layer's unit of work on the paper's joint (5 mm elements,
 //! excitation at point 2, 4 measured points, 500 lines 1-500 Hz, Model 4 at Level 1's truth):
 //! one log-likelihood value + gradient (coherence noise model), without and with the H1
-//! measurement model (Hann, 1 s blocks, force from 0 Hz: the fine grid has 4 points per line
-//! over 0..508 Hz), side by side with the ROM sweep of the same 4 FRFs x 500 lines with
-//! derivatives that it is measured against (issue 11: at most twice the sweep).
+//! measurement model (Hann, 1 s blocks, force from 0 Hz, the default fine grid), side by side
+//! with the ROM sweep of the same 4 FRFs x 500 lines with derivatives that it is measured
+//! against (issue 11: at most twice the sweep).
 //! Run: `cargo bench --bench likelihood`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
