@@ -179,7 +179,7 @@ pub fn quantile(values: &[f64], p: f64) -> f64 {
 
 /// Standard normal quantile `Phi^-1(p)`: Acklam's rational approximation refined by two Halley
 /// steps on `erfc`, accurate to a few ulps for `p` in (0, 1).
-fn norm_ppf(p: f64) -> f64 {
+pub(crate) fn norm_ppf(p: f64) -> f64 {
     if !(p > 0.0 && p < 1.0) {
         return if p == 0.0 {
             f64::NEG_INFINITY

@@ -119,8 +119,9 @@ pub fn erfc(x: f64) -> f64 {
     (-x * x).exp() / std::f64::consts::PI.sqrt() / f
 }
 
-/// Inverse standard normal CDF (Acklam's rational approximation refined by one Halley step,
-/// relative accuracy about 1e-15).
+/// Inverse standard normal CDF: the diagnostics' quantile function
+/// ([`super::diagnostics::norm_ppf`], accurate to about 1e-15 in both tails), with the support's
+/// ends mapped to -inf and +inf.
 pub fn normal_quantile(u: f64) -> f64 {
     if u <= 0.0 {
         return f64::NEG_INFINITY;
@@ -128,54 +129,7 @@ pub fn normal_quantile(u: f64) -> f64 {
     if u >= 1.0 {
         return f64::INFINITY;
     }
-    let a = [
-        -3.969683028665376e1,
-        2.209460984245205e2,
-        -2.759285104469687e2,
-        1.383_577_518_672_69e2,
-        -3.066479806614716e1,
-        2.506628277459239,
-    ];
-    let b = [
-        -5.447609879822406e1,
-        1.615858368580409e2,
-        -1.556989798598866e2,
-        6.680131188771972e1,
-        -1.328068155288572e1,
-    ];
-    let c = [
-        -7.784894002430293e-3,
-        -3.223964580411365e-1,
-        -2.400758277161838,
-        -2.549732539343734,
-        4.374664141464968,
-        2.938163982698783,
-    ];
-    let d = [
-        7.784695709041462e-3,
-        3.224671290700398e-1,
-        2.445134137142996,
-        3.754408661907416,
-    ];
-    let pl = 0.02425;
-    let x = if u < pl {
-        let q = (-2.0 * u.ln()).sqrt();
-        (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5])
-            / ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1.0)
-    } else if u <= 1.0 - pl {
-        let q = u - 0.5;
-        let r = q * q;
-        (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q
-            / (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1.0)
-    } else {
-        let q = (-2.0 * (1.0 - u).ln()).sqrt();
-        -(((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5])
-            / ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1.0)
-    };
-    // Halley refinement.
-    let e = normal_cdf(x) - u;
-    let g = e * (2.0 * std::f64::consts::PI).sqrt() * (x * x / 2.0).exp();
-    x - g / (1.0 + x * g / 2.0)
+    super::diagnostics::norm_ppf(u)
 }
 
 const LN_SQRT_2PI: f64 = 0.918_938_533_204_672_8;

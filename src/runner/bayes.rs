@@ -76,6 +76,16 @@ pub struct PosteriorResult {
     pub initial_x: Vec<f64>,
 }
 
+impl PosteriorResult {
+    /// The draws the figures show: NUTS's when it ran, else the first sampler's.
+    pub fn figure_sampler(&self) -> Option<&SamplerResult> {
+        self.samplers
+            .iter()
+            .find(|s| s.sampler == "nuts")
+            .or(self.samplers.first())
+    }
+}
+
 /// The estimator declared by the study as the forward model's measurement-model settings for
 /// a level with lines `freq_hz`.
 pub fn estimator_spec(estimator: &Estimator, freq_hz: &[f64]) -> EstimatorSpec {

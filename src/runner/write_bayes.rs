@@ -391,12 +391,7 @@ pub fn figures(
     use crate::plot::posterior::{pair_figure, posterior_bands_figure, trace_figure, BandGroup};
     let mut out = Vec::new();
     for p in posts {
-        let Some(s) = p
-            .samplers
-            .iter()
-            .find(|s| s.sampler == "nuts")
-            .or(p.samplers.first())
-        else {
+        let Some(s) = p.figure_sampler() else {
             continue;
         };
         let by = s.draws.by_chain();
@@ -433,12 +428,7 @@ pub fn figures(
         let freq: Vec<f64> = (0..=100).map(|k| 1.0 + 4.99 * k as f64).collect();
         let mut groups = Vec::new();
         for p in posts.iter().filter(|p| p.model == m) {
-            let Some(s) = p
-                .samplers
-                .iter()
-                .find(|s| s.sampler == "nuts")
-                .or(p.samplers.first())
-            else {
+            let Some(s) = p.figure_sampler() else {
                 continue;
             };
             let n = s.draws.chain.len();
