@@ -306,8 +306,34 @@ impl<'a> FrfLikelihood<'a> {
     /// Log likelihood at law parameters `p` and noise coordinates `noise`, with the gradient
     /// in (p, noise) when `grad`.
     pub fn eval(&self, p: &[f64], noise: &[f64], grad: bool) -> Result<LogLik, ForwardError> {
-        let pred = self.forward.predict(p, grad)?;
-        Ok(self.eval_prediction(&pred, noise, grad))
+        if !grad {
+            let pred = self.forward.predict(p, false)?;
+            return Ok(self.eval_prediction(&pred, noise, false));
+        }
+        // The law's part of the gradient by one vector-Jacobian product: the cotangent
+        // d log L / d E[H1] pulled back through the measurement kernel and the FRF.
+        let lin = self.forward.linearise(p)?;
+        let pred = crate::forward::Prediction {
+            values: lin.values.clone(),
+            jac: Vec::new(),
+        };
+        let mut ll = self.eval_prediction(&pred, noise, true);
+        let v = self.variances(noise);
+        let nu = self.nu_of(noise);
+        let cot: Vec<C64> = lin
+            .values
+            .iter()
+            .zip(&self.data.values)
+            .zip(&v)
+            .map(|((h, x), v)| {
+                let r = h - x;
+                let (_, dq, _) = self.terms(nu, r, *v);
+                r * (2.0 * dq / v)
+            })
+            .collect();
+        let gp = lin.vjp(&cot);
+        ll.grad.splice(0..0, gp);
+        Ok(ll)
     }
 
     /// [`FrfLikelihood::eval`] on a prediction already made.

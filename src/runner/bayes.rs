@@ -112,6 +112,9 @@ pub fn measurement_model(
     else {
         return Ok(None);
     };
+    if let Some((m, _)) = &level.measurement {
+        return Ok(Some(m.clone()));
+    }
     MeasurementModel::new(
         estimator_spec(est, &level.freq_hz),
         &level.freq_hz,

@@ -51,12 +51,8 @@ impl Leakage<'_> {
         if lines_hz.is_empty() {
             return Ok(Vec::new());
         }
-        let m = MeasurementModel::new(
-            self.measurement.spec,
-            &lines_hz,
-            &crate::forward::MeasurementParams::default(),
-        )
-        .map_err(|e| fail(e.to_string()))?;
+        let m = MeasurementModel::new(self.measurement.spec, &lines_hz, &self.measurement.params)
+            .map_err(|e| fail(e.to_string()))?;
         let obs = Observation::new(
             self.engine,
             &col.omega_rad_s,

@@ -140,6 +140,11 @@ pub struct LevelData {
     pub coherence: Option<Vec<f64>>,
     /// Number of averaged blocks of the H1 estimate, when the file says.
     pub n_averages: Option<u32>,
+    /// The H1 estimator's model on these lines with its grid chosen by convergence
+    /// ([`crate::forward::Observation::converged_measurement`]), set with the engine; `None`
+    /// before, or without an estimator (then [`bayes::measurement_model`] uses the default
+    /// grid).
+    pub measurement: Option<(crate::forward::MeasurementModel, crate::forward::GridChoice)>,
 }
 
 /// The constitutive law and parameters (in the law's order, SI) that made a simulated level.
@@ -359,6 +364,7 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
         out.push(LevelData {
             coherence,
             n_averages: lvl.n_averages,
+            measurement: None,
             name: level.name.clone(),
             column: crate::rfm::MeasuredColumn {
                 omega_rad_s: freq_hz.iter().map(|f| TWO_PI * f).collect(),
@@ -453,11 +459,12 @@ type Engines = (Box<dyn FrfEngine>, String, Option<Box<dyn FrfEngine>>);
 fn build_engine(
     study: &Study,
     built: &BuiltModel,
-    levels: &[LevelData],
+    levels: &mut [LevelData],
+    laws: &[Box<dyn crate::material::ConstitutiveModel>],
     rom_cache: Option<&Path>,
 ) -> Result<Engines, RunError> {
     let mut inputs: Vec<usize> = Vec::new();
-    for l in levels {
+    for l in levels.iter() {
         for &k in l
             .column
             .outputs
@@ -519,6 +526,53 @@ fn build_engine(
                     rc
                 }
             };
+            let mut grid_note = String::new();
+            // The measurement model's grid, chosen per level by convergence at the first
+            // model's initial values (on the unprepared ROM: a one-off cost).
+            if let (Some(est), Some((law, m0))) = (
+                study
+                    .measurements
+                    .as_ref()
+                    .and_then(|m| m.estimator.as_ref()),
+                laws.iter().zip(&study.models).next(),
+            ) {
+                let probe = RomEngine {
+                    rom: rom.clone(),
+                    pencils: Vec::new(),
+                };
+                let modulus = |w: f64| law.modulus(&m0.initial, w);
+                for level in levels.iter_mut() {
+                    let c = &level.column;
+                    let obs = crate::forward::Observation::new(
+                        &probe,
+                        &c.omega_rad_s,
+                        c.input,
+                        &c.outputs,
+                        None,
+                    )
+                    .map_err(|e| RunError::Engine(e.to_string()))?;
+                    let chosen = obs
+                        .converged_measurement(
+                            bayes::estimator_spec(est, &level.freq_hz),
+                            &modulus,
+                            crate::forward::GRID_TOLERANCE,
+                        )
+                        .map_err(|e| study_err(study, "measurements.estimator", e.to_string()))?;
+                    let g = &chosen.1;
+                    grid_note += &format!(
+                        "; H1 measurement model of {}: {} points per line{} (largest change of E[H1] when the grid is doubled, relative to |H| per line: {})",
+                        level.name,
+                        g.points_per_line,
+                        if g.converged { "" } else { ", NOT CONVERGED to the tolerance" },
+                        g.history
+                            .iter()
+                            .map(|(m, c)| format!("{m}->{}: {c:.1e}", 2 * m))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    );
+                    level.measurement = Some(chosen);
+                }
+            }
             // Prepare the pencil for the first level's grid (all levels normally share it).
             let omega = &levels[0].column.omega_rad_s;
             let pencils = vec![rom
@@ -569,7 +623,7 @@ fn build_engine(
             ) + &match (&file, from_cache) {
                 (Some(f), true) => format!(" (loaded from the ROM cache {})", f.display()),
                 _ => String::new(),
-            };
+            } + &grid_note;
             Ok((Box::new(RomEngine { rom, pencils }), note, lik_engine))
         }
     }
@@ -714,7 +768,7 @@ fn run_study_here(
     let built = build(study)?;
     progress(Event::Finish);
     lap("build model", &mut t);
-    let levels = load_levels(study, &built)?;
+    let mut levels = load_levels(study, &built)?;
     check_initial_values(study, &built, &levels, &laws)?;
     lap("load and check data", &mut t);
     progress(Event::Start {
@@ -722,7 +776,7 @@ fn run_study_here(
         total: 0,
     });
     let (engine, engine_note, lik_engine) =
-        build_engine(study, &built, &levels, opts.rom_cache.as_deref())?;
+        build_engine(study, &built, &mut levels, &laws, opts.rom_cache.as_deref())?;
     progress(Event::Finish);
     lap("engine", &mut t);
     let mut results = Vec::new();

@@ -247,3 +247,70 @@ fn expected_h1_matches_scipy_welch_monte_carlo() {
         assert!(z[0] > 20.0 && rel[0] > 0.05, "channel {ch}: {} SE", z[0]);
     }
 }
+
+/// The grid is chosen by convergence, and what is chosen is converged: on the spring chain
+/// (modes from 20 Hz) a lossy adhesive (E'' = 0.3 E') needs fewer points per line than a
+/// nearly elastic one (E'' = 0.01 E', sharp resonances), and the chosen grid's E[H1] agrees
+/// with a 32-point reference to the tolerance (per line, relative to |H|) within a factor 2
+/// (the doubling check estimates the error of the coarser grid).
+#[test]
+fn measurement_grid_is_chosen_by_convergence() {
+    use rfmlab::forward::{Observation, GRID_TOLERANCE};
+    let engine = crate::spring_model::measured_engine();
+    let lines: Vec<f64> = (1..=200).map(|k| k as f64).collect();
+    let omega: Vec<f64> = lines.iter().map(|f| 2.0 * PI * f).collect();
+    let spec = EstimatorSpec {
+        window: Window::Hann,
+        block_s: 1.0,
+        fs_hz: 2048.0,
+        force_band_hz: (0.0, 200.0),
+        shaker: None,
+    };
+    let obs = Observation::new(&engine, &omega, 1, &[0, 1, 2, 3], None).unwrap();
+    let choose = |loss: f64| {
+        let modulus = move |_w: f64| C64::new(5e6, loss * 5e6);
+        let (m, choice) = obs
+            .converged_measurement(spec, &modulus, GRID_TOLERANCE)
+            .unwrap();
+        // Against 32 points per line.
+        let reference = MeasurementModel::new(
+            spec,
+            &lines,
+            &MeasurementParams {
+                points_per_line: 32,
+                ..MeasurementParams::default()
+            },
+        )
+        .unwrap();
+        let bias = |mm: MeasurementModel| {
+            Observation::new(&engine, &omega, 1, &[0, 1, 2, 3], Some(mm))
+                .unwrap()
+                .bias_for_modulus(&modulus)
+                .unwrap()
+        };
+        let le: Vec<C64> = omega.iter().map(|&w| modulus(w)).collect();
+        let (exact, _) = obs.accelerance_with(&omega, &le, false).unwrap();
+        let err = bias(m)
+            .iter()
+            .zip(bias(reference))
+            .zip(&exact)
+            .map(|((a, b), h)| (a - b).norm() / h.norm())
+            .fold(0.0, f64::max);
+        eprintln!("loss factor {loss}: {choice:?}, error vs 32 points {err:.2e}");
+        (choice, err)
+    };
+    let (lossy, e_lossy) = choose(0.3);
+    let (sharp, e_sharp) = choose(0.01);
+    assert!(
+        lossy.converged && e_lossy < 2.0 * GRID_TOLERANCE,
+        "{lossy:?} {e_lossy}"
+    );
+    assert!(
+        sharp.points_per_line > lossy.points_per_line,
+        "a nearly elastic adhesive needs a finer grid: {sharp:?} vs {lossy:?}"
+    );
+    assert!(
+        !sharp.converged || e_sharp < 2.0 * GRID_TOLERANCE,
+        "{sharp:?} {e_sharp}"
+    );
+}
