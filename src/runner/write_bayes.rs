@@ -282,6 +282,12 @@ pub fn report(
             p.map.laplace.log_evidence,
             if p.map.laplace.positive_definite { "" } else { " (Hessian not positive definite: not usable)" }
         ));
+        if let Some((n, worst)) = p.linearisation_check {
+            rep.paragraph(&format!(
+                "The samplers saw the H1 measurement model's bias linearised at the MAP (`[inference] measurement = \"linearised\"`); on {n} posterior draws the exact operator's log likelihood differs from it by at most {worst:.2e} nats{}.",
+                if worst > 0.1 { ": WARNING, more than 0.1 nats; rerun with measurement = \"exact\"" } else { "" }
+            ));
+        }
         let has_truth = level.is_some_and(|l| {
             l.truth
                 .as_ref()

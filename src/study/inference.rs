@@ -52,6 +52,8 @@ pub struct RawInference {
     pub map: Option<RawMap>,
     pub nuts: Option<RawNuts>,
     pub tmcmc: Option<RawTmcmc>,
+    /// "linearised" (default) or "exact": how samplers see `[measurements.estimator]`.
+    pub measurement: Option<String>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -153,6 +155,9 @@ pub struct Inference {
     pub nu_prior: Prior,
     pub map_starts: usize,
     pub map_max_iterations: u64,
+    /// Samplers see the measurement model's bias linearised at the MAP (`true`, the default:
+    /// the likelihood then costs a sweep of the lines) or the exact kernel operator.
+    pub linearised_measurement: bool,
 }
 
 fn prior(ctx: &Ctx, key: &str, r: &RawPrior) -> Result<Prior, StudyError> {
@@ -489,6 +494,16 @@ pub(super) fn inference(
         priors,
         noise_scale_prior: Prior::LogUniform { lo: 1e-4, hi: 1.0 },
         nu_prior: Prior::LogUniform { lo: 1.0, hi: 100.0 },
+        linearised_measurement: match r.measurement.as_deref() {
+            None | Some("linearised") => true,
+            Some("exact") => false,
+            Some(o) => {
+                return Err(ctx.err(
+                    format!("{key}.measurement"),
+                    format!("unknown value \"{o}\": use \"linearised\" (the measurement model's bias linearised at the MAP, the default) or \"exact\""),
+                ))
+            }
+        },
         map_starts: m.and_then(|m| m.starts).unwrap_or(16),
         map_max_iterations: count(
             &format!("{key}.map.max_iterations"),
