@@ -38,6 +38,7 @@ mod modes;
 mod output;
 mod paper_joint;
 mod plot;
+mod replicates;
 mod rfm;
 mod rfm_gauss_newton;
 mod rom;
