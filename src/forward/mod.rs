@@ -168,7 +168,11 @@ impl<'a> ForwardModel<'a> {
         self.check(p)?;
         if let Some(lb) = &self.linear_bias {
             let mut out = self.exact_on(&self.obs.omega_rad_s, p, jac)?.0;
-            lb.add_to(p, &mut out.values, if jac { Some(&mut out.jac) } else { None });
+            lb.add_to(
+                p,
+                &mut out.values,
+                if jac { Some(&mut out.jac) } else { None },
+            );
             return Ok(out);
         }
         let Some(m) = &self.obs.measurement else {
@@ -472,9 +476,9 @@ impl Linearised {
         };
         let mut g: Vec<f64> = (0..self.n_params)
             .map(|q| {
-                self.extra
-                    .get(q)
-                    .map_or(0.0, |e| e.iter().zip(c).map(|(a, z)| (z.conj() * a).re).sum())
+                self.extra.get(q).map_or(0.0, |e| {
+                    e.iter().zip(c).map(|(a, z)| (z.conj() * a).re).sum()
+                })
             })
             .collect();
         for (j, (bj, dj)) in b.chunks(n).zip(self.dh.chunks(n)).enumerate() {
@@ -578,7 +582,12 @@ impl ForwardModel<'_> {
         }
         let full = self.predict(p0, true)?;
         let exact = self.exact(p0, true)?;
-        let b0 = full.values.iter().zip(&exact.values).map(|(a, b)| a - b).collect();
+        let b0 = full
+            .values
+            .iter()
+            .zip(&exact.values)
+            .map(|(a, b)| a - b)
+            .collect();
         let jac_log = full
             .jac
             .iter()

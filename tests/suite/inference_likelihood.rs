@@ -187,8 +187,7 @@ fn log_likelihood_gradient_matches_finite_differences_for_every_noise_model() {
                     Prior::LogUniform { lo: 1e-4, hi: 1.0 }
                 });
             }
-            let mut post =
-                posterior(&eng, &col, &coh, noise, with_mm.then(|| mm.clone()), priors);
+            let mut post = posterior(&eng, &col, &coh, noise, with_mm.then(|| mm.clone()), priors);
             assert_eq!(post.dim(), 3 + n_noise, "{what}");
             // A point off the optimum (so the gradient is not zero).
             let mut phys = vec![5.3e6, 4.9e6, 7.1e3];
@@ -450,7 +449,8 @@ fn linearised_measurement_bias_is_exact_at_p0_and_second_order_around_it() {
         &MeasurementParams::default(),
     )
     .unwrap();
-    let exact = ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(mm.clone())).unwrap();
+    let exact =
+        ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(mm.clone())).unwrap();
     let mut lin = ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(mm)).unwrap();
     lin.linearise_measurement(&TRUTH).unwrap();
     let err = |rel: f64| {
