@@ -2,7 +2,8 @@
 //! excitation at point 2, 4 measured points, 500 lines 1-500 Hz, Model 4 at Level 1's truth):
 //! one log-likelihood value + gradient (coherence noise model), without and with the H1
 //! measurement model (Hann, 1 s blocks, force from 0 Hz; 8 points per line and the grid the
-//! runner chooses by convergence), side by side
+//! runner chooses by convergence; and its bias linearised at the point, what the samplers
+//! evaluate), side by side
 //! with the ROM sweep of the same 4 FRFs x 500 lines with derivatives that it is measured
 //! against (issue 11: at most twice the sweep).
 //! Run: `cargo bench --bench likelihood`.
@@ -111,6 +112,9 @@ fn bench(c: &mut Criterion) {
     let plain = lik(None);
     let measured = lik(Some(mm.clone()));
     let measured_auto = lik(Some(auto.clone()));
+    // What the samplers evaluate by default: the measurement bias linearised at the MAP.
+    let mut measured_lin = lik(Some(auto.clone()));
+    measured_lin.forward.linearise_measurement(&p).unwrap();
     eprintln!(
         "fine grids: {} points (8 per line), {} points (converged, {} per line) for 500 lines",
         mm.fine_hz.len(),
@@ -136,6 +140,10 @@ fn bench(c: &mut Criterion) {
     c.bench_function(
         "loglik_and_gradient_4x500_with_measurement_model_converged_grid_5mm",
         |b| b.iter(|| measured_auto.eval(black_box(&p), &[], true).unwrap()),
+    );
+    c.bench_function(
+        "loglik_and_gradient_4x500_with_measurement_model_linearised_5mm",
+        |b| b.iter(|| measured_lin.eval(black_box(&p), &[], true).unwrap()),
     );
     // The sweep the likelihood with the measurement model must make: the converged fine grid.
     let fine_modulus: Vec<C64> = auto
