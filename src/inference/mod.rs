@@ -23,7 +23,9 @@ pub mod whiten;
 
 pub use nuts::{sample_nuts, ChainDraws, NutsParams, NutsRun};
 pub use sampling::{no_progress, Progress, SamplerError};
-pub use stepping_stone::{stepping_stone, SteppingStoneParams, SteppingStoneRun};
+pub use stepping_stone::{
+    stepping_stone, SteppingStoneParams, SteppingStoneReplica, SteppingStoneRun, SteppingStoneRung,
+};
 pub use tmcmc::{sample_tmcmc, TmcmcParams, TmcmcRun, TmcmcStage};
 
 /// Why a density evaluation failed.

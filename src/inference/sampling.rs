@@ -1,6 +1,6 @@
-//! What the samplers share: their error type, the progress events they report, and the
+//! What the samplers share: their error type, the progress events they report, the
 //! random-walk Metropolis kernel on a tempered posterior that TMCMC and stepping-stone move
-//! their particles with.
+//! their particles with, and systematic resampling.
 //!
 //! The tempered target at exponent `beta` is `pi_beta(x) ∝ p(x) L(x)^beta` (prior times the
 //! likelihood raised to `beta`); `beta = 0` is the prior, `beta = 1` the posterior. A proposal
@@ -98,6 +98,14 @@ pub enum SamplerError {
         /// The exponent reached.
         beta: f64,
     },
+    /// Stepping-stone ran out of rungs before reaching the posterior.
+    #[error("stepping-stone did not reach beta = 1 within {max_rungs} rungs (beta = {beta}): raise max_rungs or lower target_ess")]
+    TooManyRungs {
+        /// The rung limit.
+        max_rungs: usize,
+        /// The exponent reached.
+        beta: f64,
+    },
     /// The run stopped on request (`stop_after_stages`) after saving its checkpoint.
     #[error("stopped after stage {stage} as requested; rerun with the same checkpoint to resume")]
     Stopped {
@@ -151,12 +159,15 @@ pub enum Progress {
         /// Its exponent.
         beta: f64,
     },
-    /// A stepping-stone rung is done.
+    /// A stepping-stone rung is done (its ladder is adaptive: the number of rungs is known only
+    /// when `beta` reaches 1).
     SteppingStoneRung {
+        /// The replica (independent population, 0-based).
+        replica: usize,
+        /// The number of replicas.
+        replicas: usize,
         /// The rung (1-based).
         rung: usize,
-        /// The number of rungs.
-        rungs: usize,
         /// Its exponent.
         beta: f64,
     },
@@ -311,8 +322,41 @@ fn rw_step(
     }
 }
 
-/// `steps` rounds of random-walk Metropolis moves of every particle at exponent `beta`, each
-/// particle with its own RNG stream, adapting `scale` after each round toward `target_accept`.
+/// One round of random-walk Metropolis moves (every particle one step, each with its own RNG
+/// stream, in parallel) at exponent `beta` with proposal scale `scale`, then the adaptation of
+/// `scale` toward `target_accept` for round `round` (0-based) of the stage. Returns the numbers
+/// of accepted proposals and of likelihood evaluations, reduced in particle order.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn move_round(
+    post: &dyn Posterior,
+    particles: &mut [Particle],
+    rngs: &mut [StdRng],
+    beta: f64,
+    chol: &[f64],
+    scale: &mut f64,
+    target_accept: f64,
+    round: usize,
+) -> Result<(u64, u64), SamplerError> {
+    let n = particles.len();
+    let s = *scale;
+    let out: Vec<Result<(bool, bool), SamplerError>> = particles
+        .par_iter_mut()
+        .zip(rngs.par_iter_mut())
+        .map(|(p, rng)| rw_step(post, p, beta, chol, s, rng))
+        .collect();
+    let (mut accepted, mut n_loglik) = (0u64, 0u64);
+    for r in out {
+        let (a, e) = r?;
+        accepted += a as u64;
+        n_loglik += e as u64;
+    }
+    let rate = accepted as f64 / n as f64;
+    *scale = (s * ((rate - target_accept) / ((round + 1) as f64).sqrt()).exp()).clamp(1e-4, 1e2);
+    Ok((accepted, n_loglik))
+}
+
+/// `steps` rounds of random-walk Metropolis moves of every particle at exponent `beta` (see
+/// [`move_round`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn move_population(
     post: &dyn Posterior,
@@ -328,27 +372,41 @@ pub(crate) fn move_population(
     let mut accepted_total = 0u64;
     let mut n_loglik = 0u64;
     for round in 0..steps {
-        let s = *scale;
-        let out: Vec<Result<(bool, bool), SamplerError>> = particles
-            .par_iter_mut()
-            .zip(rngs.par_iter_mut())
-            .map(|(p, rng)| rw_step(post, p, beta, chol, s, rng))
-            .collect();
-        let mut accepted = 0u64;
-        for r in out {
-            let (a, e) = r?;
-            accepted += a as u64;
-            n_loglik += e as u64;
-        }
+        let (accepted, evals) = move_round(
+            post,
+            particles,
+            rngs,
+            beta,
+            chol,
+            scale,
+            target_accept,
+            round,
+        )?;
         accepted_total += accepted;
-        let rate = accepted as f64 / n as f64;
-        *scale =
-            (s * ((rate - target_accept) / ((round + 1) as f64).sqrt()).exp()).clamp(1e-4, 1e2);
+        n_loglik += evals;
     }
     Ok(MoveStats {
         acceptance: accepted_total as f64 / (n * steps.max(1)) as f64,
         n_loglik,
     })
+}
+
+/// Systematic resampling: `w.len()` indices in proportion to the normalised weights `w`, from
+/// one uniform `u0` in `[0, 1)`.
+pub(crate) fn systematic_resample(w: &[f64], u0: f64) -> Vec<usize> {
+    let n = w.len();
+    let mut idx = Vec::with_capacity(n);
+    let mut cum = w[0];
+    let mut j = 0;
+    for i in 0..n {
+        let u = (u0 + i as f64) / n as f64;
+        while u > cum && j + 1 < n {
+            j += 1;
+            cum += w[j];
+        }
+        idx.push(j);
+    }
+    idx
 }
 
 /// Checks a count setting.
@@ -406,6 +464,14 @@ mod tests {
         let singular = [1.0, 1.0, 1.0, 1.0];
         let l = cholesky_jittered(&singular, 2);
         assert!(l.iter().all(|v| v.is_finite()) && l[3] > 0.0);
+    }
+
+    #[test]
+    fn systematic_resampling_keeps_expected_counts() {
+        let w = [0.5, 0.25, 0.0, 0.25];
+        let idx = systematic_resample(&w, 0.5);
+        let count = |k| idx.iter().filter(|&&i| i == k).count();
+        assert_eq!((count(0), count(1), count(2), count(3)), (2, 1, 0, 1));
     }
 
     #[test]

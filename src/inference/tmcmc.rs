@@ -39,7 +39,7 @@ use rayon::prelude::*;
 use super::checkpoint::{self, Decoder, Encoder};
 use super::sampling::{
     cholesky_jittered, eval_log_lik, in_range, log_mean_exp, move_population, nonzero,
-    weighted_mean_cov, Particle, Progress, SamplerError,
+    systematic_resample, weighted_mean_cov, Particle, Progress, SamplerError,
 };
 use super::{unit_rng, Posterior};
 
@@ -305,23 +305,6 @@ fn next_beta(ll: &[f64], beta: f64, target: f64) -> f64 {
     (beta + 0.5 * (lo + hi)).min(1.0)
 }
 
-/// Systematic resampling: `n` indices in proportion to `w` (normalised).
-fn systematic_resample(w: &[f64], u0: f64) -> Vec<usize> {
-    let n = w.len();
-    let mut idx = Vec::with_capacity(n);
-    let mut cum = w[0];
-    let mut j = 0;
-    for i in 0..n {
-        let u = (u0 + i as f64) / n as f64;
-        while u > cum && j + 1 < n {
-            j += 1;
-            cum += w[j];
-        }
-        idx.push(j);
-    }
-    idx
-}
-
 /// The seed of stage `stage`'s streams.
 fn stage_seed(seed: u64, stage: usize) -> u64 {
     unit_rng(seed, stage as u64).random()
@@ -547,14 +530,6 @@ mod tests {
         ll2[0] = f64::NEG_INFINITY;
         let b2 = next_beta(&ll2, 0.0, 1.0);
         assert!(b2 > 0.0 && (weights_cov(&ll2, b2) - 1.0).abs() < 1e-6);
-    }
-
-    #[test]
-    fn systematic_resampling_keeps_expected_counts() {
-        let w = [0.5, 0.25, 0.0, 0.25];
-        let idx = systematic_resample(&w, 0.5);
-        let count = |k| idx.iter().filter(|&&i| i == k).count();
-        assert_eq!((count(0), count(1), count(2), count(3)), (2, 1, 0, 1));
     }
 
     #[test]
