@@ -285,6 +285,19 @@ impl MeasurementModel {
             .collect()
     }
 
+    /// The kernel rows for the force the structure receives: [`MeasurementModel::rows`]
+    /// without a shaker; with one, re-weighted by the transmitted-force PSD for the drive-point
+    /// accelerance `drive[j]` on the fine grid (a shaker colours the force spectrum through the
+    /// drive point).
+    pub fn rows_for_drive(&self, drive: &[C64]) -> std::borrow::Cow<'_, [Vec<KernelTerm>]> {
+        match self.spec.shaker {
+            None => std::borrow::Cow::Borrowed(&self.rows),
+            Some(_) => {
+                std::borrow::Cow::Owned(self.weights_for_force(Some(&self.force_psd(drive))))
+            }
+        }
+    }
+
     /// Transmitted-force PSD (relative) on the fine grid for the drive-point accelerance
     /// `drive[j]`: `|T(f_j)|^2` with the shaker's transfer ([`crate::experiment::Shaker`]);
     /// flat without a shaker.

@@ -18,6 +18,7 @@ use crate::common::C64;
 use crate::frf::{FrfEngine, FrfError};
 use crate::material::ConstitutiveModel;
 pub use measurement::{EstimatorSpec, KernelTerm, MeasurementModel, MeasurementParams};
+use std::borrow::Cow;
 
 /// Errors of a prediction.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -180,14 +181,9 @@ impl<'a> ForwardModel<'a> {
         };
         let (fine, drive) = self.exact_on(&m.fine_omega(), p, jac)?;
         let n = self.obs.outputs.len();
-        // A shaker colours the force spectrum through the drive point; its weights are
-        // evaluated at p and held fixed in the Jacobian (their derivative is second order in
-        // the leakage bias).
-        let shaker_rows = m
-            .spec
-            .shaker
-            .map(|_| m.weights_for_force(Some(&m.force_psd(&drive))));
-        let rows = shaker_rows.as_ref().unwrap_or(&m.rows);
+        // A shaker's weights are evaluated at p and held fixed in the Jacobian (their
+        // derivative is second order in the leakage bias).
+        let rows = &*m.rows_for_drive(&drive);
         if fine.jac.is_empty() {
             return Ok(Prediction {
                 values: MeasurementModel::apply(rows, &fine.values, n),
@@ -317,12 +313,8 @@ impl<'a> Observation<'a> {
         let (fine, _, drive) = self.accelerance_and_drive(&fo, &fe, false)?;
         let le: Vec<C64> = self.omega_rad_s.iter().map(|&w| modulus(w)).collect();
         let (exact, _) = self.accelerance_with(&self.omega_rad_s, &le, false)?;
-        let shaker_rows = m
-            .spec
-            .shaker
-            .map(|_| m.weights_for_force(Some(&m.force_psd(&drive))));
-        let rows = shaker_rows.as_ref().unwrap_or(&m.rows);
-        let expected = MeasurementModel::apply(rows, &fine, self.outputs.len());
+        let expected =
+            MeasurementModel::apply(&m.rows_for_drive(&drive), &fine, self.outputs.len());
         Ok(expected.iter().zip(&exact).map(|(a, b)| a - b).collect())
     }
 }
@@ -432,7 +424,7 @@ impl Observation<'_> {
 /// A prediction with what its Jacobian needs, for vector-Jacobian products: the gradient of a
 /// scalar of the prediction (a log likelihood) costs one adjoint pass of the kernel instead of
 /// one forward pass per parameter ([`ForwardModel::linearise`]).
-pub struct Linearised {
+pub struct Linearised<'m> {
     /// `E[H1]` (or the exact accelerance) at the lines, `[line * n_out + k]`.
     pub values: Vec<C64>,
     n_out: usize,
@@ -442,12 +434,12 @@ pub struct Linearised {
     /// `dE*/dp_q` on the evaluation grid, `[j * n_params + q]`.
     dedp: Vec<C64>,
     /// The kernel rows (fixed at p), when there is a measurement model.
-    rows: Option<Vec<Vec<KernelTerm>>>,
+    rows: Option<Cow<'m, [Vec<KernelTerm>]>>,
     /// Jacobian columns added at the lines (the linearised bias), `[q][line * n_out + k]`.
     extra: Vec<Vec<C64>>,
 }
 
-impl Linearised {
+impl Linearised<'_> {
     /// `g_q = Re sum_o conj(c_o) dE[H1]_o/dp_q` for the cotangent `c` (`[line * n_out + k]`).
     pub fn vjp(&self, c: &[C64]) -> Vec<f64> {
         let n = self.n_out;
@@ -495,7 +487,7 @@ impl ForwardModel<'_> {
     /// The prediction at `p` (as [`ForwardModel::predict`] without the Jacobian) and what its
     /// vector-Jacobian products need. A shaker's kernel weights are held fixed at `p`, as in
     /// `predict`.
-    pub fn linearise(&self, p: &[f64]) -> Result<Linearised, ForwardError> {
+    pub fn linearise(&self, p: &[f64]) -> Result<Linearised<'_>, ForwardError> {
         self.check(p)?;
         let np = self.law.n_params();
         let measurement = self
@@ -517,10 +509,7 @@ impl ForwardModel<'_> {
         let (mut values, rows) = match measurement {
             None => (h, None),
             Some(m) => {
-                let rows = match m.spec.shaker {
-                    Some(_) => m.weights_for_force(Some(&m.force_psd(&drive))),
-                    None => m.rows.clone(),
-                };
+                let rows = m.rows_for_drive(&drive);
                 (MeasurementModel::apply(&rows, &h, n), Some(rows))
             }
         };

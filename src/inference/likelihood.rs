@@ -308,67 +308,44 @@ impl<'a> FrfLikelihood<'a> {
     pub fn eval(&self, p: &[f64], noise: &[f64], grad: bool) -> Result<LogLik, ForwardError> {
         if !grad {
             let pred = self.forward.predict(p, false)?;
-            return Ok(self.eval_prediction(&pred, noise, false));
+            return Ok(self.eval_values(&pred.values, noise, false).0);
         }
         // The law's part of the gradient by one vector-Jacobian product: the cotangent
         // d log L / d E[H1] pulled back through the measurement kernel and the FRF.
         let lin = self.forward.linearise(p)?;
-        let pred = crate::forward::Prediction {
-            values: lin.values.clone(),
-            jac: Vec::new(),
-        };
-        let mut ll = self.eval_prediction(&pred, noise, true);
-        let v = self.variances(noise);
-        let nu = self.nu_of(noise);
-        let cot: Vec<C64> = lin
-            .values
-            .iter()
-            .zip(&self.data.values)
-            .zip(&v)
-            .map(|((h, x), v)| {
-                let r = h - x;
-                let (_, dq, _) = self.terms(nu, r, *v);
-                r * (2.0 * dq / v)
-            })
-            .collect();
-        let gp = lin.vjp(&cot);
-        ll.grad.splice(0..0, gp);
+        let (mut ll, cot) = self.eval_values(&lin.values, noise, true);
+        ll.grad.splice(0..0, lin.vjp(&cot));
         Ok(ll)
     }
 
-    /// [`FrfLikelihood::eval`] on a prediction already made.
-    pub fn eval_prediction(
-        &self,
-        pred: &crate::forward::Prediction,
-        noise: &[f64],
-        grad: bool,
-    ) -> LogLik {
-        let np = pred.jac.len();
+    /// Log likelihood of the predicted values `values` (`[line * n_out + k]`) and, when
+    /// `grad`, its gradient in the noise coordinates with the cotangent `c_o` of the values,
+    /// such that `d log L / dp = Re sum_o conj(c_o) d values_o / dp`.
+    fn eval_values(&self, values: &[C64], noise: &[f64], grad: bool) -> (LogLik, Vec<C64>) {
         let v = self.variances(noise);
         let nu = self.nu_of(noise);
         let mut value = 0.0;
-        let mut g = vec![0.0; if grad { np + self.n_noise() } else { 0 }];
-        for (o, (h, x)) in pred.values.iter().zip(&self.data.values).enumerate() {
+        let mut g = vec![0.0; if grad { self.n_noise() } else { 0 }];
+        let mut cot = Vec::with_capacity(if grad { values.len() } else { 0 });
+        for (o, (h, x)) in values.iter().zip(&self.data.values).enumerate() {
             let r = h - x;
             let (lp, dq, dnu) = self.terms(nu, r, v[o]);
             value += lp;
             if grad {
-                for (k, jk) in pred.jac.iter().enumerate() {
-                    g[k] += dq * 2.0 * (r.conj() * jk[o]).re / v[o];
-                }
+                cot.push(r * (2.0 * dq / v[o]));
                 if self.n_tau > 0 {
                     // d/dv [-ln v + f(q)] = -1/v - f'(q) q / v; dv/dtau = 2 tau |X|^2
                     let q = r.norm_sqr() / v[o];
                     let dv = -1.0 / v[o] - dq * q / v[o];
                     let t = self.group[o];
-                    g[np + t] += dv * 2.0 * noise[t] * self.abs2[o];
+                    g[t] += dv * 2.0 * noise[t] * self.abs2[o];
                 }
                 if self.infers_nu() {
-                    g[np + self.n_tau] += dnu;
+                    g[self.n_tau] += dnu;
                 }
             }
         }
-        LogLik { value, grad: g }
+        (LogLik { value, grad: g }, cot)
     }
 
     /// Pointwise log likelihood per line (summed over channels), for LOO and WAIC.

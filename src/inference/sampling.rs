@@ -418,6 +418,20 @@ pub(crate) fn nonzero(what: &'static str, n: usize) -> Result<(), SamplerError> 
     }
 }
 
+/// Checks a population size: non-zero, and at least 2 (a covariance needs two particles);
+/// `hint` says how many the estimate wants.
+pub(crate) fn particle_count(n: usize, hint: &'static str) -> Result<(), SamplerError> {
+    nonzero("particles", n)?;
+    if n < 2 {
+        return Err(SamplerError::Setting {
+            name: "particles",
+            value: n.to_string(),
+            hint,
+        });
+    }
+    Ok(())
+}
+
 /// Checks a real setting against an open interval `(lo, hi)`.
 pub(crate) fn in_range(
     name: &'static str,

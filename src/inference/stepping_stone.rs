@@ -84,7 +84,7 @@ use rand::RngExt;
 use rayon::prelude::*;
 
 use super::sampling::{
-    cholesky_jittered, eval_log_lik, in_range, log_mean_exp, move_round, nonzero,
+    cholesky_jittered, eval_log_lik, in_range, log_mean_exp, move_round, nonzero, particle_count,
     systematic_resample, weighted_mean_cov, Particle, Progress, SamplerError,
 };
 use super::{unit_rng, Posterior};
@@ -190,14 +190,7 @@ pub struct SteppingStoneRun {
 const SALT: u64 = 0x5354_4550_5354_4f4e; // "STEPSTON"
 
 fn validate(p: &SteppingStoneParams) -> Result<(), SamplerError> {
-    nonzero("particles", p.particles)?;
-    if p.particles < 2 {
-        return Err(SamplerError::Setting {
-            name: "particles",
-            value: p.particles.to_string(),
-            hint: "at least 2 (hundreds for evidence)",
-        });
-    }
+    particle_count(p.particles, "at least 2 (hundreds for evidence)")?;
     nonzero("replicas", p.replicas)?;
     nonzero("max_steps", p.max_steps)?;
     nonzero("max_rungs", p.max_rungs)?;

@@ -39,7 +39,7 @@ use rayon::prelude::*;
 use super::checkpoint::{self, Decoder, Encoder};
 use super::sampling::{
     cholesky_jittered, eval_log_lik, in_range, log_mean_exp, move_population, nonzero,
-    systematic_resample, weighted_mean_cov, Particle, Progress, SamplerError,
+    particle_count, systematic_resample, weighted_mean_cov, Particle, Progress, SamplerError,
 };
 use super::{unit_rng, Posterior};
 
@@ -219,14 +219,7 @@ impl State {
 }
 
 fn validate(p: &TmcmcParams) -> Result<(), SamplerError> {
-    nonzero("particles", p.particles)?;
-    if p.particles < 2 {
-        return Err(SamplerError::Setting {
-            name: "particles",
-            value: p.particles.to_string(),
-            hint: "at least 2 (1000+ for evidence)",
-        });
-    }
+    particle_count(p.particles, "at least 2 (1000+ for evidence)")?;
     nonzero("steps_per_stage", p.steps_per_stage)?;
     nonzero("max_stages", p.max_stages)?;
     in_range(
