@@ -282,6 +282,9 @@ pub fn report(
             p.map.laplace.log_evidence,
             if p.map.laplace.positive_definite { "" } else { " (Hessian not positive definite: not usable)" }
         ));
+        for note in &p.notes {
+            rep.paragraph(note);
+        }
         if let Some((n, sd, lme)) = p.linearisation_check {
             rep.paragraph(&format!(
                 "The samplers saw the H1 measurement model's bias linearised at the MAP (`[inference] measurement = \"linearised\"`). On {n} posterior draws the exact operator's log likelihood minus the linearised one has sd {sd:.2e} nats and log mean exp {lme:+.3e} nats; the latter is added to the evidence estimates (importance sampling from the linearised posterior). {}",

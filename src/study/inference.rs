@@ -14,6 +14,11 @@
 //! scale = "coherence"          # student_t only: "coherence" or "inferred"
 //! nu = 4.0                     # student_t only: a number, or "infer"
 //! bands_hz = [1, 100, 500]     # inferred scales per channel and band (default: one per channel)
+//! channel_correlation = "leakage"  # "none" (default), "leakage" (the Welch H1 error as a common
+//!                              # frequency jitter along dE[H1]/df, its off-direction share from the
+//!                              # MAP residuals) or "estimated" (a sample correlation of the MAP
+//!                              # residuals, shrunk to the identity); Gaussian errors only
+//! correlation_window_lines = 21  # lines in the window of each line's estimate
 //!
 //! [inference.priors.model4]    # default per parameter: log-uniform over a decade either side of the initial value
 //! E0 = { family = "log_normal", median = 7e6, sigma_ln = 0.5 }
@@ -66,6 +71,8 @@ pub struct RawNoise {
     pub scale: Option<String>,
     pub nu: Option<toml::Value>,
     pub bands_hz: Option<Vec<f64>>,
+    pub channel_correlation: Option<String>,
+    pub correlation_window_lines: Option<usize>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -138,6 +145,15 @@ pub struct NutsSettings {
     pub target_accept: f64,
 }
 
+/// How the channels' error correlation per line is modelled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CorrelationKind {
+    /// Rank one along dE[H1]/df plus an estimated isotropic share (the Welch leakage jitter).
+    Leakage,
+    /// The shrunk sample correlation of the MAP residuals.
+    Estimated,
+}
+
 /// The validated `[inference]` section.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Inference {
@@ -158,6 +174,9 @@ pub struct Inference {
     /// Samplers see the measurement model's bias linearised at the MAP (`true`, the default:
     /// the likelihood then costs a sweep of the lines) or the exact kernel operator.
     pub linearised_measurement: bool,
+    /// Correlated channels: how, and the window (lines) of each line's estimate from the MAP
+    /// residuals; `None`: independent channels.
+    pub channel_correlation: Option<(CorrelationKind, usize)>,
 }
 
 fn prior(ctx: &Ctx, key: &str, r: &RawPrior) -> Result<Prior, StudyError> {
@@ -410,6 +429,46 @@ pub(super) fn inference(
             "only for model = \"student_t\" (the other models name their scale)",
         ));
     }
+    let channel_correlation = match rn.and_then(|n| n.channel_correlation.as_deref()) {
+        None | Some("none") => {
+            if rn.and_then(|n| n.correlation_window_lines).is_some() {
+                return Err(ctx.err(
+                    format!("{nk}.correlation_window_lines"),
+                    "only with channel_correlation = \"leakage\" or \"estimated\"",
+                ));
+            }
+            None
+        }
+        Some(kind @ ("estimated" | "leakage")) => {
+            if !matches!(errors, ErrorLaw::Gaussian) {
+                return Err(ctx.err(
+                    format!("{nk}.channel_correlation"),
+                    "correlated channels need Gaussian errors: use model = \"coherence\" or \"inferred\", or channel_correlation = \"none\"",
+                ));
+            }
+            let w = rn.and_then(|n| n.correlation_window_lines).unwrap_or(21);
+            if w < 8 {
+                return Err(ctx.err(
+                    format!("{nk}.correlation_window_lines"),
+                    format!("{w}: give at least 8 lines (the default 21 estimates a 4-channel correlation from 21 residual vectors)"),
+                ));
+            }
+            Some((
+                if kind == "leakage" {
+                    CorrelationKind::Leakage
+                } else {
+                    CorrelationKind::Estimated
+                },
+                w,
+            ))
+        }
+        Some(o) => {
+            return Err(ctx.err(
+                format!("{nk}.channel_correlation"),
+                format!("unknown value \"{o}\": use \"none\", \"leakage\" or \"estimated\""),
+            ))
+        }
+    };
     // Priors.
     for (m, ps) in &r.priors {
         let Some(spec) = models.iter().find(|s| s.name.eq_ignore_ascii_case(m)) else {
@@ -504,6 +563,7 @@ pub(super) fn inference(
                 ))
             }
         },
+        channel_correlation,
         map_starts: m.and_then(|m| m.starts).unwrap_or(16),
         map_max_iterations: count(
             &format!("{key}.map.max_iterations"),

@@ -113,7 +113,12 @@ fn str_column<'t>(t: &'t Table, name: &str) -> &'t [String] {
 
 /// The study: the 10 mm joint, one level per replicate file, Model 4 from Table 4's initial
 /// values, the estimator as the data were made, the MAP of the coherence likelihood.
-fn study_text(out: &Path, files: &[(String, std::path::PathBuf)], n_averages: f64) -> String {
+fn study_text(
+    out: &Path,
+    files: &[(String, std::path::PathBuf)],
+    n_averages: f64,
+    correlation: &str,
+) -> String {
     let mut s = format!(
         "[study]\nname = \"replicates\"\noutput_dir = \"{}\"\nseed = 11\n{}\n\
 [measurements]\nband_hz = [1.0, 500.0]\n\
@@ -138,7 +143,7 @@ fn study_text(out: &Path, files: &[(String, std::path::PathBuf)], n_averages: f6
         "[solver]\nengine = \"rom\"\n\
 [analyses]\nper_line = false\nsensitivity = false\nfigures = false\n\
 [inference]\nmodels = [\"model4\"]\nsamplers = []\n\
-[inference.noise]\nmodel = \"coherence\"\nn_averages = {n_averages}\n\
+[inference.noise]\nmodel = \"coherence\"\nn_averages = {n_averages}\nchannel_correlation = \"{correlation}\"\n\
 [inference.map]\nstarts = 0\n"
     )
     .unwrap();
@@ -147,6 +152,22 @@ fn study_text(out: &Path, files: &[(String, std::path::PathBuf)], n_averages: f6
 
 #[test]
 fn map_of_the_coherence_likelihood_scatters_a_third_of_the_rfm_over_replicates() {
+    replicates("none");
+}
+
+/// The same replicates with the channels' errors modelled as the leakage jitter
+/// (`channel_correlation = "leakage"`): the MAP still scatters a third of the RFM, and with
+/// `RFMLAB_LONG` (20 replicates) the MAP's scatter over its Laplace sd is at most 1.5. Measured
+/// over 20 replicates: 1.16-1.41 (E0 1.31, h 1.16, E1 1.24, eta1 1.41) against 1.53-1.83 with
+/// independent channels (the 99 % band of an sd from 20 draws is 0.60-1.42 times the true
+/// one). What is left is the correlation between neighbouring lines of a Hann-windowed
+/// estimate, which the likelihood does not model.
+#[test]
+fn with_the_leakage_correlation_the_map_scatter_matches_the_laplace_sd() {
+    replicates("leakage");
+}
+
+fn replicates(correlation: &str) {
     let t0 = Instant::now();
     let n_rep = if std::env::var_os("RFMLAB_LONG").is_some() {
         LONG
@@ -278,7 +299,7 @@ fn map_of_the_coherence_likelihood_scatters_a_third_of_the_rfm_over_replicates()
 
     // One study, one level per replicate.
     let out = dir.path().join("out");
-    let text = study_text(&out, &files, n_eff);
+    let text = study_text(&out, &files, n_eff, correlation);
     let file = dir.path().join("replicates.toml");
     std::fs::write(&file, text).unwrap();
     let study = rfmlab::study::load(&file).unwrap();
@@ -333,7 +354,7 @@ fn map_of_the_coherence_likelihood_scatters_a_third_of_the_rfm_over_replicates()
 
     eprintln!(
         "{n_rep} replicates, relative error (%): sd and range over replicates\n\
-param | RFM mean | RFM sd | RFM range        | MAP mean | MAP sd | MAP range        | Laplace sd | sd ratio | range ratio"
+param | RFM mean | RFM sd | RFM range        | MAP mean | MAP sd | MAP range        | Laplace sd | sd ratio | range ratio | MAP sd / Laplace sd (channel_correlation = {correlation})"
     );
     let mut failures = Vec::new();
     for k in 0..np {
@@ -341,7 +362,7 @@ param | RFM mean | RFM sd | RFM range        | MAP mean | MAP sd | MAP range    
         let (mm, ms, mlo, mhi) = stats(&map[k]);
         let lsd = lap_sd[k].iter().sum::<f64>() / n_rep as f64;
         eprintln!(
-            "{:5} | {:+8.3} | {:6.3} | {:+7.2}..{:+7.2} | {:+8.4} | {:6.4} | {:+7.3}..{:+7.3} | {:10.4} | {:8.3} | {:11.3}",
+            "{:5} | {:+8.3} | {:6.3} | {:+7.2}..{:+7.2} | {:+8.4} | {:6.4} | {:+7.3}..{:+7.3} | {:10.4} | {:8.3} | {:11.3} | {:.3}",
             names[k],
             100.0 * rm,
             100.0 * rs,
@@ -353,8 +374,16 @@ param | RFM mean | RFM sd | RFM range        | MAP mean | MAP sd | MAP range    
             100.0 * mhi,
             100.0 * lsd,
             ms / rs,
-            (mhi - mlo) / (rhi - rlo)
+            (mhi - mlo) / (rhi - rlo),
+            ms / lsd
         );
+        if correlation != "none" && n_rep == LONG && !(0.6..=1.5).contains(&(ms / lsd)) {
+            failures.push(format!(
+                "{}: MAP sd over replicates / Laplace sd = {:.3}, outside 0.6-1.5",
+                names[k],
+                ms / lsd
+            ));
+        }
         if ms > rs / 3.0 {
             failures.push(format!(
                 "{}: MAP sd {:.4} % > RFM sd {:.4} % / 3",

@@ -106,3 +106,48 @@ fn independent_virtual_experiment_model4_meets_its_targets() {
         assert!(worst(&e) < 1e-3, "{level}: fd {e:?} (target 0.1 %)");
     }
 }
+
+/// Issue 11's acceptance on the time-domain set, "the posterior 95 % intervals contain the
+/// truth": `studies/bayes_virtual_td.toml` as shipped (coherence noise model, the channels'
+/// errors as the Welch leakage jitter, `channel_correlation = "leakage"`) without its samplers,
+/// the MAP and its Laplace sd (the samplers' sds are within 4 % of it there). Measured: |z| <=
+/// 1.6 for every parameter at both levels (the full run with NUTS and TMCMC: |z| <= 1.60, all 16
+/// intervals hold the truth); with independent channels Level 2's eta1 was at z = 2.01 (NUTS).
+#[test]
+fn posterior_intervals_on_the_time_domain_set_hold_the_truth() {
+    use rfmlab::output::{ColumnData, Table};
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies");
+    let text = std::fs::read_to_string(root.join("bayes_virtual_td.toml"))
+        .unwrap()
+        .replace("samplers = [\"nuts\", \"tmcmc\"]", "samplers = []");
+    assert!(text.contains("samplers = []") && text.contains("channel_correlation = \"leakage\""));
+    let dir = tempfile::tempdir().unwrap();
+    fit(dir.path(), "td_posterior", &text);
+    let lap = Table::read_parquet(dir.path().join("td_posterior").join("laplace.parquet")).unwrap();
+    let strs = |name: &str| match lap.column(name) {
+        Some(ColumnData::Str(v)) => v.clone(),
+        _ => panic!("laplace.{name} is not a string column"),
+    };
+    let (level, param) = (strs("level"), strs("parameter"));
+    let map = lap.column("map").and_then(|c| c.as_f64()).unwrap();
+    let sd = lap.column("sd").and_then(|c| c.as_f64()).unwrap();
+    let names = ["E0", "h", "E1", "eta1"];
+    let mut checked = 0;
+    for i in 0..lap.n_rows() {
+        let Some(k) = names.iter().position(|n| *n == param[i]) else {
+            continue;
+        };
+        let t = truth(&level[i])[k];
+        let z = (map[i] - t) / sd[i];
+        eprintln!(
+            "{} {}: MAP {:+.4} % from the truth, Laplace sd {:.4} %, z {z:+.2}",
+            level[i],
+            param[i],
+            100.0 * (map[i] / t - 1.0),
+            100.0 * sd[i] / t
+        );
+        assert!(z.abs() < 1.96, "{} {}: z = {z:.2}", level[i], param[i]);
+        checked += 1;
+    }
+    assert_eq!(checked, 8);
+}
