@@ -23,7 +23,7 @@
 //! max_branches = 30
 //! min_evidence_gain = 2.3           # nats
 //! try_fractional = true
-//! kk_per_decade = 2.0
+//! kk_per_decade = 6.0
 //! kk_threshold = 3.0
 //! causal_floor_ratio = 1.05
 //! n_starts = 4
