@@ -441,3 +441,60 @@ fn bad_material_input_names_file_and_key_with_exit_2() {
     // Nothing was written.
     assert!(!dir.path().join("out").exists());
 }
+
+#[test]
+fn material_command_writes_tables_figures_and_report() {
+    // The bundled study, run as a user would, into a temporary folder.
+    let dir = tempfile::tempdir().unwrap();
+    let study = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies/dma_tensile.toml");
+    let text = std::fs::read_to_string(&study)
+        .unwrap()
+        .replace(
+            "seed = 1\n",
+            &format!(
+                "seed = 1\noutput_dir = \"{}\"\n",
+                dir.path().join("out").display()
+            ),
+        )
+        .replace(
+            "file = \"data/dma/tensile_master_Tref_25C.csv\"",
+            &format!("file = \"{}\"", tensile_csv().display()),
+        );
+    let copy = dir.path().join("dma_tensile.toml");
+    std::fs::write(&copy, text).unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rfmlab"))
+        .args(["material", copy.to_str().unwrap(), "--json"])
+        .env("CI", "1")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["path"][0], "fractional_zener");
+    let res = dir.path().join("out");
+    for f in [
+        "steps.parquet",
+        "parameters.parquet",
+        "residuals.parquet",
+        "kk.parquet",
+        "report.md",
+        "fit_loss.png",
+        "kk.png",
+        "manifest.json",
+    ] {
+        assert!(res.join(f).exists(), "{f} missing");
+    }
+    let steps = rfmlab::output::Table::read_parquet(res.join("steps.parquet")).unwrap();
+    let acc = steps.column("accepted").unwrap();
+    assert!(acc.len() >= 4);
+    let report = std::fs::read_to_string(res.join("report.md")).unwrap();
+    assert!(report.contains("Kramers-Kronig") && report.contains("model4"));
+    if let Some(py) = crate::python_checks::python_for_parquet(
+        "material_command_writes_tables_figures_and_report",
+    ) {
+        crate::python_checks::check_parquet(&py, &res);
+    }
+}
