@@ -8,6 +8,7 @@
 //! | [`common`] | shared small types: complex scalar, directions, units |
 //! | [`fe`] | 20-node hexahedra, structured mesher, sparse assembly of M, K_b, S; Matrix Market import |
 //! | [`material`] | constitutive models E*(w; p) with analytic Jacobians (Models 1-5, fractional Zener, generalized Maxwell) |
+//! | [`material_fit`] | material-level loop on measured E'(w), E''(w) (DMA): posterior, residual tests, Kramers-Kronig check |
 //! | [`frf`] | the FRF engine interface and the full-model sweep with sensitivities (paper eq. 44-47) |
 //! | [`forward`] | the forward model: engine + law + H1 measurement model -> predicted H1 and its Jacobian |
 //! | [`inference`] | priors, likelihood, MAP (argmin multistart), samplers (NUTS, TMCMC), diagnostics |
@@ -40,6 +41,7 @@ pub mod iem;
 pub mod inference;
 pub mod linalg;
 pub mod material;
+pub mod material_fit;
 pub mod modal;
 pub mod modes;
 pub mod output;

@@ -91,6 +91,16 @@ pub fn parse_pair(flag: &str, s: &str) -> Result<(f64, f64), InputError> {
 
 /// Load and validate a study file (errors are input errors: exit code 2).
 pub fn load_study(path: &Path) -> anyhow::Result<rfmlab::study::Study> {
+    if let Ok(text) = std::fs::read_to_string(path) {
+        if rfmlab::study::material::is_material_study(&text) {
+            return Err(InputError(format!(
+                "{}: material_data: this is a material study (E'(w), E''(w) without a structure); run it with `rfmlab material {}`",
+                path.display(),
+                path.display()
+            ))
+            .into());
+        }
+    }
     Ok(rfmlab::study::load(path)?)
 }
 

@@ -10,6 +10,7 @@ mod convergence;
 mod engine;
 mod frf;
 mod inspect;
+mod material;
 mod modes;
 mod rom;
 mod run;
@@ -49,6 +50,8 @@ enum Command {
     Run(run::RunArgs),
     /// Validate a study file (and its data) without running it.
     Check(run::CheckArgs),
+    /// Fit relaxation laws to measured E'(w), E''(w) (a DMA master curve): evidence loop, residual tests, Kramers-Kronig check.
+    Material(material::MaterialArgs),
 }
 
 /// Parse arguments, run, print the error chain, return the exit code.
@@ -76,6 +79,7 @@ pub fn run() -> i32 {
         Command::Simulate(a) => simulate::run(a, &g),
         Command::Run(a) => run::run(a, &g),
         Command::Check(a) => run::check(a, &g),
+        Command::Material(a) => material::run(a, &g),
     };
     match result {
         Ok(()) => 0,

@@ -23,6 +23,7 @@
 pub mod bayes;
 mod compute;
 mod leakage;
+pub mod material;
 mod sample;
 pub mod write;
 mod write_bayes;

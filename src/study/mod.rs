@@ -258,3 +258,4 @@ pub(crate) fn resolve(file: &Path, p: &str) -> PathBuf {
 pub mod build;
 pub mod experiment;
 pub mod inference;
+pub mod material;

@@ -32,6 +32,7 @@ mod inference_grid;
 mod inference_likelihood;
 mod inference_samplers;
 mod material;
+mod material_fit;
 mod matrix_market;
 mod measurement_model;
 mod modes;

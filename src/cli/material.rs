@@ -1,0 +1,43 @@
+//! `rfmlab material STUDY.toml`: the material-level loop on measured E'(w), E''(w)
+//! ([`rfmlab::runner::material`]).
+
+use super::common::{print_json, Global};
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct MaterialArgs {
+    /// The material study file (TOML with a [material_data] section).
+    pub study: PathBuf,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: &MaterialArgs, g: &Global) -> anyhow::Result<()> {
+    let study = rfmlab::study::material::load_material(&a.study)?;
+    let sp = super::common::spinner(g, "material loop");
+    let summary = rfmlab::runner::material::run_material(&study)?;
+    sp.finish_and_clear();
+    if a.json {
+        print_json(&serde_json::to_value(&summary)?)?;
+    } else if !g.quiet {
+        eprintln!(
+            "{}: {} -> {} ({} parameters); RMS log10 error E' {:.4} -> {:.4}, E'' {:.4} -> {:.4}; stop: {}",
+            study.name,
+            summary.path.first().cloned().unwrap_or_default(),
+            summary.final_law,
+            summary.final_n_params,
+            summary.first_rms_log10_storage,
+            summary.final_rms_log10_storage,
+            summary.first_rms_log10_loss,
+            summary.final_rms_log10_loss,
+            summary.stop_reason
+        );
+        eprintln!(
+            "results in {} ({:.1} s); see report.md",
+            summary.output_dir.display(),
+            summary.seconds
+        );
+    }
+    Ok(())
+}
