@@ -14,6 +14,7 @@ mod modes;
 mod rom;
 mod run;
 mod simulate;
+mod validate;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -49,6 +50,9 @@ enum Command {
     Run(run::RunArgs),
     /// Validate a study file (and its data) without running it.
     Check(run::CheckArgs),
+    /// Statistical validation of the Bayesian layer (SBC, coverage, model selection, evidence
+    /// against quadrature), shardable with --shard i/n; --merge combines the shards.
+    Validate(validate::ValidateArgs),
 }
 
 /// Parse arguments, run, print the error chain, return the exit code.
@@ -76,6 +80,7 @@ pub fn run() -> i32 {
         Command::Simulate(a) => simulate::run(a, &g),
         Command::Run(a) => run::run(a, &g),
         Command::Check(a) => run::check(a, &g),
+        Command::Validate(a) => validate::run(a, &g),
     };
     match result {
         Ok(()) => 0,
