@@ -138,6 +138,6 @@ Data: frequency-domain virtual experiment of `{}`, level {} ({} N RMS). Posterio
     for t in &v.tables {
         t.write_parquet(dir.join(format!("{}.parquet", t.name())))?;
     }
-    write_atomic_bytes(&dir.join("summary.md"), v.markdown.as_bytes())?;
+    write_atomic_bytes(dir.join("summary.md"), v.markdown.as_bytes())?;
     Ok(v)
 }
