@@ -23,6 +23,7 @@
 //! | [`study`] | study files: TOML as written -> validated typed study (outside the numerical core) |
 //! | [`output`] | parquet tables, manifest, atomic writes (outside the numerical core) |
 //! | [`plot`] | PNG/SVG figures (outside the numerical core) |
+//! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
 //!
 //! Numerical modules never import `study`, `output`, `plot` or the CLI.
 
@@ -51,3 +52,4 @@ pub mod rfm;
 pub mod rom;
 pub mod runner;
 pub mod study;
+pub mod validate;

@@ -15,6 +15,7 @@ mod modes;
 mod rom;
 mod run;
 mod simulate;
+mod validate;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -52,6 +53,9 @@ enum Command {
     Check(run::CheckArgs),
     /// Fit relaxation laws to measured E'(w), E''(w) (a DMA master curve): evidence loop, residual tests, Kramers-Kronig check.
     Material(material::MaterialArgs),
+    /// Statistical validation of the Bayesian layer (SBC, coverage, model selection, evidence
+    /// against quadrature), shardable with --shard i/n; --merge combines the shards.
+    Validate(validate::ValidateArgs),
 }
 
 /// Parse arguments, run, print the error chain, return the exit code.
@@ -80,6 +84,7 @@ pub fn run() -> i32 {
         Command::Run(a) => run::run(a, &g),
         Command::Check(a) => run::check(a, &g),
         Command::Material(a) => material::run(a, &g),
+        Command::Validate(a) => validate::run(a, &g),
     };
     match result {
         Ok(()) => 0,

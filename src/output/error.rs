@@ -56,6 +56,9 @@ pub enum OutputError {
         name: String,
         reason: &'static str,
     },
+    /// The parts of a sharded table do not fit together.
+    #[error("sharded table '{table}': {message}")]
+    Shard { table: String, message: String },
 }
 
 impl OutputError {

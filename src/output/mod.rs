@@ -34,3 +34,4 @@ pub use manifest::{
 pub use report::Report;
 pub use results_dir::ResultsDir;
 pub use table::{ColumnData, Table};
+pub mod shards;

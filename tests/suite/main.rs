@@ -48,4 +48,5 @@ mod runner;
 mod uff_fuzz;
 mod uff_real_files;
 mod uff_roundtrip;
+mod validate;
 mod virtual_experiment;
