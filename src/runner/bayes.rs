@@ -77,6 +77,8 @@ pub struct PosteriorResult {
     /// With the measurement bias linearised at the MAP: (draws checked, sd over them of
     /// log L exact - log L linearised, log mean exp of that difference), in nats.
     pub linearisation_check: Option<(usize, f64, f64)>,
+    /// Evidence, predictive criteria and checks for model comparison ([`super::compare`]).
+    pub compare: super::compare::Comparison,
 }
 
 impl PosteriorResult {
@@ -405,6 +407,10 @@ pub fn infer_level(
             }
             None => None,
         };
+        let lin_shift = linearisation_check.map_or(0.0, |r| r.2);
+        let compare = super::compare::compare(
+            study, inf, &post, &map, &samplers, lin_shift, seed, level, name, progress,
+        )?;
         let mut units = law.param_units();
         units.extend(std::iter::repeat_n(
             "1".to_string(),
@@ -422,6 +428,7 @@ pub fn infer_level(
             samplers,
             initial_x: x0,
             linearisation_check,
+            compare,
         });
     }
     Ok(out)

@@ -34,6 +34,7 @@ mod inference_samplers;
 mod material;
 mod matrix_market;
 mod measurement_model;
+mod model_comparison;
 mod modes;
 mod output;
 mod paper_joint;
