@@ -51,6 +51,7 @@ fn study_text(out: &Path) -> String {
     .replace("tune = 1000", "tune = 200")
     .replace("draws = 1000", "draws = 200")
     .replace("starts = 8", "starts = 2")
+    .replace("particles = 1000", "particles = 500")
     .replace(
         "sensitivity = false",
         "sensitivity = false\nfigures = false",
