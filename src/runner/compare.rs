@@ -175,14 +175,14 @@ pub fn widening_shift(priors: &[Prior], values: &[Vec<f64>], nl: usize) -> (f64,
 /// the law's parameters (in log coordinates for log-uniform priors).
 fn inside_sd(priors: &[Prior], values: &[Vec<f64>], nl: usize) -> f64 {
     let mut out = f64::INFINITY;
-    for k in 0..nl {
-        let (bounds, log) = match priors[k] {
+    for (prior, values) in priors.iter().zip(values).take(nl) {
+        let (bounds, log) = match *prior {
             Prior::LogUniform { lo, hi } => ((lo, hi), true),
             Prior::Uniform { lo, hi } | Prior::TruncatedNormal { lo, hi, .. } => ((lo, hi), false),
             Prior::LogNormal { .. } => continue,
         };
         let f = |v: f64| if log { v.ln() } else { v };
-        let col: Vec<f64> = values[k].iter().map(|v| f(*v)).collect();
+        let col: Vec<f64> = values.iter().map(|v| f(*v)).collect();
         let n = col.len() as f64;
         let m = col.iter().sum::<f64>() / n;
         let sd = (col.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
@@ -399,6 +399,9 @@ fn save_replica(file: &std::path::Path, r: &SteppingStoneReplica) {
     }
 }
 
+/// Per draw: pointwise log likelihood, FRAC per channel, SCC and ACC per line.
+type PerDraw = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>);
+
 /// Thinned (chain, draw, row) triples (the draw number as in the `draws` table): at most [`MAX_DRAWS`] rows, evenly within each chain,
 /// the same number per chain.
 fn thin(s: &SamplerResult) -> Vec<(usize, usize, usize)> {
@@ -508,7 +511,7 @@ pub fn compare(
         total: 0,
     });
     use rayon::prelude::*;
-    let per_draw: Vec<Option<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>)>> = rows
+    let per_draw: Vec<Option<PerDraw>> = rows
         .par_iter()
         .map(|&(_, _, r)| {
             let phys: Vec<f64> = s.draws.values.iter().map(|col| col[r]).collect();

@@ -209,17 +209,17 @@ pub fn tables(posts: &[&PosteriorResult]) -> Result<Vec<Table>, RunError> {
                     pw.f(
                         "elpd_loo_i",
                         "nats",
-                        l_at(c.loo.as_ref().map(|x| &x.pointwise), l),
+                        l_at(c.loo.as_ref().map(|x| x.pointwise.as_slice()), l),
                     );
                     pw.f(
                         "pareto_k",
                         "1",
-                        l_at(c.loo.as_ref().map(|x| &x.pareto_k), l),
+                        l_at(c.loo.as_ref().map(|x| x.pareto_k.as_slice()), l),
                     );
                     pw.f(
                         "elpd_waic_i",
                         "nats",
-                        l_at(c.waic.as_ref().map(|x| &x.pointwise), l),
+                        l_at(c.waic.as_ref().map(|x| x.pointwise.as_slice()), l),
                     );
                 }
             }
@@ -234,7 +234,7 @@ pub fn tables(posts: &[&PosteriorResult]) -> Result<Vec<Table>, RunError> {
     ])
 }
 
-fn l_at(v: Option<&Vec<f64>>, l: usize) -> f64 {
+fn l_at(v: Option<&[f64]>, l: usize) -> f64 {
     v.and_then(|v| v.get(l)).copied().unwrap_or(f64::NAN)
 }
 

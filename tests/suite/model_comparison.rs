@@ -29,7 +29,7 @@ fn study_text(out: &Path) -> String {
         .unwrap()
         .to_string();
     let ss_start = s.find("[inference.stepping_stone]");
-    let mut s = s.clone();
+    let mut s = s;
     if let Some(i) = ss_start {
         // Drop the study's stepping-stone settings: this test sets its own.
         let end = s[i + 1..].find("\n[").map_or(s.len(), |e| i + 1 + e);
