@@ -24,7 +24,8 @@ pub mod whiten;
 pub use nuts::{sample_nuts, ChainDraws, NutsParams, NutsRun};
 pub use sampling::{no_progress, Progress, SamplerError};
 pub use stepping_stone::{
-    stepping_stone, SteppingStoneParams, SteppingStoneReplica, SteppingStoneRun, SteppingStoneRung,
+    combine_replicas, stepping_stone, stepping_stone_replica, SteppingStoneParams,
+    SteppingStoneReplica, SteppingStoneRun, SteppingStoneRung,
 };
 pub use tmcmc::{sample_tmcmc, TmcmcParams, TmcmcRun, TmcmcStage};
 

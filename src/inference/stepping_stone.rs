@@ -78,7 +78,7 @@
 //! Determinism: replica `r` takes its seed from `unit_rng(seed ^ salt, r)`, rung `k` of it its
 //! streams from `unit_rng(replica seed, k)`: one stream per particle (and one for the resampling),
 //! moves in parallel reduced in particle order, so results are bit-identical whatever the thread
-//! count. No checkpoints (a run is minutes at most).
+//! count. The runner checkpoints finished replicas ([`stepping_stone_replica`], [`combine_replicas`]).
 
 use rand::RngExt;
 use rayon::prelude::*;
@@ -422,6 +422,24 @@ pub fn stepping_stone(
     let replicas = (0..params.replicas)
         .map(|r| run_replica(post, params, r, progress))
         .collect::<Result<Vec<_>, _>>()?;
+    Ok(combine_replicas(replicas))
+}
+
+/// Replica `replica` of [`stepping_stone`] alone (the same numbers as inside a full run), for
+/// callers that keep finished replicas, e.g. in checkpoints.
+pub fn stepping_stone_replica(
+    post: &dyn Posterior,
+    params: &SteppingStoneParams,
+    replica: usize,
+    progress: &(dyn Fn(Progress) + Sync),
+) -> Result<SteppingStoneReplica, SamplerError> {
+    validate(params)?;
+    run_replica(post, params, replica, progress)
+}
+
+/// The estimate over replicas: `log mean_r Z_r` and the replicas' standard error (the
+/// within-run one for a single replica). `replicas` must not be empty.
+pub fn combine_replicas(replicas: Vec<SteppingStoneReplica>) -> SteppingStoneRun {
     let logs: Vec<f64> = replicas.iter().map(|r| r.log_evidence).collect();
     let log_evidence = log_mean_exp(&logs);
     let nr = logs.len();
@@ -432,14 +450,14 @@ pub fn stepping_stone(
             .sum();
         (ss / (nr * (nr - 1)) as f64).sqrt()
     } else {
-        replicas[0].log_evidence_se
+        replicas.first().map_or(f64::NAN, |r| r.log_evidence_se)
     };
-    Ok(SteppingStoneRun {
+    SteppingStoneRun {
         log_evidence,
         log_evidence_se,
         n_loglik: replicas.iter().map(|r| r.n_loglik).sum(),
         replicas,
-    })
+    }
 }
 
 #[cfg(test)]

@@ -82,6 +82,8 @@ pub struct PosteriorResult {
     /// Sentences for the report about the noise model as fitted (e.g. the channels'
     /// estimated correlation).
     pub notes: Vec<String>,
+    /// Evidence, predictive criteria and checks for model comparison ([`super::compare`]).
+    pub compare: super::compare::Comparison,
 }
 
 impl PosteriorResult {
@@ -436,6 +438,10 @@ pub fn infer_level(
             }
             None => None,
         };
+        let lin_shift = linearisation_check.map_or(0.0, |r| r.2);
+        let compare = super::compare::compare(
+            study, inf, &post, &map, &samplers, lin_shift, seed, level, name, progress,
+        )?;
         let mut units = law.param_units();
         units.extend(std::iter::repeat_n(
             "1".to_string(),
@@ -454,6 +460,7 @@ pub fn infer_level(
             initial_x: x0,
             linearisation_check,
             notes,
+            compare,
         });
     }
     Ok(out)

@@ -21,12 +21,14 @@
 //! earlier results untouched (at worst a stray `.tmp-*` folder).
 
 pub mod bayes;
+pub mod compare;
 mod compute;
 mod leakage;
 pub mod material;
 mod sample;
 pub mod write;
 mod write_bayes;
+mod write_compare;
 
 pub use compute::{
     BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,

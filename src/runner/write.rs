@@ -854,6 +854,9 @@ pub(super) fn write_results(
         for table in super::write_bayes::tables(levels, &posts)? {
             dir.write_table(&table)?;
         }
+        for table in super::write_compare::tables(&posts)? {
+            dir.write_table(&table)?;
+        }
         let figs = if figures {
             let mut f = draw_figures(dir.path(), levels, results)?;
             let posts: Vec<&super::bayes::PosteriorResult> =
@@ -869,6 +872,7 @@ pub(super) fn write_results(
         };
         let mut report = build_report(study, levels, results, &figs, engine_note);
         super::write_bayes::report(&mut report, levels, &posts, &figs);
+        super::write_compare::report(&mut report, &posts);
         dir.write_report(&report)?;
         let mut manifest = Manifest::new(&study.file, Some(study.seed));
         for (step, secs) in timings {

@@ -36,6 +36,10 @@
 //!
 //! [inference.tmcmc]
 //! particles = 2000
+//!
+//! [inference.stepping_stone]   # with samplers = [..., "stepping_stone"]: evidence only
+//! particles = 250              # per replica
+//! replicas = 8                 # the standard error comes from their spread
 //! ```
 
 use super::validate::Ctx;
@@ -57,6 +61,7 @@ pub struct RawInference {
     pub map: Option<RawMap>,
     pub nuts: Option<RawNuts>,
     pub tmcmc: Option<RawTmcmc>,
+    pub stepping_stone: Option<RawSteppingStone>,
     /// "linearised" (default) or "exact": how samplers see `[measurements.estimator]`.
     pub measurement: Option<String>,
 }
@@ -108,6 +113,22 @@ pub struct RawNuts {
 #[serde(deny_unknown_fields)]
 pub struct RawTmcmc {
     pub particles: Option<usize>,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawSteppingStone {
+    pub particles: Option<usize>,
+    pub replicas: Option<usize>,
+}
+
+/// Stepping-stone settings (evidence only; see [`crate::inference::stepping_stone`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SteppingStoneSettings {
+    /// Particles per replica.
+    pub particles: usize,
+    /// Independent replicas (at least 2: the standard error comes from their spread).
+    pub replicas: usize,
 }
 
 /// The noise model as declared (the number of averages may come from the data file).
@@ -162,6 +183,8 @@ pub struct Inference {
     pub nuts: Option<NutsSettings>,
     /// TMCMC particles, when TMCMC runs.
     pub tmcmc_particles: Option<usize>,
+    /// Stepping-stone settings, when it runs.
+    pub stepping_stone: Option<SteppingStoneSettings>,
     pub noise: NoiseSpec,
     /// Priors per model name: one per law parameter (defaults filled in), then noise priors.
     pub priors: BTreeMap<String, Vec<Prior>>,
@@ -269,10 +292,10 @@ pub(super) fn inference(
         .clone()
         .unwrap_or_else(|| vec!["nuts".into(), "tmcmc".into()]);
     for (i, s) in samplers.iter().enumerate() {
-        if !matches!(s.as_str(), "nuts" | "tmcmc") {
+        if !matches!(s.as_str(), "nuts" | "tmcmc" | "stepping_stone") {
             return Err(ctx.err(
                 format!("{key}.samplers[{i}]"),
-                format!("unknown sampler \"{s}\": use \"nuts\" and/or \"tmcmc\""),
+                format!("unknown sampler \"{s}\": use \"nuts\", \"tmcmc\" and/or \"stepping_stone\" (evidence)"),
             ));
         }
     }
@@ -334,6 +357,25 @@ pub(super) fn inference(
             2000,
             50,
         )?)
+    } else {
+        None
+    };
+    let stepping_stone = if samplers.iter().any(|s| s == "stepping_stone") {
+        let ss = r.stepping_stone.as_ref();
+        Some(SteppingStoneSettings {
+            particles: count(
+                &format!("{key}.stepping_stone.particles"),
+                ss.and_then(|s| s.particles),
+                250,
+                50,
+            )?,
+            replicas: count(
+                &format!("{key}.stepping_stone.replicas"),
+                ss.and_then(|s| s.replicas),
+                8,
+                2,
+            )?,
+        })
     } else {
         None
     };
@@ -542,6 +584,7 @@ pub(super) fn inference(
         levels,
         nuts,
         tmcmc_particles,
+        stepping_stone,
         noise: NoiseSpec {
             n_averages,
             model: NoiseModel {

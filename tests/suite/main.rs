@@ -35,6 +35,7 @@ mod material;
 mod material_fit;
 mod matrix_market;
 mod measurement_model;
+mod model_comparison;
 mod modes;
 mod output;
 mod paper_joint;
