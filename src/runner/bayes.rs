@@ -77,6 +77,10 @@ pub struct PosteriorResult {
     /// With the measurement bias linearised at the MAP: (draws checked, sd over them of
     /// log L exact - log L linearised, log mean exp of that difference), in nats.
     pub linearisation_check: Option<(usize, f64, f64)>,
+    /// Parameter redundancy at the MAP (issue 12 item 4); the error says why it is missing.
+    pub redundancy: Result<super::redundancy::Redundancy, String>,
+    /// The basin study (`[inference.basins]`), filled in after the level's inference.
+    pub basins: Option<super::basins::BasinStudy>,
 }
 
 impl PosteriorResult {
@@ -405,6 +409,7 @@ pub fn infer_level(
             }
             None => None,
         };
+        let redundancy = super::redundancy::analyse(&post, &map, &samplers);
         let mut units = law.param_units();
         units.extend(std::iter::repeat_n(
             "1".to_string(),
@@ -422,6 +427,8 @@ pub fn infer_level(
             samplers,
             initial_x: x0,
             linearisation_check,
+            redundancy,
+            basins: None,
         });
     }
     Ok(out)

@@ -54,6 +54,10 @@ pub struct RawInference {
     pub tmcmc: Option<RawTmcmc>,
     /// "linearised" (default) or "exact": how samplers see `[measurements.estimator]`.
     pub measurement: Option<String>,
+    /// `[inference.across_levels]`, see [`super::comparison`].
+    pub across_levels: Option<super::comparison::RawLevels>,
+    /// `[inference.basins]`, see [`super::comparison`].
+    pub basins: Option<super::comparison::RawBasins>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -158,6 +162,10 @@ pub struct Inference {
     /// Samplers see the measurement model's bias linearised at the MAP (`true`, the default:
     /// the likelihood then costs a sweep of the lines) or the exact kernel operator.
     pub linearised_measurement: bool,
+    /// The comparison across levels (`[inference.across_levels]`).
+    pub level_change: super::comparison::LevelSettings,
+    /// The basin study (`[inference.basins]`), off unless given.
+    pub basins: Option<super::comparison::BasinSettings>,
 }
 
 fn prior(ctx: &Ctx, key: &str, r: &RawPrior) -> Result<Prior, StudyError> {
@@ -479,6 +487,8 @@ pub(super) fn inference(
     }
     let m = r.map.as_ref();
     Ok(Inference {
+        level_change: super::comparison::levels(ctx, r.across_levels.as_ref())?,
+        basins: super::comparison::basins(ctx, r.basins.as_ref())?,
         models: model_names,
         levels,
         nuts,
