@@ -571,3 +571,24 @@ mod tests {
         }
     }
 }
+
+/// The default study end to end with the comparison parts (minutes: `cargo test --release
+/// --lib bayes_study_with_comparison -- --ignored --nocapture`); results in
+/// `results/bayes_compare/`, timings printed.
+#[cfg(test)]
+mod study_run {
+    #[test]
+    #[ignore]
+    fn bayes_study_with_comparison() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let study = crate::study::load(&root.join("studies/bayes.toml")).unwrap();
+        let opts = super::super::RunOptions {
+            output_dir: Some(root.join("results/bayes_compare")),
+            ..Default::default()
+        };
+        let s = super::super::run_study(&study, &opts, &|_| ()).unwrap();
+        println!("total {:.1} s, files {:?}", s.seconds, s.files);
+        let m = std::fs::read_to_string(root.join("results/bayes_compare/manifest.json")).unwrap();
+        println!("{m}");
+    }
+}
