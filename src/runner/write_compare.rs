@@ -577,7 +577,7 @@ pub fn report(rep: &mut Report, results: &[LevelResults], figures: &[(String, St
                 r.names
                     .iter()
                     .zip(&ratio)
-                    .map(|(n, x)| format!("{n} {x:.3}"))
+                    .map(|(n, x)| format!("{n} {x:.2e}"))
                     .collect::<Vec<_>>()
                     .join(", "),
             ]);
@@ -610,7 +610,7 @@ pub fn report(rep: &mut Report, results: &[LevelResults], figures: &[(String, St
                             .map(|j| format!("{} {:+.3}", r.names[j], r.correlation[k * d + j]))
                             .collect();
                         format!(
-                            "Model 5 at {}: eta0 carries {:.2} of the weakest direction ({}); its posterior correlations: {}; its posterior sd is {:.3} of its prior sd. The series dashpot eta0 and the Maxwell branch (E1, eta1) both add loss at low frequency, and the data separate them least.",
+                            "Model 5 at {}: eta0 carries {:.2} of the weakest direction ({}); its posterior correlations: {}; its posterior sd is {:.2e} of its prior sd. The series dashpot eta0 and the Maxwell branch (E1, eta1) both add loss at low frequency, and the data separate them least.",
                             p.level,
                             v.get(k).copied().unwrap_or(f64::NAN).abs(),
                             r.weakest_text,
