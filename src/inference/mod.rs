@@ -9,8 +9,11 @@
 
 use rand::rngs::StdRng;
 
+pub mod basins;
 pub mod checkpoint;
 pub mod diagnostics;
+pub mod identifiability;
+pub mod joint;
 pub mod likelihood;
 pub mod loo;
 pub mod map;

@@ -84,6 +84,10 @@ pub struct PosteriorResult {
     pub notes: Vec<String>,
     /// Evidence, predictive criteria and checks for model comparison ([`super::compare`]).
     pub compare: super::compare::Comparison,
+    /// Parameter redundancy at the MAP (issue 12 item 4); the error says why it is missing.
+    pub redundancy: Result<super::redundancy::Redundancy, String>,
+    /// The basin study (`[inference.basins]`), filled in after the level's inference.
+    pub basins: Option<super::basins::BasinStudy>,
 }
 
 impl PosteriorResult {
@@ -442,6 +446,7 @@ pub fn infer_level(
         let compare = super::compare::compare(
             study, inf, &post, &map, &samplers, lin_shift, seed, level, name, progress,
         )?;
+        let redundancy = super::redundancy::analyse(&post, &map, &samplers);
         let mut units = law.param_units();
         units.extend(std::iter::repeat_n(
             "1".to_string(),
@@ -461,6 +466,8 @@ pub fn infer_level(
             linearisation_check,
             notes,
             compare,
+            redundancy,
+            basins: None,
         });
     }
     Ok(out)

@@ -93,6 +93,8 @@ pub struct LevelResults {
     pub sensitivity: Option<SensitivityCurves>,
     /// Posteriors of the `[inference]` models at this level.
     pub posteriors: Vec<super::bayes::PosteriorResult>,
+    /// The change from the lower `[inference]` level to this one (set on the higher level).
+    pub across_levels: Option<super::levels::LevelComparison>,
 }
 
 fn analysis(name: impl Into<String>, e: impl std::fmt::Display) -> RunError {
@@ -525,5 +527,6 @@ pub fn analyse_level(
         global,
         sensitivity,
         posteriors: Vec::new(),
+        across_levels: None,
     })
 }

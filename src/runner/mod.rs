@@ -20,15 +20,19 @@
 //! into place (then the old one is deleted). A failed or interrupted run therefore leaves the
 //! earlier results untouched (at worst a stray `.tmp-*` folder).
 
+pub mod basins;
 pub mod bayes;
 pub mod compare;
 mod compute;
 mod leakage;
 pub mod material;
+pub mod levels;
+pub mod redundancy;
 mod sample;
 pub mod write;
 mod write_bayes;
 mod write_compare;
+mod write_levels;
 
 pub use compute::{
     BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,
@@ -797,8 +801,29 @@ fn run_study_here(
                 progress,
             )?;
             lap(&format!("inference {}", level.name), &mut t);
+            basins::run_level(
+                study,
+                inf,
+                lik_engine.as_deref().unwrap_or(engine.as_ref()),
+                engine.as_ref(),
+                level,
+                &laws,
+                &mut r.posteriors,
+            )?;
+            if inf.basins.is_some() {
+                lap(&format!("basins {}", level.name), &mut t);
+            }
         }
         results.push(r);
+    }
+    if let Some(inf) = &study.inference {
+        let lik = lik_engine.as_deref().unwrap_or(engine.as_ref());
+        if let Some(c) = levels::compare(study, inf, lik, &levels, &laws, &results)? {
+            if let Some(r) = results.iter_mut().find(|r| r.level == c.high) {
+                r.across_levels = Some(c);
+            }
+            lap("across levels", &mut t);
+        }
     }
     let out_dir = opts
         .output_dir

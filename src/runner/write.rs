@@ -857,11 +857,15 @@ pub(super) fn write_results(
         for table in super::write_compare::tables(&posts)? {
             dir.write_table(&table)?;
         }
+        for table in super::write_levels::tables(results)? {
+            dir.write_table(&table)?;
+        }
         let figs = if figures {
             let mut f = draw_figures(dir.path(), levels, results)?;
             let posts: Vec<&super::bayes::PosteriorResult> =
                 results.iter().flat_map(|r| r.posteriors.iter()).collect();
             f.extend(super::write_bayes::figures(dir.path(), &posts)?);
+            f.extend(super::write_levels::figures(dir.path(), results)?);
             for (png, _) in &f {
                 dir.record(png);
                 dir.record(png.replace(".png", ".svg"));
@@ -873,6 +877,7 @@ pub(super) fn write_results(
         let mut report = build_report(study, levels, results, &figs, engine_note);
         super::write_bayes::report(&mut report, levels, &posts, &figs);
         super::write_compare::report(&mut report, &posts);
+        super::write_levels::report(&mut report, results, &figs);
         dir.write_report(&report)?;
         let mut manifest = Manifest::new(&study.file, Some(study.seed));
         for (step, secs) in timings {

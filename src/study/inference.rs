@@ -64,6 +64,10 @@ pub struct RawInference {
     pub stepping_stone: Option<RawSteppingStone>,
     /// "linearised" (default) or "exact": how samplers see `[measurements.estimator]`.
     pub measurement: Option<String>,
+    /// `[inference.across_levels]`, see [`super::comparison`].
+    pub across_levels: Option<super::comparison::RawLevels>,
+    /// `[inference.basins]`, see [`super::comparison`].
+    pub basins: Option<super::comparison::RawBasins>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -200,6 +204,10 @@ pub struct Inference {
     /// Correlated channels: how, and the window (lines) of each line's estimate from the MAP
     /// residuals; `None`: independent channels.
     pub channel_correlation: Option<(CorrelationKind, usize)>,
+    /// The comparison across levels (`[inference.across_levels]`).
+    pub level_change: super::comparison::LevelSettings,
+    /// The basin study (`[inference.basins]`), off unless given.
+    pub basins: Option<super::comparison::BasinSettings>,
 }
 
 fn prior(ctx: &Ctx, key: &str, r: &RawPrior) -> Result<Prior, StudyError> {
@@ -580,6 +588,8 @@ pub(super) fn inference(
     }
     let m = r.map.as_ref();
     Ok(Inference {
+        level_change: super::comparison::levels(ctx, r.across_levels.as_ref())?,
+        basins: super::comparison::basins(ctx, r.basins.as_ref())?,
         models: model_names,
         levels,
         nuts,

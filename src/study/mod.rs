@@ -256,6 +256,7 @@ pub(crate) fn resolve(file: &Path, p: &str) -> PathBuf {
 }
 
 pub mod build;
+pub mod comparison;
 pub mod experiment;
 pub mod inference;
 pub mod material;
