@@ -21,6 +21,7 @@ mod csv_io;
 mod data_checks;
 mod default_data;
 mod default_study;
+mod effects;
 mod experiment;
 mod fe_cantilever;
 mod fe_element;
