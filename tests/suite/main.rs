@@ -16,6 +16,7 @@ mod cli_inspect;
 mod cli_rom;
 mod cli_simulate;
 mod cli_structure_errors;
+mod closed_loop;
 mod correlation;
 mod csv_io;
 mod data_checks;
