@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 
 pub mod common;
 mod convergence;
+mod diagnose;
 mod engine;
 mod frf;
 mod inspect;
@@ -49,6 +50,8 @@ enum Command {
     Run(run::RunArgs),
     /// Validate a study file (and its data) without running it.
     Check(run::CheckArgs),
+    /// Close the loop: residuals of the fit, score tests of candidate effects, refits, before/after.
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 /// Parse arguments, run, print the error chain, return the exit code.
@@ -76,6 +79,7 @@ pub fn run() -> i32 {
         Command::Simulate(a) => simulate::run(a, &g),
         Command::Run(a) => run::run(a, &g),
         Command::Check(a) => run::check(a, &g),
+        Command::Diagnose(a) => diagnose::run(a, &g),
     };
     match result {
         Ok(()) => 0,

@@ -21,6 +21,7 @@
 //! earlier results untouched (at worst a stray `.tmp-*` folder).
 
 pub mod bayes;
+pub mod closed_loop;
 mod compute;
 mod leakage;
 mod sample;
