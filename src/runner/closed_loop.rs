@@ -192,17 +192,18 @@ fn residuals_table(results: &[LevelResult]) -> Result<Table, RunError> {
 /// `candidates`: one row per candidate and round.
 fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
     let mut t = Table::new("candidates");
-    let mut cols: (Vec<String>, Vec<i64>, Vec<i64>, Vec<String>, Vec<String>) = Default::default();
+    let (mut c_level, mut c_round, mut c_rank, mut c_effect, mut c_kind) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let mut num: [Vec<f64>; 4] = Default::default();
     let mut refit: [Vec<Option<f64>>; 4] = Default::default();
     let (mut acc, mut verdict, mut unit) = (Vec::new(), Vec::new(), Vec::new());
     for (level, _, _, res, _) in results {
         for c in &res.candidates {
-            cols.0.push(level.clone());
-            cols.1.push(c.round as i64);
-            cols.2.push(c.rank as i64);
-            cols.3.push(c.effect.name());
-            cols.4.push(c.effect.kind().into());
+            c_level.push(level.clone());
+            c_round.push(c.round as i64);
+            c_rank.push(c.rank as i64);
+            c_effect.push(c.effect.name());
+            c_kind.push(c.effect.kind().into());
             unit.push(c.effect.unit().to_string());
             num[0].push(c.score);
             num[1].push(c.p_value);
@@ -219,11 +220,11 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
     }
     let [score, p, est, est_sd] = num;
     let [gain, logz, size, sd] = refit;
-    t.push_str("level", cols.0)
-        .and_then(|t| t.push_i64("round", "", cols.1))
-        .and_then(|t| t.push_i64("rank", "", cols.2))
-        .and_then(|t| t.push_str("effect", cols.3))
-        .and_then(|t| t.push_str("kind", cols.4))
+    t.push_str("level", c_level)
+        .and_then(|t| t.push_i64("round", "", c_round))
+        .and_then(|t| t.push_i64("rank", "", c_rank))
+        .and_then(|t| t.push_str("effect", c_effect))
+        .and_then(|t| t.push_str("kind", c_kind))
         .and_then(|t| t.push_str("unit", unit))
         .and_then(|t| t.push_f64("score", "1", score))
         .and_then(|t| t.push_f64("p_value", "1", p))

@@ -5,6 +5,7 @@
 //!   law's parameters back within 3 sd of the truth, and leaves normalised chi-square <= 1.2;
 //! * null data (no effect, 1 seed; 20 with RFMLAB_LONG=1): nothing is accepted in at least 95 %
 //!   of seeds.
+//!
 //! The gain and beam cases run with RFMLAB_LONG=1 (about 2 min on 2 busy cores).
 
 use crate::spring_model::{measured_engine, Normal};
