@@ -1,7 +1,8 @@
 //! `rfmlab diagnose STUDY.toml`: the closed loop ([`crate::closed_loop`]) at every level of the
 //! study's `[inference]` section, for its first model (or the one asked for), with the default
 //! candidates: a point mass at every measured point, a gain and a delay per channel, the beam
-//! modulus factor. Writes the parquet tables `residuals`, `candidates`, `closed_loop` and a
+//! modulus factor (left out when the adherend has viscous damping `C_b`, where its exact
+//! scaling does not hold). Writes the parquet tables `residuals`, `candidates`, `closed_loop` and a
 //! markdown summary `closed_loop.md` into `<output_dir>.diagnose/`.
 
 use super::{bayes, RunError};
@@ -96,7 +97,11 @@ pub fn diagnose_study(
             .filter(|(o, _)| engine.inputs().contains(o))
             .map(|(o, id)| (*o, *id))
             .collect();
-        let candidates = default_candidates(&level.response_ids, &mass_points);
+        let mut candidates = default_candidates(&level.response_ids, &mass_points);
+        // The beam factor's exact scaling needs an adherend without viscous damping C_b.
+        if built.model.c_b.is_some() {
+            candidates.retain(|c| !matches!(c, crate::forward::Effect::BeamModulus));
+        }
         let res = run_closed_loop(&mut post, &x0, &candidates, params).map_err(|e| {
             RunError::Analysis {
                 analysis: format!("closed loop of {name} at {}", level.name),
