@@ -31,6 +31,7 @@
 // the deliberate NaN-rejecting form of a positivity check.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod closed_loop;
 pub mod common;
 pub mod correlation;
 pub mod data;

@@ -7,6 +7,7 @@ use clap::{Parser, Subcommand};
 
 pub mod common;
 mod convergence;
+mod diagnose;
 mod engine;
 mod frf;
 mod inspect;
@@ -56,6 +57,8 @@ enum Command {
     /// Statistical validation of the Bayesian layer (SBC, coverage, model selection, evidence
     /// against quadrature), shardable with --shard i/n; --merge combines the shards.
     Validate(validate::ValidateArgs),
+    /// Close the loop: residuals of the fit, score tests of candidate effects, refits, before/after.
+    Diagnose(diagnose::DiagnoseArgs),
 }
 
 /// Parse arguments, run, print the error chain, return the exit code.
@@ -85,6 +88,7 @@ pub fn run() -> i32 {
         Command::Check(a) => run::check(a, &g),
         Command::Material(a) => material::run(a, &g),
         Command::Validate(a) => validate::run(a, &g),
+        Command::Diagnose(a) => diagnose::run(a, &g),
     };
     match result {
         Ok(()) => 0,

@@ -12,11 +12,13 @@
 //! object, so a prediction is made in one place. Without a measurement model the prediction is
 //! the exact accelerance at the lines.
 
+pub mod effects;
 pub mod measurement;
 
 use crate::common::C64;
 use crate::frf::{FrfEngine, FrfError};
 use crate::material::ConstitutiveModel;
+pub use effects::{Effect, EffectTerm, Effects};
 pub use measurement::{EstimatorSpec, KernelTerm, MeasurementModel, MeasurementParams};
 use std::borrow::Cow;
 
@@ -58,6 +60,9 @@ pub struct ForwardModel<'a> {
     /// The measurement model's bias linearised at a point ([`ForwardModel::linearise_measurement`]):
     /// when set, predictions are `H(p) + b(p0) + db/dln p (ln p - ln p0)`.
     pub linear_bias: Option<LinearBias>,
+    /// Effects the structure and law lack ([`effects`]); none by default. Free terms' values
+    /// are parameters after the law's.
+    pub effects: Effects,
 }
 
 /// The measurement model's systematic error `b = E[H1] - H` at `p0` and its derivative in
@@ -98,6 +103,7 @@ impl<'a> ForwardModel<'a> {
             obs: Observation::new(engine, omega_rad_s, input, outputs, measurement)?,
             law,
             linear_bias: None,
+            effects: Effects::default(),
         })
     }
 
@@ -107,15 +113,38 @@ impl<'a> ForwardModel<'a> {
     pub fn n_lines(&self) -> usize {
         self.obs.omega_rad_s.len()
     }
+    /// The law's parameters plus the free effects' values.
     pub fn n_params(&self) -> usize {
-        self.law.n_params()
+        self.law.n_params() + self.effects.n_free()
+    }
+    /// Names of the parameters: the law's, then the free effects'.
+    pub fn param_names(&self) -> Vec<String> {
+        let mut n = self.law.param_names();
+        n.extend(self.effects.free_names());
+        n
+    }
+    /// Replace the effects (checked against the engine and the channels).
+    pub fn set_effects(&mut self, effects: Effects) -> Result<(), ForwardError> {
+        effects.check(self.obs.engine, self.obs.outputs.len())?;
+        if !effects.is_empty() {
+            self.linear_bias = None;
+        }
+        self.effects = effects;
+        Ok(())
     }
 
-    /// Check `p` against the law's admissible range.
+    /// Check `p` against the law's admissible range (and the free effects' ranges).
     pub fn check(&self, p: &[f64]) -> Result<(), ForwardError> {
-        let ok = p.len() == self.law.n_params()
+        let bounds = self.law.bounds().into_iter().chain(
+            self.effects
+                .terms
+                .iter()
+                .filter(|t| t.free)
+                .map(|t| t.effect.bounds()),
+        );
+        let ok = p.len() == self.n_params()
             && p.iter()
-                .zip(self.law.bounds())
+                .zip(bounds)
                 .all(|(v, (lo, hi))| v.is_finite() && *v > lo && *v < hi);
         if ok {
             Ok(())
@@ -132,6 +161,9 @@ impl<'a> ForwardModel<'a> {
         p: &[f64],
         jac: bool,
     ) -> Result<(Prediction, Vec<C64>), ForwardError> {
+        if !self.effects.is_empty() {
+            return self.exact_on_with_effects(omega, p, jac);
+        }
         let np = self.law.n_params();
         let modulus: Vec<C64> = omega.iter().map(|&w| self.law.modulus(p, w)).collect();
         let (h, dh, drive) = self.obs.accelerance_and_drive(omega, &modulus, jac)?;
@@ -157,15 +189,138 @@ impl<'a> ForwardModel<'a> {
         Ok((out, drive))
     }
 
-    /// The exact accelerance at the data's lines (no measurement model).
+    /// [`Self::exact_on`] with structural effects (channel effects come at the lines).
+    fn exact_on_with_effects(
+        &self,
+        omega: &[f64],
+        p: &[f64],
+        jac: bool,
+    ) -> Result<(Prediction, Vec<C64>), ForwardError> {
+        let nl = self.law.n_params();
+        let (pl, pe) = p.split_at(nl);
+        let values = self.effects.values(pe);
+        let modulus: Vec<C64> = omega.iter().map(|&w| self.law.modulus(pl, w)).collect();
+        let sc = self.effects.structural(
+            self.obs.engine,
+            self.obs.input,
+            &self.obs.outputs,
+            omega,
+            &modulus,
+            jac,
+            &values,
+        )?;
+        let n = self.obs.outputs.len();
+        let mut out = Prediction {
+            values: sc.h,
+            jac: Vec::new(),
+        };
+        if jac {
+            let mut dedp = vec![C64::new(0.0, 0.0); nl];
+            let mut jm = vec![vec![C64::new(0.0, 0.0); omega.len() * n]; nl];
+            for (l, &w) in omega.iter().enumerate() {
+                self.law.jacobian(pl, w, &mut dedp);
+                for k in 0..n {
+                    let d = sc.dh[l * n + k];
+                    for (q, col) in jm.iter_mut().enumerate() {
+                        col[l * n + k] = d * dedp[q];
+                    }
+                }
+            }
+            for (t, term) in self.effects.terms.iter().enumerate() {
+                if term.free {
+                    jm.push(sc.d_terms[t].clone());
+                }
+            }
+            out.jac = jm;
+        }
+        Ok((out, sc.drive))
+    }
+
+    /// Channel effects (gains, delays) applied at the lines to `out` (values and Jacobian).
+    fn apply_channel_effects(&self, p: &[f64], out: &mut Prediction) {
+        if self.effects.is_empty() {
+            return;
+        }
+        let nl = self.law.n_params();
+        let values = self.effects.values(&p[nl..]);
+        let n = self.obs.outputs.len();
+        let one = C64::new(1.0, 0.0);
+        let mut factor = vec![one; self.obs.omega_rad_s.len() * n];
+        for (term, v) in self.effects.terms.iter().zip(&values) {
+            match term.effect {
+                Effect::Gain { channel, .. } => {
+                    for f in factor.iter_mut().skip(channel).step_by(n) {
+                        *f *= 1.0 + v;
+                    }
+                }
+                Effect::Delay { channel, .. } => {
+                    for (l, w) in self.obs.omega_rad_s.iter().enumerate() {
+                        factor[l * n + channel] *= C64::from_polar(1.0, -w * v);
+                    }
+                }
+                _ => {}
+            }
+        }
+        out.values
+            .iter_mut()
+            .zip(&factor)
+            .for_each(|(a, f)| *a *= f);
+        for col in out.jac.iter_mut() {
+            col.iter_mut().zip(&factor).for_each(|(a, f)| *a *= f);
+        }
+        if out.jac.is_empty() {
+            return;
+        }
+        let mut q = nl;
+        for (term, v) in self.effects.terms.iter().zip(&values) {
+            if !term.free {
+                continue;
+            }
+            match term.effect {
+                Effect::Gain { channel, .. } => {
+                    let col = &mut out.jac[q];
+                    for (o, c) in col.iter_mut().enumerate() {
+                        *c = if o % n == channel {
+                            out.values[o] / (1.0 + v)
+                        } else {
+                            C64::new(0.0, 0.0)
+                        };
+                    }
+                }
+                Effect::Delay { channel, .. } => {
+                    let col = &mut out.jac[q];
+                    for (o, c) in col.iter_mut().enumerate() {
+                        *c = if o % n == channel {
+                            C64::new(0.0, -self.obs.omega_rad_s[o / n]) * out.values[o]
+                        } else {
+                            C64::new(0.0, 0.0)
+                        };
+                    }
+                }
+                _ => {}
+            }
+            q += 1;
+        }
+    }
+
+    /// The exact accelerance at the data's lines (no measurement model; channel effects on).
     pub fn exact(&self, p: &[f64], jac: bool) -> Result<Prediction, ForwardError> {
         self.check(p)?;
-        Ok(self.exact_on(&self.obs.omega_rad_s, p, jac)?.0)
+        let mut out = self.exact_on(&self.obs.omega_rad_s, p, jac)?.0;
+        self.apply_channel_effects(p, &mut out);
+        Ok(out)
     }
 
     /// What the analyser is expected to report: `E[H1]` at the lines (the exact accelerance
-    /// without a measurement model), with its Jacobian in `p` when `jac`.
+    /// without a measurement model), with its Jacobian in `p` when `jac`; the effects'
+    /// channel gains and delays act on the analyser's output.
     pub fn predict(&self, p: &[f64], jac: bool) -> Result<Prediction, ForwardError> {
+        let mut out = self.predict_structure(p, jac)?;
+        self.apply_channel_effects(p, &mut out);
+        Ok(out)
+    }
+
+    fn predict_structure(&self, p: &[f64], jac: bool) -> Result<Prediction, ForwardError> {
         self.check(p)?;
         if let Some(lb) = &self.linear_bias {
             let mut out = self.exact_on(&self.obs.omega_rad_s, p, jac)?.0;
@@ -489,6 +644,19 @@ impl ForwardModel<'_> {
     /// `predict`.
     pub fn linearise(&self, p: &[f64]) -> Result<Linearised<'_>, ForwardError> {
         self.check(p)?;
+        if !self.effects.is_empty() {
+            // With effects, the full Jacobian columns at the lines (one forward pass each).
+            let pred = self.predict(p, true)?;
+            return Ok(Linearised {
+                values: pred.values,
+                n_out: self.obs.outputs.len(),
+                n_params: p.len(),
+                dh: Vec::new(),
+                dedp: Vec::new(),
+                rows: None,
+                extra: pred.jac,
+            });
+        }
         let np = self.law.n_params();
         let measurement = self
             .obs
@@ -566,7 +734,7 @@ impl ForwardModel<'_> {
     /// does nothing.
     pub fn linearise_measurement(&mut self, p0: &[f64]) -> Result<(), ForwardError> {
         self.linear_bias = None;
-        if self.obs.measurement.is_none() {
+        if self.obs.measurement.is_none() || !self.effects.is_empty() {
             return Ok(());
         }
         let full = self.predict(p0, true)?;

@@ -752,7 +752,7 @@ pub struct FrfPosterior<'a> {
 
 impl<'a> FrfPosterior<'a> {
     pub fn new(likelihood: FrfLikelihood<'a>, priors: Vec<Prior>) -> Result<Self, LikelihoodError> {
-        let mut names = likelihood.forward.law.param_names();
+        let mut names = likelihood.forward.param_names();
         names.extend(likelihood.noise_names().iter().cloned());
         if priors.len() != names.len() {
             return Err(LikelihoodError::Data(format!(

@@ -227,7 +227,7 @@ pub fn build_posterior<'a>(
 
 /// Initial unconstrained point: law parameters from `p_law`, noise scales at the RMS relative
 /// residual of the fit per channel (so a start is never absurd), nu at 10.
-fn initial_x(post: &FrfPosterior<'_>, p_law: &[f64]) -> Vec<f64> {
+pub(crate) fn initial_x(post: &FrfPosterior<'_>, p_law: &[f64]) -> Vec<f64> {
     let mut phys = p_law.to_vec();
     let lik = &post.likelihood;
     if lik.n_tau() > 0 {

@@ -22,11 +22,12 @@
 
 pub mod basins;
 pub mod bayes;
+pub mod closed_loop;
 pub mod compare;
 mod compute;
 mod leakage;
-pub mod material;
 pub mod levels;
+pub mod material;
 pub mod redundancy;
 mod sample;
 pub mod write;

@@ -211,3 +211,25 @@ fn bad_study_files_exit_2_naming_file_and_key_and_keep_earlier_results() {
         .collect();
     assert!(stray.is_empty());
 }
+
+/// `rfmlab diagnose` on a study without `[inference]`, or with a bad threshold: exit 2 naming
+/// the file and the key.
+#[test]
+fn diagnose_bad_input_exits_2() {
+    let s = setup();
+    let file = write(&s.root.join("noinf.toml"), &good(&s));
+    let (code, _, err) = rfmlab(&["--quiet", "diagnose", file.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("noinf.toml") && err.contains("inference"),
+        "{err}"
+    );
+    let (code, _, err) = rfmlab(&[
+        "--quiet",
+        "diagnose",
+        file.to_str().unwrap(),
+        "--threshold-nats=-1",
+    ]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--threshold-nats"), "{err}");
+}

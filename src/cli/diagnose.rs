@@ -1,0 +1,67 @@
+//! `rfmlab diagnose STUDY.toml`: the closed loop ([`rfmlab::runner::closed_loop`]).
+
+use super::common::{print_json, Global, InputError};
+use rfmlab::closed_loop::ClosedLoopParams;
+use rfmlab::runner::RunError;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct DiagnoseArgs {
+    /// The study file (TOML); it needs an [inference] section.
+    pub study: PathBuf,
+    /// The model to diagnose (default: the first of `[inference] models`).
+    #[arg(long)]
+    pub model: Option<String>,
+    /// Laplace log-evidence gain (nats) an effect needs to be accepted.
+    #[arg(long, default_value_t = 5.0)]
+    pub threshold_nats: f64,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn wrap(e: RunError) -> anyhow::Error {
+    if e.is_input() {
+        anyhow::Error::new(InputError(e.to_string()))
+    } else {
+        anyhow::Error::new(e)
+    }
+}
+
+pub fn run(a: &DiagnoseArgs, g: &Global) -> anyhow::Result<()> {
+    if !(a.threshold_nats.is_finite() && a.threshold_nats >= 0.0) {
+        return Err(anyhow::Error::new(InputError(format!(
+            "--threshold-nats {} must be a non-negative number of nats (default 5)",
+            a.threshold_nats
+        ))));
+    }
+    let study = super::common::load_study(&a.study)?;
+    let sp = super::common::spinner(g, "closing the loop");
+    let params = ClosedLoopParams {
+        threshold_nats: a.threshold_nats,
+        ..ClosedLoopParams::default()
+    };
+    let summary = rfmlab::runner::closed_loop::diagnose_study(&study, a.model.as_deref(), &params)
+        .map_err(wrap)?;
+    sp.finish_and_clear();
+    if a.json {
+        print_json(&serde_json::to_value(&summary)?)?;
+    } else if !g.quiet {
+        for l in &summary.levels {
+            eprintln!(
+                "{} {}: {}; normalised chi-square {:.3} -> {:.3}",
+                l.level,
+                summary.model,
+                l.conclusion,
+                l.chi2_normalised_before,
+                l.chi2_normalised_after
+            );
+        }
+        eprintln!(
+            "results in {} ({:.1} s); see closed_loop.md",
+            summary.output_dir.display(),
+            summary.seconds
+        );
+    }
+    Ok(())
+}

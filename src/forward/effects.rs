@@ -1,0 +1,457 @@
+//! Effects the structure-and-law model may lack: named one-parameter extensions of the forward
+//! model (issue 13, item 1), each with its physics, SI unit, default prior and analytic
+//! derivative.
+//!
+//! ```text
+//!   gain of channel k:     E[H1]_k -> (1 + g) E[H1]_k                                  d/dg   = E[H1]_k
+//!   delay of channel k:    E[H1]_k -> exp(-j w tau) E[H1]_k                            d/dtau = -j w (...)
+//!   beam modulus factor:   K_b + j D_b -> (1 + b)(K_b + j D_b), so (no viscous C_b)
+//!                          H(w, E*; b) = H(w / sqrt(1 + b), E* / (1 + b); 0) / (1 + b)   (exact scaling)
+//!   point mass at point P: M -> M + m b_P b_P^T (b_P the point's DOF weights; the measured
+//!                          direction), so with D = -w^2 m and H_PP, H_oP, H_Pi read from the
+//!                          engine (every measured point is an engine input):
+//!                          H'_oi = H_oi - H_oP G D H_Pi,   G = (1 + D H_PP)^-1           (Sherman-Morrison-Woodbury)
+//! ```
+//!
+//! Structural effects are exact algebraic transforms of the certified engine's receptances at
+//! the observation points, so the ROM with an effect on is as accurate as the ROM itself: no
+//! basis enrichment is needed (the mass identity needs only point receptances; the modulus
+//! scaling evaluates the engine at another frequency inside its certified band). The point
+//! mass acts in the measured direction only (a sensor's translational inertia along its axis);
+//! its x and y inertia are not modelled. The derivative in the beam factor is a central
+//! difference (step 1e-6) of the exact transform; every other derivative is analytic.
+
+use crate::common::C64;
+use crate::frf::FrfEngine;
+use crate::inference::prior::Prior;
+
+/// One kind of effect, with where it acts.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Effect {
+    /// Gain error of response channel `channel` (index into the observed outputs; `id` the
+    /// channel's id for names).
+    Gain { channel: usize, id: u32 },
+    /// Time delay (s) of response channel `channel` against the force channel.
+    Delay { channel: usize, id: u32 },
+    /// A point mass (kg) at engine point `point` (an engine input), acting in the measured
+    /// direction; `id` the point's id in the study.
+    PointMass { point: usize, id: u32 },
+    /// Relative change of the adherends' (beam) modulus, `E_beam = (1 + b) E_beam,declared`.
+    BeamModulus,
+}
+
+impl Effect {
+    /// Name of the effect's parameter, as in tables.
+    pub fn name(&self) -> String {
+        match self {
+            Effect::Gain { id, .. } => format!("gain_ch{id}"),
+            Effect::Delay { id, .. } => format!("delay_ch{id}"),
+            Effect::PointMass { id, .. } => format!("mass_pt{id}"),
+            Effect::BeamModulus => "beam_modulus".into(),
+        }
+    }
+    /// Type of the effect (a study's `type` key).
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Effect::Gain { .. } => "gain",
+            Effect::Delay { .. } => "delay",
+            Effect::PointMass { .. } => "point_mass",
+            Effect::BeamModulus => "beam_modulus",
+        }
+    }
+    /// SI unit of the parameter.
+    pub fn unit(&self) -> &'static str {
+        match self {
+            Effect::Gain { .. } | Effect::BeamModulus => "1",
+            Effect::Delay { .. } => "s",
+            Effect::PointMass { .. } => "kg",
+        }
+    }
+    /// A sentence of physics for the report.
+    pub fn physics(&self) -> String {
+        match self {
+            Effect::Gain { id, .. } => format!(
+                "channel {id} reads (1 + g) times the true response: a sensitivity (calibration) error of its accelerometer or conditioner"
+            ),
+            Effect::Delay { id, .. } => format!(
+                "channel {id} lags the force by tau: a phase growing linearly with frequency (anti-alias filter or acquisition skew)"
+            ),
+            Effect::PointMass { id, .. } => format!(
+                "an undeclared mass m at point {id} (a sensor, cable or fixture) lowers the modes that move that point"
+            ),
+            Effect::BeamModulus => "the adherends' modulus differs from the declared one by a factor (1 + b): all beam-dominated modes shift by sqrt(1 + b)".into(),
+        }
+    }
+    /// Value at which the effect is absent.
+    pub fn null_value(&self) -> f64 {
+        0.0
+    }
+    /// Whether the parameter is one-sided (a mass is >= 0): the score test is then one-sided
+    /// (Self and Liang 1987: a 50:50 mixture of chi-square 0 and 1).
+    pub fn one_sided(&self) -> bool {
+        matches!(self, Effect::PointMass { .. })
+    }
+    /// Admissible range (open) of the parameter.
+    pub fn bounds(&self) -> (f64, f64) {
+        match self {
+            Effect::Gain { .. } => (-0.9, 9.0),
+            Effect::Delay { .. } => (-0.01, 0.01),
+            Effect::PointMass { .. } => (-1e-12, 10.0),
+            Effect::BeamModulus => (-0.9, 9.0),
+        }
+    }
+    /// Default prior when the effect is free: uniform over a stated plausible range (the
+    /// evidence depends on it: a ten times wider range costs ln 10 = 2.3 nats).
+    /// gain +-20 %, delay +-1 ms, mass 0-100 g, beam modulus +-20 %.
+    pub fn default_prior(&self) -> Prior {
+        match self {
+            Effect::Gain { .. } | Effect::BeamModulus => Prior::Uniform { lo: -0.2, hi: 0.2 },
+            Effect::Delay { .. } => Prior::Uniform {
+                lo: -1e-3,
+                hi: 1e-3,
+            },
+            Effect::PointMass { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
+        }
+    }
+    fn is_structural(&self) -> bool {
+        matches!(self, Effect::PointMass { .. } | Effect::BeamModulus)
+    }
+}
+
+/// An effect with its value, fixed or free.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EffectTerm {
+    pub effect: Effect,
+    /// Value (SI) when fixed; the starting value when free.
+    pub value: f64,
+    /// Free: its value is a parameter of the forward model, after the law's.
+    pub free: bool,
+}
+
+/// The effects of a forward model (none by default: the model is then unchanged).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Effects {
+    pub terms: Vec<EffectTerm>,
+}
+
+/// What the structural part returns on a grid: accelerance `[line * n_out + k]`, its
+/// derivative in E' (when asked), the drive-point accelerance, and one derivative column per
+/// term (zero for channel effects; only when asked).
+pub(crate) struct StructuralColumns {
+    pub h: Vec<C64>,
+    pub dh: Vec<C64>,
+    pub drive: Vec<C64>,
+    pub d_terms: Vec<Vec<C64>>,
+}
+
+/// Dense complex solve of a small system (Gaussian elimination with partial pivoting);
+/// returns `None` when singular.
+fn small_solve(a: &[C64], n: usize, b: &[C64], nrhs: usize) -> Option<Vec<C64>> {
+    let mut a = a.to_vec();
+    let mut x = b.to_vec();
+    for c in 0..n {
+        let piv = (c..n).max_by(|&i, &j| a[i * n + c].norm().total_cmp(&a[j * n + c].norm()))?;
+        if a[piv * n + c].norm() == 0.0 {
+            return None;
+        }
+        if piv != c {
+            for k in 0..n {
+                a.swap(c * n + k, piv * n + k);
+            }
+            for k in 0..nrhs {
+                x.swap(c * nrhs + k, piv * nrhs + k);
+            }
+        }
+        for r in c + 1..n {
+            let f = a[r * n + c] / a[c * n + c];
+            for k in c..n {
+                let v = a[c * n + k];
+                a[r * n + k] -= f * v;
+            }
+            for k in 0..nrhs {
+                let v = x[c * nrhs + k];
+                x[r * nrhs + k] -= f * v;
+            }
+        }
+    }
+    for c in (0..n).rev() {
+        for k in 0..nrhs {
+            let mut s = x[c * nrhs + k];
+            for j in c + 1..n {
+                s -= a[c * n + j] * x[j * nrhs + k];
+            }
+            x[c * nrhs + k] = s / a[c * n + c];
+        }
+    }
+    Some(x)
+}
+
+impl Effects {
+    pub fn is_empty(&self) -> bool {
+        self.terms.is_empty()
+    }
+    /// Number of free parameters.
+    pub fn n_free(&self) -> usize {
+        self.terms.iter().filter(|t| t.free).count()
+    }
+    /// Names of the free parameters, in order.
+    pub fn free_names(&self) -> Vec<String> {
+        self.terms
+            .iter()
+            .filter(|t| t.free)
+            .map(|t| t.effect.name())
+            .collect()
+    }
+    /// Values of all terms, with the free ones taken from `free` (in order).
+    pub fn values(&self, free: &[f64]) -> Vec<f64> {
+        let mut it = free.iter();
+        self.terms
+            .iter()
+            .map(|t| {
+                if t.free {
+                    *it.next().unwrap_or(&t.value)
+                } else {
+                    t.value
+                }
+            })
+            .collect()
+    }
+    /// Whether any term changes the structure.
+    pub fn has_structural(&self) -> bool {
+        self.terms.iter().any(|t| t.effect.is_structural())
+    }
+
+    /// Check the terms against the engine and the observed channels.
+    pub fn check(
+        &self,
+        engine: &dyn FrfEngine,
+        n_channels: usize,
+    ) -> Result<(), super::ForwardError> {
+        let mut seen = Vec::new();
+        for t in &self.terms {
+            let name = t.effect.name();
+            if seen.contains(&name) {
+                return Err(super::ForwardError::Setup(format!(
+                    "effect {name} is declared twice"
+                )));
+            }
+            seen.push(name.clone());
+            match t.effect {
+                Effect::Gain { channel, .. } | Effect::Delay { channel, .. }
+                    if channel >= n_channels =>
+                {
+                    return Err(super::ForwardError::Setup(format!(
+                        "effect {name}: channel index {channel} is not observed ({n_channels} channels)"
+                    )));
+                }
+                Effect::PointMass { point, .. } if !engine.inputs().contains(&point) => {
+                    return Err(super::ForwardError::Setup(format!(
+                        "effect {name}: point index {point} is not an input of the engine (a point mass needs the receptances of its point)"
+                    )));
+                }
+                _ => {}
+            }
+            let (lo, hi) = t.effect.bounds();
+            if !(t.value > lo && t.value < hi) {
+                return Err(super::ForwardError::Setup(format!(
+                    "effect {name}: value {} {} is outside ({lo}, {hi})",
+                    t.value,
+                    t.effect.unit()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Structural part: the engine's receptances transformed by the beam factor and the point
+    /// masses at `values` (one per term), read as accelerance at `outputs` driven at `input`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn structural(
+        &self,
+        engine: &dyn FrfEngine,
+        input: usize,
+        outputs: &[usize],
+        omega: &[f64],
+        modulus: &[C64],
+        derivs: bool,
+        values: &[f64],
+    ) -> Result<StructuralColumns, super::ForwardError> {
+        let mut out =
+            self.structural_values(engine, input, outputs, omega, modulus, derivs, values)?;
+        if derivs {
+            // The beam factor's column by a central difference of the exact transform.
+            for (t, term) in self.terms.iter().enumerate() {
+                if matches!(term.effect, Effect::BeamModulus) {
+                    let step = 1e-6;
+                    let mut vp = values.to_vec();
+                    vp[t] += step;
+                    let hp =
+                        self.structural_values(engine, input, outputs, omega, modulus, false, &vp)?;
+                    vp[t] -= 2.0 * step;
+                    let hm =
+                        self.structural_values(engine, input, outputs, omega, modulus, false, &vp)?;
+                    out.d_terms[t] =
+                        hp.h.iter()
+                            .zip(&hm.h)
+                            .map(|(a, b)| (a - b) / (2.0 * step))
+                            .collect();
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn structural_values(
+        &self,
+        engine: &dyn FrfEngine,
+        input: usize,
+        outputs: &[usize],
+        omega: &[f64],
+        modulus: &[C64],
+        derivs: bool,
+        values: &[f64],
+    ) -> Result<StructuralColumns, super::ForwardError> {
+        let zero = C64::new(0.0, 0.0);
+        let beam = self
+            .terms
+            .iter()
+            .zip(values)
+            .find(|(t, _)| matches!(t.effect, Effect::BeamModulus))
+            .map_or(0.0, |(_, v)| *v);
+        let scale = 1.0 + beam;
+        let w_eng: Vec<f64> = omega.iter().map(|w| w / scale.sqrt()).collect();
+        let e_eng: Vec<C64> = modulus.iter().map(|e| e / scale).collect();
+        let sw = engine.sweep(&w_eng, &e_eng, derivs)?;
+        let pos = |p: usize| engine.inputs().iter().position(|&j| j == p);
+        let jin = pos(input).ok_or(crate::frf::FrfError::BadInput(input))?;
+        // Masses: (term index, point, engine input position, value).
+        let masses: Vec<(usize, usize, usize, f64)> = self
+            .terms
+            .iter()
+            .zip(values)
+            .enumerate()
+            .filter_map(|(t, (term, v))| match term.effect {
+                Effect::PointMass { point, .. } => Some((t, point, pos(point)?, *v)),
+                _ => None,
+            })
+            .collect();
+        let np = masses.len();
+        let n = outputs.len();
+        let nl = omega.len();
+        let mut res = StructuralColumns {
+            h: Vec::with_capacity(nl * n),
+            dh: Vec::with_capacity(if derivs { nl * n } else { 0 }),
+            drive: Vec::with_capacity(nl),
+            d_terms: if derivs {
+                vec![vec![zero; nl * n]; self.terms.len()]
+            } else {
+                Vec::new()
+            },
+        };
+        // Targets: the outputs, then the drive point.
+        let targets: Vec<usize> = outputs.iter().copied().chain([input]).collect();
+        for (l, &w) in omega.iter().enumerate() {
+            let acc = -w * w;
+            // Receptance (scaled back) and its E' derivative between point i and input pos j.
+            let r = |i: usize, j: usize| sw.h[sw.idx(l, i, j)] / scale;
+            let dr = |i: usize, j: usize| sw.dh_de[sw.idx(l, i, j)] / (scale * scale);
+            if np == 0 {
+                for (ti, &o) in targets.iter().enumerate() {
+                    if ti == n {
+                        res.drive.push(acc * r(o, jin));
+                    } else {
+                        res.h.push(acc * r(o, jin));
+                        if derivs {
+                            res.dh.push(acc * dr(o, jin));
+                        }
+                    }
+                }
+                continue;
+            }
+            // A = I + D H_PP (np x np), D = diag(-w^2 m).
+            let d: Vec<C64> = masses.iter().map(|m| C64::new(-w * w * m.3, 0.0)).collect();
+            let mut a = vec![zero; np * np];
+            for (p, mp) in masses.iter().enumerate() {
+                for (q, mq) in masses.iter().enumerate() {
+                    a[p * np + q] = d[p] * r(mp.1, mq.2) + if p == q { 1.0 } else { 0.0 };
+                }
+            }
+            // u = G D H_Pi (np), and for the E' derivative also G D dH_Pi and G D dH_PP u.
+            let hpi: Vec<C64> = masses.iter().map(|m| r(m.1, jin)).collect();
+            let dhpi: Vec<C64> = hpi.iter().zip(&d).map(|(h, d)| d * h).collect();
+            let u = small_solve(&a, np, &dhpi, 1).ok_or_else(|| {
+                super::ForwardError::Frf(format!(
+                    "the point masses make the structure singular at {} rad/s",
+                    w
+                ))
+            })?;
+            let (du, dpp_u) = if derivs {
+                let x: Vec<C64> = masses
+                    .iter()
+                    .zip(&d)
+                    .map(|(m, d)| d * dr(m.1, jin))
+                    .collect();
+                let du = small_solve(&a, np, &x, 1).expect("same matrix as above");
+                // y = G D dH_PP u
+                let z: Vec<C64> = (0..np)
+                    .map(|p| {
+                        d[p] * (0..np)
+                            .map(|q| dr(masses[p].1, masses[q].2) * u[q])
+                            .sum::<C64>()
+                    })
+                    .collect();
+                let y = small_solve(&a, np, &z, 1).expect("same matrix as above");
+                (du, y)
+            } else {
+                (Vec::new(), Vec::new())
+            };
+            // c = H_Pi - H_PP u: the mass points' responses with the masses on.
+            let c: Vec<C64> = (0..np)
+                .map(|p| {
+                    hpi[p]
+                        - (0..np)
+                            .map(|q| r(masses[p].1, masses[q].2) * u[q])
+                            .sum::<C64>()
+                })
+                .collect();
+            for (ti, &o) in targets.iter().enumerate() {
+                let hop: Vec<C64> = masses.iter().map(|m| r(o, m.2)).collect();
+                let corr: C64 = hop.iter().zip(&u).map(|(a, b)| a * b).sum();
+                let val = acc * (r(o, jin) - corr);
+                if ti == n {
+                    res.drive.push(val);
+                    continue;
+                }
+                res.h.push(val);
+                if derivs {
+                    let dhop: Vec<C64> = masses.iter().map(|m| dr(o, m.2)).collect();
+                    let dcorr: C64 = dhop.iter().zip(&u).map(|(a, b)| a * b).sum::<C64>()
+                        + hop.iter().zip(&du).map(|(a, b)| a * b).sum::<C64>()
+                        - hop.iter().zip(&dpp_u).map(|(a, b)| a * b).sum::<C64>();
+                    res.dh.push(acc * (dr(o, jin) - dcorr));
+                }
+            }
+            if derivs {
+                // dH'_oi/dd_p = -g_p c_p with g = H_oP A^-1 (the receptance row to the mass
+                // points with the masses on) and c = H_Pi - H_PP u; d_p = -w^2 m_p.
+                for (p, m) in masses.iter().enumerate() {
+                    let t = m.0;
+                    for (k, &o) in outputs.iter().enumerate() {
+                        let hop: Vec<C64> = masses.iter().map(|mm| r(o, mm.2)).collect();
+                        let g = row_times_inverse(&a, np, &hop);
+                        res.d_terms[t][l * n + k] = acc * (w * w) * g[p] * c[p];
+                    }
+                }
+            }
+        }
+        Ok(res)
+    }
+}
+
+/// `x^T = h^T A^-1` for the small matrix `A = I + D H_PP` (row-major): the receptance row
+/// between a point and the mass points with the masses on, `H_oP (I + D H_PP)^-1`.
+fn row_times_inverse(a: &[C64], n: usize, h: &[C64]) -> Vec<C64> {
+    let at: Vec<C64> = (0..n * n).map(|i| a[(i % n) * n + i / n]).collect();
+    small_solve(&at, n, h, 1).unwrap_or_else(|| vec![C64::new(0.0, 0.0); n])
+}

@@ -1,0 +1,378 @@
+//! `rfmlab diagnose STUDY.toml`: the closed loop ([`crate::closed_loop`]) at every level of the
+//! study's `[inference]` section, for its first model (or the one asked for), with the default
+//! candidates: a point mass at every measured point, a gain and a delay per channel, the beam
+//! modulus factor (left out when the adherend has viscous damping `C_b`, where its exact
+//! scaling does not hold). Writes the parquet tables `residuals`, `candidates`, `closed_loop` and a
+//! markdown summary `closed_loop.md` into `<output_dir>.diagnose/`.
+
+use super::{bayes, RunError};
+use crate::closed_loop::{
+    default_candidates, run_closed_loop, ClosedLoopParams, ClosedLoopResult, Residuals,
+};
+use crate::output::{ResultsDir, Table};
+use crate::study::Study;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+/// What `diagnose` found, per level.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DiagnoseSummary {
+    pub study: String,
+    pub model: String,
+    pub output_dir: PathBuf,
+    pub levels: Vec<DiagnoseLevel>,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct DiagnoseLevel {
+    pub level: String,
+    pub conclusion: String,
+    pub chi2_normalised_before: f64,
+    pub chi2_normalised_after: f64,
+    pub relative_norm_before: f64,
+    pub relative_norm_after: f64,
+    pub frac_before: Vec<f64>,
+    pub frac_after: Vec<f64>,
+}
+
+fn out_err(e: crate::output::OutputError) -> RunError {
+    RunError::Output(e)
+}
+
+/// Run the loop on `study` (model `model`, else the first of `[inference] models`).
+pub fn diagnose_study(
+    study: &Study,
+    model: Option<&str>,
+    params: &ClosedLoopParams,
+) -> Result<DiagnoseSummary, RunError> {
+    let t0 = std::time::Instant::now();
+    let Some(inf) = &study.inference else {
+        return Err(super::study_err(
+            study,
+            "inference",
+            "diagnose needs an [inference] section (its noise model and priors define the likelihood the loop tests); add one as in studies/bayes.toml",
+        ));
+    };
+    let name = match model {
+        Some(m) => m.to_string(),
+        None => inf.models.first().cloned().ok_or_else(|| {
+            super::study_err(study, "inference.models", "list at least one model")
+        })?,
+    };
+    let laws = super::model_laws(study)?;
+    let Some((spec, law)) = study
+        .models
+        .iter()
+        .zip(&laws)
+        .find(|(m, _)| m.name.eq_ignore_ascii_case(&name))
+    else {
+        return Err(super::study_err(
+            study,
+            "inference.models",
+            format!("model {name} is not a model of the study"),
+        ));
+    };
+    let built = super::build(study)?;
+    let mut levels = super::load_levels(study, &built)?;
+    let (engine, _, lik_engine) = super::build_engine(study, &built, &mut levels, &laws, None)?;
+    let engine = lik_engine.as_deref().unwrap_or(engine.as_ref());
+    let out = super::sibling(&study.output_dir, "diagnose");
+    let parent = out.parent().unwrap_or(std::path::Path::new("."));
+    let dir_name = out
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "diagnose".into());
+    let mut dir = ResultsDir::create(parent, &dir_name).map_err(out_err)?;
+    let mut summary = Vec::new();
+    let mut results = Vec::new();
+    for level in levels.iter().filter(|l| inf.levels.contains(&l.name)) {
+        let mut post = bayes::build_posterior(study, inf, engine, level, law.as_ref(), &name)?;
+        let x0 = bayes::initial_x(&post, &spec.initial);
+        let col = &level.column;
+        let mass_points: Vec<(usize, u32)> = col
+            .outputs
+            .iter()
+            .zip(&level.response_ids)
+            .filter(|(o, _)| engine.inputs().contains(o))
+            .map(|(o, id)| (*o, *id))
+            .collect();
+        let mut candidates = default_candidates(&level.response_ids, &mass_points);
+        // The beam factor's exact scaling needs an adherend without viscous damping C_b.
+        if built.model.c_b.is_some() {
+            candidates.retain(|c| !matches!(c, crate::forward::Effect::BeamModulus));
+        }
+        let res = run_closed_loop(&mut post, &x0, &candidates, params).map_err(|e| {
+            RunError::Analysis {
+                analysis: format!("closed loop of {name} at {}", level.name),
+                message: e.to_string(),
+            }
+        })?;
+        let truth = level
+            .truth
+            .as_ref()
+            .filter(|t| t.model.param_names() == law.param_names())
+            .map(|t| t.params.clone());
+        summary.push(DiagnoseLevel {
+            level: level.name.clone(),
+            conclusion: res.conclusion.clone(),
+            chi2_normalised_before: res.before.residuals.chi2_normalised,
+            chi2_normalised_after: res.after.residuals.chi2_normalised,
+            relative_norm_before: res.before.residuals.relative_norm,
+            relative_norm_after: res.after.residuals.relative_norm,
+            frac_before: res.before.residuals.frac.clone(),
+            frac_after: res.after.residuals.frac.clone(),
+        });
+        results.push((
+            level.name.clone(),
+            level.freq_hz.clone(),
+            level.response_ids.clone(),
+            res,
+            truth,
+        ));
+    }
+    dir.write_table(&residuals_table(&results)?)
+        .map_err(out_err)?;
+    dir.write_table(&candidates_table(&results)?)
+        .map_err(out_err)?;
+    dir.write_table(&closed_loop_table(&results)?)
+        .map_err(out_err)?;
+    let md = markdown(&study.name, &name, &results);
+    dir.write_bytes("closed_loop.md", md.as_bytes())
+        .map_err(out_err)?;
+    Ok(DiagnoseSummary {
+        study: study.name.clone(),
+        model: name,
+        output_dir: dir.path().to_path_buf(),
+        levels: summary,
+        seconds: t0.elapsed().as_secs_f64(),
+    })
+}
+
+type LevelResult = (
+    String,
+    Vec<f64>,
+    Vec<u32>,
+    ClosedLoopResult,
+    Option<Vec<f64>>,
+);
+
+/// `residuals`: level, stage ("before"/"after"), freq_hz, channel, standardised residual.
+fn residuals_table(results: &[LevelResult]) -> Result<Table, RunError> {
+    let (mut lv, mut st, mut f, mut ch, mut re, mut im) = (
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+        Vec::new(),
+    );
+    for (level, freq, ids, res, _) in results {
+        for (stage, r) in [
+            ("before", &res.before.residuals),
+            ("after", &res.after.residuals),
+        ] {
+            let n = ids.len();
+            for (o, z) in r.z.iter().enumerate() {
+                lv.push(level.clone());
+                st.push(stage.to_string());
+                f.push(freq[o / n]);
+                ch.push(ids[o % n]);
+                re.push(z.re);
+                im.push(z.im);
+            }
+        }
+    }
+    let mut t = Table::new("residuals");
+    t.push_str("level", lv)
+        .and_then(|t| t.push_str("stage", st))
+        .and_then(|t| t.push_f64("freq_hz", "Hz", f))
+        .and_then(|t| t.push_u32("channel", "", ch))
+        .and_then(|t| t.push_f64("z_re", "1", re))
+        .and_then(|t| t.push_f64("z_im", "1", im))
+        .map_err(out_err)?;
+    Ok(t)
+}
+
+/// `candidates`: one row per candidate and round.
+fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
+    let mut t = Table::new("candidates");
+    let (mut c_level, mut c_round, mut c_rank, mut c_effect, mut c_kind) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut num: [Vec<f64>; 4] = Default::default();
+    let mut refit: [Vec<Option<f64>>; 4] = Default::default();
+    let (mut acc, mut verdict, mut unit) = (Vec::new(), Vec::new(), Vec::new());
+    for (level, _, _, res, _) in results {
+        for c in &res.candidates {
+            c_level.push(level.clone());
+            c_round.push(c.round as i64);
+            c_rank.push(c.rank as i64);
+            c_effect.push(c.effect.name());
+            c_kind.push(c.effect.kind().into());
+            unit.push(c.effect.unit().to_string());
+            num[0].push(c.score);
+            num[1].push(c.p_value);
+            num[2].push(c.one_step);
+            num[3].push(c.one_step_sd);
+            let r = c.refit.as_ref();
+            refit[0].push(r.map(|r| r.evidence_gain));
+            refit[1].push(r.map(|r| r.log_evidence));
+            refit[2].push(r.map(|r| r.size));
+            refit[3].push(r.map(|r| r.sd));
+            acc.push(r.is_some_and(|r| r.accepted));
+            verdict.push(r.map_or("not refitted".to_string(), |r| r.verdict.clone()));
+        }
+    }
+    let [score, p, est, est_sd] = num;
+    let [gain, logz, size, sd] = refit;
+    t.push_str("level", c_level)
+        .and_then(|t| t.push_i64("round", "", c_round))
+        .and_then(|t| t.push_i64("rank", "", c_rank))
+        .and_then(|t| t.push_str("effect", c_effect))
+        .and_then(|t| t.push_str("kind", c_kind))
+        .and_then(|t| t.push_str("unit", unit))
+        .and_then(|t| t.push_f64("score", "1", score))
+        .and_then(|t| t.push_f64("p_value", "1", p))
+        .and_then(|t| t.push_f64("one_step_size", "SI (see unit)", est))
+        .and_then(|t| t.push_f64("one_step_sd", "SI (see unit)", est_sd))
+        .and_then(|t| t.push_opt_f64("evidence_gain", "nat", gain))
+        .and_then(|t| t.push_opt_f64("log_evidence", "nat", logz))
+        .and_then(|t| t.push_opt_f64("size", "SI (see unit)", size))
+        .and_then(|t| t.push_opt_f64("size_sd", "SI (see unit)", sd))
+        .and_then(|t| t.push_bool("accepted", acc))
+        .and_then(|t| t.push_str("verdict", verdict))
+        .map_err(out_err)?;
+    Ok(t)
+}
+
+/// `closed_loop`: per level and quantity, before and after (parameters with sds, and the
+/// residual statistics), and the truth where the data are simulated.
+fn closed_loop_table(results: &[LevelResult]) -> Result<Table, RunError> {
+    let (mut lv, mut q) = (Vec::new(), Vec::new());
+    let (mut b, mut bs, mut a, mut as_, mut tr) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (level, _, ids, res, truth) in results {
+        for (i, name) in res.after.names.iter().enumerate() {
+            let j = res.before.names.iter().position(|n| n == name);
+            lv.push(level.clone());
+            q.push(name.clone());
+            b.push(j.map(|j| res.before.values[j]));
+            bs.push(j.map(|j| res.before.sd[j]));
+            a.push(Some(res.after.values[i]));
+            as_.push(Some(res.after.sd[i]));
+            tr.push(truth.as_ref().and_then(|t| t.get(i).copied()));
+        }
+        let stat = |r: &Residuals| -> Vec<(String, f64)> {
+            let mut v = vec![
+                ("chi2_normalised".to_string(), r.chi2_normalised),
+                ("relative_residual_norm".to_string(), r.relative_norm),
+                ("chi2_p_value".to_string(), r.p_value),
+            ];
+            for (k, id) in ids.iter().enumerate() {
+                v.push((format!("frac_ch{id}"), r.frac[k]));
+                v.push((format!("runs_z_ch{id}"), r.channels[k].runs_z));
+            }
+            v
+        };
+        for ((n, x), (_, y)) in stat(&res.before.residuals)
+            .into_iter()
+            .zip(stat(&res.after.residuals))
+        {
+            lv.push(level.clone());
+            q.push(n);
+            b.push(Some(x));
+            bs.push(None);
+            a.push(Some(y));
+            as_.push(None);
+            tr.push(None);
+        }
+    }
+    let mut t = Table::new("closed_loop");
+    t.push_str("level", lv)
+        .and_then(|t| t.push_str("quantity", q))
+        .and_then(|t| t.push_opt_f64("before", "SI", b))
+        .and_then(|t| t.push_opt_f64("before_sd", "SI", bs))
+        .and_then(|t| t.push_opt_f64("after", "SI", a))
+        .and_then(|t| t.push_opt_f64("after_sd", "SI", as_))
+        .and_then(|t| t.push_opt_f64("truth", "SI", tr))
+        .map_err(out_err)?;
+    Ok(t)
+}
+
+fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Closed loop: {study}, {model}\n");
+    for (level, _, ids, res, truth) in results {
+        let _ = writeln!(s, "## Level {level}\n\n**{}**\n", res.conclusion);
+        let _ = writeln!(
+            s,
+            "| round | rank | effect | score T | p | evidence gain (nat) | size +- sd | verdict |\n|---|---|---|---|---|---|---|---|"
+        );
+        for c in res
+            .candidates
+            .iter()
+            .filter(|c| c.rank <= 5 || c.refit.is_some())
+        {
+            let (g, sz, v) = match &c.refit {
+                Some(r) => (
+                    format!("{:.1}", r.evidence_gain),
+                    format!("{:.4e} +- {:.1e} {}", r.size, r.sd, c.effect.unit()),
+                    r.verdict.clone(),
+                ),
+                None => ("".into(), "".into(), "not refitted".into()),
+            };
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {:.1} | {:.2e} | {g} | {sz} | {v} |",
+                c.round,
+                c.rank,
+                c.effect.name(),
+                c.score,
+                c.p_value
+            );
+        }
+        for (e, _, _) in &res.accepted {
+            let _ = writeln!(s, "\n- {}: {}", e.name(), e.physics());
+        }
+        let _ = writeln!(s, "\n| | before | after |\n|---|---|---|");
+        let (b, a) = (&res.before.residuals, &res.after.residuals);
+        let _ = writeln!(
+            s,
+            "| normalised chi-square | {:.3} | {:.3} |",
+            b.chi2_normalised, a.chi2_normalised
+        );
+        let _ = writeln!(
+            s,
+            "| relative residual norm | {:.4} | {:.4} |",
+            b.relative_norm, a.relative_norm
+        );
+        for (k, id) in ids.iter().enumerate() {
+            let _ = writeln!(s, "| FRAC ch{id} | {:.5} | {:.5} |", b.frac[k], a.frac[k]);
+        }
+        let _ = writeln!(
+            s,
+            "\n| parameter | before +- sd | after +- sd | truth |\n|---|---|---|---|"
+        );
+        for (i, n) in res.after.names.iter().enumerate() {
+            let before = res
+                .before
+                .names
+                .iter()
+                .position(|m| m == n)
+                .map_or(String::new(), |j| {
+                    format!("{:.5e} +- {:.2e}", res.before.values[j], res.before.sd[j])
+                });
+            let t = truth
+                .as_ref()
+                .and_then(|t| t.get(i))
+                .map_or(String::new(), |v| format!("{v:.5e}"));
+            let _ = writeln!(
+                s,
+                "| {n} | {before} | {:.5e} +- {:.2e} | {t} |",
+                res.after.values[i], res.after.sd[i]
+            );
+        }
+        s.push('\n');
+    }
+    s
+}
