@@ -581,7 +581,7 @@ mod study_run {
     #[ignore]
     fn bayes_study_with_comparison() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let study = crate::study::load(&root.join("studies/bayes.toml")).unwrap();
+        let study = crate::study::load(&root.join("studies/bayes_compare.toml")).unwrap();
         let opts = super::super::RunOptions {
             output_dir: Some(root.join("results/bayes_compare")),
             ..Default::default()

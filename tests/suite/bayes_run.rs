@@ -25,12 +25,8 @@ fn study_text(out: &Path, extra_solver: &str) -> String {
     .replace("\"data/", &format!("\"{}/", data.display()))
     .replace("band_hz = [1.0, 500.0]", "band_hz = [10.0, 60.0]")
     .replace(
-        "models = [\"model1\", \"model2\", \"model3\", \"model4\", \"model5\"]",
+        "models = [\"model3\", \"model4\", \"model5\"]",
         "models = [\"model4\"]",
-    )
-    .replace(
-        "samplers = [\"nuts\", \"tmcmc\", \"stepping_stone\"]",
-        "samplers = [\"nuts\", \"tmcmc\"]",
     )
     .replace("levels = [\"L1\", \"L2\"]", "levels = [\"L1\"]")
     .replace("chains = 4", "chains = 2")
