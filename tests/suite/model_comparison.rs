@@ -101,8 +101,10 @@ fn loo_and_waic_equal_arviz_and_evidence_estimators_agree() {
     let az: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let ours = read_json(
         &py,
-        "import sys, json, pandas as pd; d = sys.argv[1]; m = pd.read_parquet(d + '/model_comparison.parquet'); p = pd.read_parquet(d + '/pointwise_loglik.parquet'); c = pd.read_parquet(d + '/ppc.parquet'); e = pd.read_parquet(d + '/evidence.parquet'); \
-print(json.dumps({'mc': m.to_dict('records'), 'pw': p.groupby(['level','model','line']).first().reset_index()[['level','model','line','elpd_loo_i','pareto_k','elpd_waic_i']].to_dict('records'), 'ppc': c.groupby(['level','model','channel']).first().reset_index()[['level','model','channel','p_value']].to_dict('records'), 'ev': e.to_dict('records')}))",
+        "import sys, json, math, pandas as pd; d = sys.argv[1]; \
+clean = lambda o: None if isinstance(o, float) and not math.isfinite(o) else ({k: clean(v) for k, v in o.items()} if isinstance(o, dict) else ([clean(v) for v in o] if isinstance(o, list) else o)); \
+ m = pd.read_parquet(d + '/model_comparison.parquet'); p = pd.read_parquet(d + '/pointwise_loglik.parquet'); c = pd.read_parquet(d + '/ppc.parquet'); e = pd.read_parquet(d + '/evidence.parquet'); \
+print(json.dumps(clean({'mc': m.to_dict('records'), 'pw': p.groupby(['level','model','line']).first().reset_index()[['level','model','line','elpd_loo_i','pareto_k','elpd_waic_i']].to_dict('records'), 'ppc': c.groupby(['level','model','channel']).first().reset_index()[['level','model','channel','p_value']].to_dict('records'), 'ev': e.to_dict('records')})))",
         &out,
     );
     let close = |what: &str, a: f64, b: f64| {
