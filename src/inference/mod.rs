@@ -20,6 +20,7 @@ pub mod map;
 pub mod nuts;
 pub mod prior;
 pub mod sampling;
+pub mod special;
 pub mod stepping_stone;
 pub mod tmcmc;
 pub mod whiten;
