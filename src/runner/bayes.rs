@@ -523,7 +523,7 @@ fn adopt(map: &mut MapResult, again: MapResult) {
 /// Re-linearise the measurement bias at the MAP and search again from it until the MAP stops
 /// moving (relative 1e-7 in every law parameter); leaves the bias linearised at the final MAP,
 /// where the linearised and the exact likelihood agree in value and gradient.
-fn relinearise_to_map(
+pub fn relinearise_to_map(
     post: &mut FrfPosterior<'_>,
     map: &mut MapResult,
     params: &MapParams,

@@ -44,6 +44,7 @@ use crate::material::ConstitutiveModel;
 use crate::output::shards::Shard;
 use crate::output::Table;
 use crate::rom::{build_rom, ModulusRange, ReducedModel, RomParams};
+use crate::runner::bayes::relinearise_to_map;
 use rand::RngExt;
 use rayon::prelude::*;
 pub use spec::{load_validation, ValidationSpec};
@@ -443,9 +444,6 @@ pub fn run_shard(
     })
 }
 
-/// Most re-linearisations of the measurement bias at the MAP (as the study runner).
-const MAX_RELINEARISATIONS: usize = 6;
-
 /// A unit's MAP search: the prior median plus `map_starts` space-filling starts, on the
 /// measurement bias linearised at the prior median, then re-linearised at the MAP until the
 /// MAP stops moving (there the linearised and the exact likelihood have the same value and
@@ -469,36 +467,7 @@ fn fit(
         ..MapParams::default()
     };
     let mut map = find_map(post, Some(&x0), &params, &|| ()).map_err(|e| e.to_string())?;
-    for _ in 0..MAX_RELINEARISATIONS {
-        let p_lin = map.map_physical[..nl].to_vec();
-        post.likelihood
-            .forward
-            .linearise_measurement(&p_lin)
-            .map_err(|e| e.to_string())?;
-        let again = find_map(
-            post,
-            Some(&map.map_x),
-            &MapParams {
-                n_starts: 0,
-                ..params.clone()
-            },
-            &|| (),
-        )
-        .map_err(|e| e.to_string())?;
-        let moved = again.map_physical[..nl]
-            .iter()
-            .zip(&p_lin)
-            .map(|(a, b)| ((a - b) / b).abs())
-            .fold(0.0, f64::max);
-        let evaluations = map.evaluations + again.evaluations;
-        map = MapResult {
-            evaluations,
-            ..again
-        };
-        if moved < 1e-7 {
-            break;
-        }
-    }
+    relinearise_to_map(post, &mut map, &params, nl)?;
     if !map.laplace.positive_definite {
         return Err("the Hessian at the MAP is not positive definite".into());
     }
