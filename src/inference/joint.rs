@@ -16,7 +16,7 @@
 //! physical value in every part. There is no second likelihood path: the parts are the same
 //! [`Posterior`]s the single-level inference samples.
 
-use super::prior::Prior;
+use super::prior::{log_density_all, log_jacobian_all, quantile_all, to_physical_all, Prior};
 use super::{DensityError, Posterior};
 use rand::rngs::StdRng;
 
@@ -126,16 +126,7 @@ impl Posterior for JointPosterior<'_> {
         self.names.clone()
     }
     fn log_prior(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
-        let mut s = 0.0;
-        let mut g = grad;
-        for (j, (xj, p)) in x.iter().zip(&self.priors).enumerate() {
-            let (l, d) = p.log_density_x(*xj);
-            s += l;
-            if let Some(g) = g.as_deref_mut() {
-                g[j] = d;
-            }
-        }
-        s
+        log_density_all(&self.priors, x, grad)
     }
     fn log_likelihood(&self, x: &[f64], grad: Option<&mut [f64]>) -> Result<f64, DensityError> {
         let mut total = 0.0;
@@ -162,28 +153,13 @@ impl Posterior for JointPosterior<'_> {
         self.priors.iter().map(|p| p.sample_x(rng)).collect()
     }
     fn constrained(&self, x: &[f64]) -> Vec<f64> {
-        x.iter()
-            .zip(&self.priors)
-            .map(|(x, p)| p.to_physical(*x))
-            .collect()
+        to_physical_all(&self.priors, x)
     }
     fn log_jacobian(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
-        let mut s = 0.0;
-        let mut g = grad;
-        for (i, (xi, p)) in x.iter().zip(&self.priors).enumerate() {
-            s += p.dp_dx(*xi).abs().ln();
-            if let Some(g) = g.as_deref_mut() {
-                let e = 1e-6 * (1.0 + xi.abs());
-                g[i] = (p.dp_dx(xi + e).abs().ln() - p.dp_dx(xi - e).abs().ln()) / (2.0 * e);
-            }
-        }
-        s
+        log_jacobian_all(&self.priors, x, grad)
     }
     fn prior_quantile(&self, u: &[f64]) -> Vec<f64> {
-        u.iter()
-            .zip(&self.priors)
-            .map(|(u, p)| p.quantile_x(*u))
-            .collect()
+        quantile_all(&self.priors, u)
     }
 }
 

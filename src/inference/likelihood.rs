@@ -42,7 +42,7 @@
 //! the `tau`s, then `nu` when inferred) and maps them to unconstrained coordinates (see
 //! [`super::prior`]).
 
-use super::prior::Prior;
+use super::prior::{log_density_all, log_jacobian_all, quantile_all, to_physical_all, Prior};
 use super::{DensityError, Posterior};
 use crate::common::C64;
 use crate::forward::{ForwardError, ForwardModel};
@@ -774,10 +774,7 @@ impl<'a> FrfPosterior<'a> {
 
     /// Physical values of all coordinates.
     pub fn physical(&self, x: &[f64]) -> Vec<f64> {
-        x.iter()
-            .zip(&self.priors)
-            .map(|(x, p)| p.to_physical(*x))
-            .collect()
+        to_physical_all(&self.priors, x)
     }
 
     /// Unconstrained coordinates of physical values.
@@ -797,22 +794,7 @@ impl Posterior for FrfPosterior<'_> {
         self.names.clone()
     }
     fn log_prior(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
-        let mut s = 0.0;
-        match grad {
-            Some(g) => {
-                for ((xi, p), gi) in x.iter().zip(&self.priors).zip(g.iter_mut()) {
-                    let (l, d) = p.log_density_x(*xi);
-                    s += l;
-                    *gi = d;
-                }
-            }
-            None => {
-                for (xi, p) in x.iter().zip(&self.priors) {
-                    s += p.log_density_x(*xi).0;
-                }
-            }
-        }
-        s
+        log_density_all(&self.priors, x, grad)
     }
     fn log_likelihood(&self, x: &[f64], grad: Option<&mut [f64]>) -> Result<f64, DensityError> {
         let phys = self.physical(x);
@@ -845,23 +827,9 @@ impl Posterior for FrfPosterior<'_> {
         self.physical(x)
     }
     fn log_jacobian(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
-        let mut s = 0.0;
-        let mut g = grad;
-        for (i, (xi, p)) in x.iter().zip(&self.priors).enumerate() {
-            let d = p.dp_dx(*xi);
-            s += d.abs().ln();
-            if let Some(g) = g.as_deref_mut() {
-                // d/dx ln|dp/dx| by a central difference of the closed form.
-                let e = 1e-6 * (1.0 + xi.abs());
-                g[i] = (p.dp_dx(xi + e).abs().ln() - p.dp_dx(xi - e).abs().ln()) / (2.0 * e);
-            }
-        }
-        s
+        log_jacobian_all(&self.priors, x, grad)
     }
     fn prior_quantile(&self, u: &[f64]) -> Vec<f64> {
-        u.iter()
-            .zip(&self.priors)
-            .map(|(u, p)| p.quantile_x(*u))
-            .collect()
+        quantile_all(&self.priors, u)
     }
 }

@@ -17,7 +17,7 @@
 use super::law::{ParamKind, RelaxationLaw};
 use super::MaterialFitError;
 use crate::common::C64;
-use crate::inference::prior::Prior;
+use crate::inference::prior::{log_density_all, quantile_all, to_physical_all, Prior};
 use crate::inference::{DensityError, Posterior};
 use rand::rngs::StdRng;
 
@@ -212,16 +212,7 @@ impl Posterior for MaterialPosterior {
         self.names.clone()
     }
     fn log_prior(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
-        let mut s = 0.0;
-        let mut g = grad;
-        for (i, (xi, p)) in x.iter().zip(&self.priors).enumerate() {
-            let (v, d) = p.log_density_x(*xi);
-            s += v;
-            if let Some(g) = g.as_deref_mut() {
-                g[i] = d;
-            }
-        }
-        s
+        log_density_all(&self.priors, x, grad)
     }
     fn log_likelihood(&self, x: &[f64], grad: Option<&mut [f64]>) -> Result<f64, DensityError> {
         let np = self.law.n_params();
@@ -273,10 +264,7 @@ impl Posterior for MaterialPosterior {
         self.priors.iter().map(|p| p.sample_x(rng)).collect()
     }
     fn constrained(&self, x: &[f64]) -> Vec<f64> {
-        x.iter()
-            .zip(&self.priors)
-            .map(|(x, p)| p.to_physical(*x))
-            .collect()
+        to_physical_all(&self.priors, x)
     }
     fn log_jacobian(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
         let mut s = 0.0;
@@ -297,9 +285,6 @@ impl Posterior for MaterialPosterior {
         s
     }
     fn prior_quantile(&self, u: &[f64]) -> Vec<f64> {
-        u.iter()
-            .zip(&self.priors)
-            .map(|(u, p)| p.quantile_x(*u))
-            .collect()
+        quantile_all(&self.priors, u)
     }
 }
