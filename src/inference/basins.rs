@@ -162,4 +162,35 @@ mod tests {
         assert!(own as f64 >= 0.8 * near as f64, "{own} of {near}");
         assert!(near >= 10, "{near}");
     }
+
+    #[test]
+    fn polished_end_points_of_one_well_coincide_and_stay_in_their_well() {
+        // End points scattered by a fraction of the wells' width (sd 0.15), as a gradient
+        // tolerance leaves them: after Newton polishing, the two wells' points agree to 1e-6
+        // (a 1e-6 clustering tolerance finds exactly the two wells) and none changes well.
+        use crate::inference::map::polish_end_point;
+        let ends = [
+            [1.05, 0.03],
+            [0.97, -0.02],
+            [1.01, 0.05],
+            [-0.95, -0.04],
+            [-1.04, 0.02],
+        ];
+        let polished: Vec<(Vec<f64>, f64)> = ends
+            .iter()
+            .map(|e| polish_end_point(&DoubleWell, e, 1e-14).unwrap())
+            .collect();
+        for (e, (x, _)) in ends.iter().zip(&polished) {
+            assert_eq!(e[0].signum(), x[0].signum(), "{e:?} -> {x:?}");
+            assert!((x[0].abs() - 1.0).abs() < 0.05 && x[1].abs() < 1e-6, "{x:?}");
+        }
+        let pts: Vec<Option<Vec<f64>>> = polished.iter().map(|(x, _)| Some(x.clone())).collect();
+        let obj: Vec<f64> = polished.iter().map(|(_, f)| *f).collect();
+        let (of, basins) = cluster(&pts, &obj, 1e-6);
+        assert_eq!(basins.len(), 2, "{basins:?}");
+        assert_eq!(of, vec![Some(0), Some(0), Some(0), Some(1), Some(1)]);
+        // Unpolished, the same tolerance splits every end point into its own basin.
+        let raw: Vec<Option<Vec<f64>>> = ends.iter().map(|e| Some(e.to_vec())).collect();
+        assert_eq!(cluster(&raw, &[0.0; 5], 1e-6).1.len(), 5);
+    }
 }

@@ -471,6 +471,22 @@ fn polish(
     Ok((x, steps))
 }
 
+/// Newton-polish an end point of a local search to the stationary point of its basin (the
+/// physical-MAP objective, as the search uses): L-BFGS stops on a gradient tolerance, which
+/// leaves end points of one basin scattered by a fraction of a posterior sd; after polishing
+/// they coincide to the Newton decrement `tol`. Returns the point and its `-log p` (up to
+/// `log Z`). Where the Hessian is not positive definite (a saddle, a flat ridge) the point is
+/// returned as it was.
+pub fn polish_end_point(
+    post: &dyn Posterior,
+    x: &[f64],
+    tol: f64,
+) -> Result<(Vec<f64>, f64), DensityError> {
+    let (x, _) = polish(post, x, tol, true)?;
+    let f = -objective(post, &x, None, true)?;
+    Ok((x, f))
+}
+
 /// The multistart search: `initial` (unconstrained, e.g. the study's initial values) plus a
 /// Latin hypercube over the prior.
 pub fn find_map(

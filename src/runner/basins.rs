@@ -4,7 +4,10 @@
 //! points clustered into basins ([`crate::inference::basins`]).
 //!
 //! Distances are measured in Laplace posterior sd of the unconstrained coordinates at the MAP:
-//! end points within `tolerance_sd` of a basin's best point in every coordinate share it. For
+//! end points within `tolerance_sd` of a basin's best point in every coordinate share it. The
+//! search's end points are first Newton-polished to their basin's stationary point
+//! ([`polish_end_point`]): L-BFGS stops on a gradient tolerance, a fraction of an sd short of
+//! it, which a 0.1-sd tolerance would otherwise count as separate basins. For
 //! the search, basin 0 is the global MAP's (lowest `-log p`). The RFM minimises another
 //! objective (its fixed point weighs lines by the modulus sensitivity, not by the noise), so its
 //! basins are ordered by its own FRF residual and reported with their distance to the MAP.
@@ -19,7 +22,7 @@ use super::{LevelData, RunError};
 use crate::frf::FrfEngine;
 use crate::inference::basins::{cluster, Basin};
 use crate::inference::likelihood::FrfPosterior;
-use crate::inference::map::{find_map, MapParams};
+use crate::inference::map::{find_map, polish_end_point, MapParams};
 use crate::inference::Posterior;
 use crate::material::ConstitutiveModel;
 use crate::study::comparison::BasinSettings;
@@ -108,6 +111,18 @@ fn scaled(post: &FrfPosterior<'_>, phys: &[f64], sd: &[f64]) -> Vec<f64> {
         .collect()
 }
 
+/// The first parameter whose unconstrained coordinate sits at its prior box's bound
+/// (|x| > 9: within 1e-4 of the bound in prior quantile; the logistic map's gradient vanishes
+/// there, so L-BFGS reports convergence on a plateau that is no optimum).
+fn at_prior_bound(post: &FrfPosterior<'_>, x: &[f64]) -> Option<String> {
+    use crate::inference::prior::Prior;
+    x.iter()
+        .zip(&post.priors)
+        .zip(&post.names)
+        .find(|((x, p), _)| x.abs() > 9.0 && !matches!(p, Prior::LogNormal { .. }))
+        .map(|(_, n)| n.clone())
+}
+
 /// Run the basin study of `result` (the level's posterior of `law`) with `post` rebuilt in the
 /// state the MAP search saw (measurement bias linearised at the MAP when the study does so).
 #[allow(clippy::too_many_arguments)]
@@ -157,12 +172,26 @@ pub fn run(
             message: e.to_string(),
         }
     })?;
-    let ends: Vec<Option<Vec<f64>>> = map
+    // Polish each end point (in parallel, collected in start order); a failed polish keeps
+    // the search's end point.
+    let polished: Vec<(Vec<f64>, f64)> = map
         .starts
-        .iter()
-        .map(|s| s.objective.is_finite().then(|| post.physical(&s.end_x)))
+        .par_iter()
+        .map(|s| {
+            if !s.objective.is_finite() {
+                return (s.end_x.clone(), s.objective);
+            }
+            match polish_end_point(post, &s.end_x, params.polish_tol) {
+                Ok((x, f)) if f.is_finite() && f <= s.objective => (x, f),
+                _ => (s.end_x.clone(), s.objective),
+            }
+        })
         .collect();
-    let obj: Vec<f64> = map.starts.iter().map(|s| s.objective).collect();
+    let ends: Vec<Option<Vec<f64>>> = polished
+        .iter()
+        .map(|(x, f)| f.is_finite().then(|| post.physical(x)))
+        .collect();
+    let obj: Vec<f64> = polished.iter().map(|(_, f)| *f).collect();
     let pts: Vec<Option<Vec<f64>>> = ends
         .iter()
         .map(|e| e.as_ref().map(|p| scaled(post, p, &sd)))
@@ -178,9 +207,12 @@ pub fn run(
             kind: s.kind,
             start: post.physical(&s.start_x),
             end,
-            objective: s.objective,
+            objective: polished[s.index].1,
             iterations: s.iterations,
-            stop_reason: s.stop_reason.clone(),
+            stop_reason: match at_prior_bound(post, &polished[s.index].0) {
+                Some(name) => format!("{} (stalled at the prior bound of {name})", s.stop_reason),
+                None => s.stop_reason.clone(),
+            },
             basin: *b,
         })
         .collect();

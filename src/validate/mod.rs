@@ -6,6 +6,10 @@
 //! Data: the virtual experiment of the validation file's experiment ([`simulate_level`] in
 //! frequency-domain mode: block spectra drawn from their exact Gaussian law, with the
 //! experiment's chain: window, averages, sensor noise, shaker), at the force of its chosen level.
+//! By default ([`DataSource::NoiseModel`]) its H1 is replaced by a draw from the likelihood's
+//! own law at the same noise level, as SBC requires (Talts et al. 2018: data from the model
+//! that is inferred, so that a failure points at the computation); `data =
+//! "virtual_experiment"` keeps the experiment's H1 and so also checks the noise model.
 //! Simulation and inference share one certified ROM (an inverse crime on purpose: these checks
 //! calibrate the statistics, not the ROM; the ROM's own error is certified elsewhere).
 //!
@@ -47,7 +51,7 @@ use crate::rom::{build_rom, ModulusRange, ReducedModel, RomParams};
 use crate::runner::bayes::relinearise_to_map;
 use rand::RngExt;
 use rayon::prelude::*;
-pub use spec::{load_validation, ValidationSpec};
+pub use spec::{load_validation, DataSource, ValidationSpec};
 use std::time::Instant;
 
 /// Errors of a validation run.
@@ -81,6 +85,18 @@ pub struct Setup {
     /// ROM basis size and certified error.
     pub rom_basis: usize,
     pub rom_error: f64,
+    /// Where the data come from.
+    pub data: DataSource,
+}
+
+/// One unit's data set: what the likelihood sees, the equivalent number of independent
+/// averages, and (for [`DataSource::NoiseModel`]) the variances the data were drawn with,
+/// which the likelihood then uses as fixed.
+#[derive(Clone, Debug)]
+pub struct SimData {
+    pub data: FrfData,
+    pub n_averages: f64,
+    pub variances: Option<Vec<f64>>,
 }
 
 /// The law and truth of a model by name: Model 4 at the default data's truth, the others at
@@ -220,17 +236,24 @@ impl Setup {
             truth4: lv.params.clone(),
             rom_basis: cert.basis_size,
             rom_error: cert.max_rel_error,
+            data: spec.data,
         })
     }
 
-    /// One simulated data set of `law` at `params` with chain seed `seed`: the likelihood's
-    /// data and the equivalent number of independent averages.
+    /// One simulated data set of `law` at `params` with chain seed `seed`.
+    ///
+    /// The virtual experiment runs in either case (its coherence sets the noise level). With
+    /// [`DataSource::NoiseModel`] its H1 is then replaced by a draw from the likelihood's own
+    /// law: `X = E[H1](params) + e`, `Re e, Im e ~ N(0, v)` independent, with
+    /// `v = |E[H1]|^2 (1 - g2) / (2 n g2)` (the coherence scale of
+    /// [`Scale::Coherence`], floor included, evaluated at the mean instead of the data), and
+    /// the posterior uses these `v` as fixed variances.
     pub fn simulate(
         &self,
         law: &dyn ConstitutiveModel,
         params: &[f64],
         seed: u64,
-    ) -> Result<(FrfData, f64), String> {
+    ) -> Result<SimData, String> {
         let modulus = |w: f64| law.modulus(params, w);
         let plant = EnginePlant {
             engine: &self.rom,
@@ -253,15 +276,48 @@ impl Setup {
                 coherence.push(c.coherence[l]);
             }
         }
-        Ok((
-            FrfData {
+        let n_averages = sim.truth.effective_averages;
+        let variances = match self.data {
+            DataSource::VirtualExperiment => None,
+            DataSource::NoiseModel => {
+                let outputs: Vec<usize> = (0..n_out).collect();
+                let forward = ForwardModel::new(
+                    &self.rom,
+                    law,
+                    &self.omega_rad_s,
+                    self.excitation,
+                    &outputs,
+                    Some(self.measurement.clone()),
+                )
+                .map_err(|e| e.to_string())?;
+                let mean = forward.predict(params, false).map_err(|e| e.to_string())?;
+                let mut rng = unit_rng(seed, 0x6e6f_6973_65);
+                let mut v = Vec::with_capacity(values.len());
+                for (o, (x, g2)) in values.iter_mut().zip(&coherence).enumerate() {
+                    let m = mean.values[o];
+                    let g2 = g2.clamp(f64::MIN_POSITIVE, 1.0);
+                    let var = m.norm_sqr() * (1.0 - g2).max(DEFAULT_COHERENCE_FLOOR)
+                        / (2.0 * n_averages * g2);
+                    let (a, b): (f64, f64) = (
+                        rng.sample(rand_distr::StandardNormal),
+                        rng.sample(rand_distr::StandardNormal),
+                    );
+                    *x = m + crate::common::C64::new(a, b) * var.sqrt();
+                    v.push(var);
+                }
+                Some(v)
+            }
+        };
+        Ok(SimData {
+            data: FrfData {
                 freq_hz: sim.freq_hz.clone(),
                 n_out,
                 values,
                 coherence: Some(coherence),
             },
-            sim.truth.effective_averages,
-        ))
+            n_averages,
+            variances,
+        })
     }
 
     /// The posterior of `law` on `data` under log-normal priors of width `sigma_ln` around
@@ -269,8 +325,7 @@ impl Setup {
     pub fn posterior<'a>(
         &'a self,
         law: &'a dyn ConstitutiveModel,
-        data: FrfData,
-        n_averages: f64,
+        sim: &SimData,
         median: &[f64],
         sigma_ln: f64,
     ) -> Result<FrfPosterior<'a>, String> {
@@ -285,15 +340,20 @@ impl Setup {
         )
         .map_err(|e| e.to_string())?;
         let noise = NoiseModel {
-            scale: Scale::Coherence {
-                n_averages,
-                floor: DEFAULT_COHERENCE_FLOOR,
+            scale: match &sim.variances {
+                Some(v) => Scale::Fixed {
+                    variances: v.clone(),
+                },
+                None => Scale::Coherence {
+                    n_averages: sim.n_averages,
+                    floor: DEFAULT_COHERENCE_FLOOR,
+                },
             },
             errors: ErrorLaw::Gaussian,
             model_error: 0.0,
         };
-        let lik =
-            FrfLikelihood::new(forward, data, noise, &self.point_ids).map_err(|e| e.to_string())?;
+        let lik = FrfLikelihood::new(forward, sim.data.clone(), noise, &self.point_ids)
+            .map_err(|e| e.to_string())?;
         let priors = median
             .iter()
             .map(|&m| Prior::LogNormal {
@@ -511,8 +571,8 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
             let sim_seed: u64 = rng.random();
             let map_seed: u64 = rng.random();
             let res = (|| {
-                let (data, n_eff) = setup.simulate(law.as_ref(), &theta, sim_seed)?;
-                let mut post = setup.posterior(law.as_ref(), data, n_eff, &truth, s.sigma_ln)?;
+                let sim = setup.simulate(law.as_ref(), &theta, sim_seed)?;
+                let mut post = setup.posterior(law.as_ref(), &sim, &truth, s.sigma_ln)?;
                 let map = fit(&mut post, &truth, spec.map_starts, map_seed)?;
                 let d = map.laplace.dim();
                 let l = cholesky(&map.laplace.cov_x, d).ok_or("Laplace covariance")?;
@@ -563,8 +623,8 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
             let sim_seed: u64 = rng.random();
             let map_seed: u64 = rng.random();
             let res = (|| {
-                let (data, n_eff) = setup.simulate(law.as_ref(), &truth, sim_seed)?;
-                let mut post = setup.posterior(law.as_ref(), data, n_eff, &truth, c.sigma_ln)?;
+                let sim = setup.simulate(law.as_ref(), &truth, sim_seed)?;
+                let mut post = setup.posterior(law.as_ref(), &sim, &truth, c.sigma_ln)?;
                 let map = fit(&mut post, &truth, spec.map_starts, map_seed)?;
                 let b: Vec<[(f64, f64); 3]> = (0..names.len())
                     .map(|i| LEVELS.map(|lv| interval(&post, &map, i, lv)))
@@ -609,16 +669,11 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
             for (ci, name) in s.models.iter().enumerate() {
                 let res = match &data {
                     Err(e) => Err(e.to_string()),
-                    Ok((data, n_eff)) => law_and_truth(setup, name)
+                    Ok(sim) => law_and_truth(setup, name)
                         .map_err(|e| e.to_string())
                         .and_then(|(law, truth)| {
-                            let mut post = setup.posterior(
-                                law.as_ref(),
-                                data.clone(),
-                                *n_eff,
-                                &truth,
-                                s.sigma_ln,
-                            )?;
+                            let mut post =
+                                setup.posterior(law.as_ref(), sim, &truth, s.sigma_ln)?;
                             let map = fit(
                                 &mut post,
                                 &truth,
@@ -665,8 +720,8 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
             let ss_seed: u64 = rng.random();
             let res = (|| {
                 let (law, truth) = law_and_truth(setup, name).map_err(|e| e.to_string())?;
-                let (data, n_eff) = setup.simulate(law.as_ref(), &truth, sim_seed)?;
-                let mut post = setup.posterior(law.as_ref(), data, n_eff, &truth, q.sigma_ln)?;
+                let sim = setup.simulate(law.as_ref(), &truth, sim_seed)?;
+                let mut post = setup.posterior(law.as_ref(), &sim, &truth, q.sigma_ln)?;
                 let map = fit(&mut post, &truth, spec.map_starts, map_seed)?;
                 let mut out = vec![(
                     "laplace".to_string(),

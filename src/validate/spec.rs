@@ -25,6 +25,7 @@ struct RawValidation {
     seed: Option<u64>,
     map_starts: Option<usize>,
     output_dir: Option<PathBuf>,
+    data: Option<String>,
 }
 
 #[derive(Deserialize)]
@@ -106,6 +107,21 @@ pub struct QuadratureSpec {
     pub ss_replicas: usize,
 }
 
+/// Where a unit's data come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DataSource {
+    /// The likelihood's own generative model: the predicted E[H1] at the drawn parameters plus
+    /// complex Gaussian noise with the variances the noise model states (from the coherence of
+    /// a virtual-experiment run at the same parameters), inferred with those variances fixed.
+    /// What SBC calibrates: the computation (MAP, Laplace, intervals, evidence), with the model
+    /// right by construction.
+    NoiseModel,
+    /// The virtual experiment's H1 and coherence (window leakage, averaging, sensor noise),
+    /// inferred with the coherence likelihood: adds the noise model's misspecification (the
+    /// channels' correlated leakage error) to what is checked.
+    VirtualExperiment,
+}
+
 /// A validated validation file.
 #[derive(Clone, Debug)]
 pub struct ValidationSpec {
@@ -118,6 +134,8 @@ pub struct ValidationSpec {
     /// Space-filling MAP starts besides the prior median.
     pub map_starts: usize,
     pub output_dir: PathBuf,
+    /// Where the data come from (`[validation] data`).
+    pub data: DataSource,
     pub sbc: Option<SbcSpec>,
     pub coverage: Option<CoverageSpec>,
     pub selection: Option<SelectionSpec>,
@@ -302,8 +320,19 @@ pub fn load_validation(path: &Path) -> Result<ValidationSpec, StudyError> {
             })
         }
     };
+    let data = match v.data.as_deref() {
+        None | Some("noise_model") => DataSource::NoiseModel,
+        Some("virtual_experiment") => DataSource::VirtualExperiment,
+        Some(other) => {
+            return Err(err(
+                "validation.data",
+                format!("\"{other}\" is not a data source: use \"noise_model\" (the likelihood's own generative model, the default) or \"virtual_experiment\""),
+            ))
+        }
+    };
     Ok(ValidationSpec {
         file: path.to_path_buf(),
+        data,
         name: v.name,
         experiment,
         level,

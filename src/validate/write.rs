@@ -123,12 +123,16 @@ pub fn merge_and_summarise(
         .unwrap_or(0);
     let header = format!(
         "# Statistical validation: {}\n\nCommand: `{command}`\n\nRun time: {} shard(s), {:.1} s of units in total (slowest shard {:.1} s) plus {:.1} s setup (structure and ROM, {basis} vectors) per shard, {threads} threads.\n\n\
-Data: frequency-domain virtual experiment of `{}`, level {} ({} N RMS). Posteriors: MAP and Laplace approximation (Gaussian in the log parameters) with log-normal priors of width sigma_ln around the generating truth; evidence: Laplace (and stepping-stone where listed). Evidence depends on the priors' widths (see the validation file).\n\n",
+Data: {}, from the frequency-domain virtual experiment of `{}`, level {} ({} N RMS). Posteriors: MAP and Laplace approximation (Gaussian in the log parameters) with log-normal priors of width sigma_ln around the generating truth; evidence: Laplace (and stepping-stone where listed). Evidence depends on the priors' widths (see the validation file).\n\n",
         spec.name,
         count,
         secs.iter().sum::<f64>(),
         secs.iter().copied().fold(0.0, f64::max),
         setup_s,
+        match spec.data {
+            super::DataSource::NoiseModel => "the likelihood's own generative model (E[H1] at the drawn parameters plus Gaussian noise with the noise model's variances, inferred with those variances; the coherence that sets them comes from a virtual-experiment run)",
+            super::DataSource::VirtualExperiment => "the virtual experiment's H1 and coherence themselves (window leakage and averaging: the noise model's misspecification is part of what is checked)",
+        },
         spec.experiment.file.display(),
         spec.experiment.levels[spec.level].name,
         spec.experiment.levels[spec.level].force_rms_n,

@@ -256,6 +256,104 @@ fn hive_dataset_reads_as_one_table(three: &Path, one: &Path) {
     assert_eq!(v["pyarrow_shards"], serde_json::json!([0, 1, 2]));
 }
 
+/// The CI smoke version (seconds): the 10 mm rig on 96 lines (20-400 Hz at 4 Hz, 50 blocks),
+/// two units of each part and two shards. Checks that the noise-model data are what the
+/// likelihood states (standardised residuals at the generating values have mean square 1), that
+/// every unit converges with its MAP within 5 Laplace sd of the generating value, that the
+/// Laplace evidence of Model 1 matches a 41 x 41 quadrature, and that two shards merged give the
+/// single run's tables value for value. Not the statistical acceptance (the full run, README
+/// "Statistical validation").
+#[test]
+fn ci_smoke_noise_model_data_units_and_two_shards() {
+    let exp = EXPERIMENT
+        .replace("lines_hz = [1.0, 500.0, 1.0]", "lines_hz = [20.0, 400.0, 4.0]")
+        .replace("averages = 200", "averages = 50");
+    let val = r#"
+[validation]
+name = "ci_smoke"
+experiment = "experiment.toml"
+level = "L1"
+seed = 9
+data = "noise_model"
+[sbc]
+draws = 2
+posterior_draws = 19
+bins = 4
+sigma_ln = 0.1
+[coverage]
+replicates = 2
+[selection]
+replicates = 1
+models = ["model3", "model4"]
+[quadrature]
+replicates = 1
+models = ["model1"]
+grid = 41
+half_width_sd = 7.0
+"#;
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("experiment.toml"), exp).unwrap();
+    let file = dir.path().join("validation.toml");
+    std::fs::write(&file, val).unwrap();
+    let spec = load_validation(&file).unwrap();
+    assert_eq!(spec.data, rfmlab::validate::DataSource::NoiseModel);
+    let setup = Setup::new(&spec).unwrap();
+
+    // The generator: at the generating values the standardised residuals are N(0, 1) in their
+    // real and imaginary parts, so sum |z|^2 / (2 N) = 1 +- 3 sqrt(1 / N).
+    let (law, truth) = rfmlab::validate::law_and_truth(&setup, "model4").unwrap();
+    let sim = setup.simulate(law.as_ref(), &truth, 77).unwrap();
+    let v = sim.variances.as_ref().expect("noise-model data carry variances");
+    let post = setup.posterior(law.as_ref(), &sim, &truth, 0.1).unwrap();
+    let z = post.likelihood.standardised(&truth, &[]).unwrap();
+    assert_eq!(z.len(), v.len());
+    let n = z.len() as f64;
+    let ms = z.iter().map(|c| c.norm_sqr()).sum::<f64>() / (2.0 * n);
+    assert!((ms - 1.0).abs() < 3.0 / n.sqrt(), "mean square {ms} over {n} values");
+
+    let one = dir.path().join("one");
+    run_and_write(&spec, &setup, 0.0, Shard::ALL, &one, &|| ()).unwrap();
+    merge_and_summarise(&spec, &one, false, "test").unwrap();
+    let two = dir.path().join("two");
+    for i in 0..2 {
+        run_and_write(&spec, &setup, 0.0, Shard { index: i, count: 2 }, &two, &|| ()).unwrap();
+    }
+    merge_and_summarise(&spec, &two, false, "test").unwrap();
+    for name in ["sbc", "coverage", "selection", "quadrature"] {
+        let a = Table::read_parquet(one.join(format!("{name}.parquet"))).unwrap();
+        let b = Table::read_parquet(two.join(format!("{name}.parquet"))).unwrap();
+        assert!(a.n_rows() > 0, "{name} is empty");
+        assert_eq!(a, b, "{name}: 2 shards merged differ from the single run");
+        let st = strs(&a, "status");
+        assert!(st.iter().all(|s| s == "ok"), "{name}: failed units {st:?}");
+    }
+    for name in ["sbc", "coverage"] {
+        let t = Table::read_parquet(one.join(format!("{name}.parquet"))).unwrap();
+        for (r, ((t, m), s)) in f64s(&t, "truth")
+            .iter()
+            .zip(f64s(&t, "map"))
+            .zip(f64s(&t, "sd"))
+            .enumerate()
+        {
+            assert!(
+                (t - m).abs() < 5.0 * s,
+                "{name} row {r}: truth {t:e}, MAP {m:e}, sd {s:e}"
+            );
+        }
+    }
+    let q = Table::read_parquet(one.join("quadrature.parquet")).unwrap();
+    let est = strs(&q, "estimator");
+    let lz = f64s(&q, "log_evidence");
+    let qi = est.iter().position(|e| e == "quadrature").unwrap();
+    let li = est.iter().position(|e| e == "laplace").unwrap();
+    assert!(
+        (lz[qi] - lz[li]).abs() < 0.05,
+        "quadrature {} vs Laplace {}",
+        lz[qi],
+        lz[li]
+    );
+}
+
 #[test]
 fn chi_square_tail_and_binomial_band_equal_scipy() {
     use rfmlab::validate::stats::{binom_band, chi2_sf};
