@@ -4,7 +4,7 @@
 use super::common::{print_json, progress, spinner, Global};
 use anyhow::Context;
 use rfmlab::data::{FrfSet, Quantity};
-use rfmlab::experiment::plant::EnginePlant;
+use rfmlab::experiment::plant::{EnginePlant, ShakerSidePlant};
 use rfmlab::experiment::{simulate_level, ChannelLabel};
 use rfmlab::study::experiment::load_experiment;
 use serde_json::json;
@@ -72,11 +72,19 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
     for (k, lv) in ex.levels.iter().enumerate() {
         let law = rfmlab::material::model_from_name(&lv.law, lv.branches)?;
         let modulus = |w: f64| law.modulus(&lv.params, w);
-        let plant = EnginePlant {
+        let engine_plant = EnginePlant {
             engine: engine.as_ref(),
             modulus: &modulus,
             input_col: 0,
             drive_output: built.excitation,
+        };
+        let shaker_plant = ex.shaker_side_force.map(|shaker| ShakerSidePlant {
+            inner: &engine_plant,
+            shaker,
+        });
+        let plant: &dyn rfmlab::experiment::Plant = match &shaker_plant {
+            Some(p) => p,
+            None => &engine_plant,
         };
         let mut chain = ex.chain.clone();
         chain.force_rms_n = lv.force_rms_n;
@@ -84,7 +92,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         chain.gains = ex.gains.clone();
         chain.delays_s = ex.delays_s.clone();
         let t = std::time::Instant::now();
-        let sim = simulate_level(&plant, &chain).with_context(|| format!("level {}", lv.name))?;
+        let sim = simulate_level(plant, &chain).with_context(|| format!("level {}", lv.name))?;
         let level = sim.to_frf_level(&lv.name, &labels)?;
         debug_assert_eq!(level.quantity, Quantity::Accelerance);
         let mut tj = sim.truth.to_json();
@@ -147,6 +155,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         "mode": if ex.frequency_domain { "frequency" } else { "time" },
         "seed": ex.seed,
         "sensor_masses": ex.sensors.iter().map(|(id, m)| json!({"point": id, "mass_kg": m})).collect::<Vec<_>>(),
+        "shaker_side_force": ex.shaker_side_force.map(|s| json!({"shaker_mass_kg": s.armature_mass_kg, "stinger_stiffness_n_m": s.stinger_stiffness_n_m})),
         "files": written.iter().map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned())).collect::<Vec<_>>(),
         "levels": truths,
     });

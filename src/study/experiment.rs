@@ -62,6 +62,10 @@ struct RawChain {
 struct RawShaker {
     armature_mass: f64,
     stinger_stiffness: f64,
+    /// Where the force is read: "structure" (default: a force gauge at the structure, H1
+    /// estimates the structure's FRF) or "shaker" (the force on the shaker's side of the
+    /// stinger: the data carry the shaker's moving mass, `Effect::Shaker`).
+    force_gauge: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -122,6 +126,10 @@ pub struct Experiment {
     pub gains: Vec<C64>,
     pub delays_s: Vec<f64>,
     pub levels: Vec<TruthLevel>,
+    /// The shaker when its force is read on the shaker's side of the stinger
+    /// (`shaker.force_gauge = "shaker"`): the plant then carries the shaker (and
+    /// `chain.shaker` is None).
+    pub shaker_side_force: Option<crate::experiment::spec::Shaker>,
 }
 
 /// Read, parse and validate an experiment file.
@@ -244,15 +252,26 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         }
         (None, None) => {}
     }
+    let mut shaker_side_force = None;
     if let Some(s) = &raw.shaker {
-        chain.shaker = Some(Shaker {
+        let sh = Shaker {
             armature_mass_kg: ctx.positive("shaker.armature_mass", s.armature_mass, "kg")?,
             stinger_stiffness_n_m: ctx.positive(
                 "shaker.stinger_stiffness",
                 s.stinger_stiffness,
                 "N/m",
             )?,
-        });
+        };
+        match s.force_gauge.as_deref().unwrap_or("structure") {
+            "structure" => chain.shaker = Some(sh),
+            "shaker" => shaker_side_force = Some(sh),
+            o => {
+                return Err(ctx.err(
+                    "shaker.force_gauge",
+                    format!("\"{o}\": use \"structure\" (force gauge at the drive point) or \"shaker\" (force read on the shaker's side of the stinger)"),
+                ))
+            }
+        }
     }
     chain.mode = if frequency_domain {
         Mode::FrequencyDomain
@@ -388,5 +407,6 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         gains,
         delays_s,
         levels,
+        shaker_side_force,
     })
 }
