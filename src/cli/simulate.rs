@@ -44,7 +44,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
             )
         })
         .collect();
-    let model = if masses.is_empty() {
+    let mut model = if masses.is_empty() {
         built.model.clone()
     } else {
         built
@@ -52,6 +52,28 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
             .with_point_masses(&masses)
             .map_err(anyhow::Error::msg)?
     };
+    if let Some(((x0, x1), loss)) = ex.degraded_bond {
+        let spec = rfmlab::study::build::joint_spec(&ex.structure)
+            .context("degraded_bond needs the mesher's structure")?;
+        let region = rfmlab::fe::region::adhesive_region_stiffness(
+            &spec,
+            x0,
+            x1,
+            &format!("{file}: degraded_bond.x_start"),
+        )?;
+        model = model
+            .with_degraded_region(&region.s_region, loss)
+            .map_err(anyhow::Error::msg)?;
+        if !g.quiet {
+            eprintln!(
+                "degraded bond: {} adhesive elements over x = [{:.4}, {:.4}] m at {:.1} % of the modulus",
+                region.n_elements,
+                region.x_range_m.0,
+                region.x_range_m.1,
+                100.0 * (1.0 - loss)
+            );
+        }
+    }
     let sp = spinner(g, "preparing the FRF engine");
     let engine = super::engine::plant_engine(&model, built.excitation, &ex, g)?;
     sp.finish_and_clear();
@@ -155,6 +177,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         "mode": if ex.frequency_domain { "frequency" } else { "time" },
         "seed": ex.seed,
         "sensor_masses": ex.sensors.iter().map(|(id, m)| json!({"point": id, "mass_kg": m})).collect::<Vec<_>>(),
+        "degraded_bond": ex.degraded_bond.map(|((x0, x1), loss)| json!({"x_start_m": x0, "x_end_m": x1, "loss": loss})),
         "shaker_side_force": ex.shaker_side_force.map(|s| json!({"shaker_mass_kg": s.armature_mass_kg, "stinger_stiffness_n_m": s.stinger_stiffness_n_m})),
         "files": written.iter().map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned())).collect::<Vec<_>>(),
         "levels": truths,

@@ -381,3 +381,45 @@ fn degraded_region_splits_the_adhesive_stiffness() {
     }
     assert!(model.with_degraded_region(&end.s_region, 1.0).is_err());
 }
+
+#[test]
+fn simulate_refuses_a_bad_degraded_bond() {
+    let structure = crate::runner_common::structure();
+    let text = |bond: &str| {
+        format!(
+            r#"
+[experiment]
+name = "x"
+output = "x.uff"
+{structure}
+[degraded_bond]
+{bond}
+
+[[levels]]
+name = "L1"
+force_rms_n = 3.3
+law = "model3"
+params = {{ E0 = 6.0e6, E1 = 3.0e6, eta1 = 4.0e3 }}
+"#
+        )
+    };
+    let path = std::path::Path::new("/tmp/bad_bond.toml");
+    for (bond, key) in [
+        ("x_start = 0.045\nloss = 0.95", "degraded_bond.x_start"),
+        ("x_start = -0.001\nloss = 0.95", "degraded_bond.x_start"),
+        ("x_start = 0.0\nloss = 1.0", "degraded_bond.loss"),
+        (
+            "x_start = 0.0\nwidth = 0.0\nloss = 0.5",
+            "degraded_bond.width",
+        ),
+    ] {
+        let msg = rfmlab::study::experiment::parse_experiment(&text(bond), path)
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains(key) && msg.contains("bad_bond.toml"), "{msg}");
+    }
+    let ok =
+        rfmlab::study::experiment::parse_experiment(&text("x_start = 0.04\nloss = 0.95"), path)
+            .unwrap();
+    assert_eq!(ok.degraded_bond, Some(((0.04, 0.05), 0.95)));
+}
