@@ -452,3 +452,89 @@ params = {{ E0 = 6.0e6, E1 = 3.0e6, eta1 = 4.0e3 }}
             .unwrap();
     assert_eq!(ok.degraded_bond, Some(((0.04, 0.05), 0.95)));
 }
+
+/// The closed loop on the dense chain (1 % noise) with an undeclared 20 g shaker on a 2e5 N/m
+/// stinger, the force read on the shaker's side (RFMLAB_LONG=1; ~50 s on 2 busy cores): the
+/// shaker is ranked and accepted first (not the drive-point mass it resembles below the
+/// stinger resonance at 503 Hz). KNOWN WRONG, not asserted: the refit lands at 42.7 g (truth
+/// 20 g), the loop then adds a spurious 56 g drive-point mass and chi-square stays ~1e4: the
+/// refit from the biased baseline MAP finds a local optimum (the Jacobian is right, see
+/// `shaker_jacobian_matches_finite_differences`); the refit's start is the loop's business.
+#[test]
+fn the_loop_names_an_undeclared_shaker() {
+    if std::env::var("RFMLAB_LONG").map_or(true, |v| v != "1") {
+        return;
+    }
+    use crate::spring_model::Normal;
+    use rfmlab::closed_loop::{default_candidates, run_closed_loop, ClosedLoopParams};
+    use rfmlab::inference::likelihood::{
+        ErrorLaw, FrfData, FrfLikelihood, FrfPosterior, NoiseModel, Scale,
+    };
+    use rfmlab::inference::prior::Prior;
+    let eng = measured_engine();
+    let w: Vec<f64> = (0..160).map(|i| TAU * (8.0 + 6.0 * i as f64)).collect();
+    let outs = [0, 1, 2, 3];
+    let value = 0.02;
+    let mut truth_fm = ForwardModel::new(&eng, &Model3, &w, 1, &outs, None).unwrap();
+    truth_fm
+        .set_effects(Effects {
+            terms: vec![fixed(SHAKER, value)],
+        })
+        .unwrap();
+    let h = truth_fm.predict(&TRUTH, false).unwrap().values;
+    let mut rng = Normal(7);
+    let v: Vec<f64> = h.iter().map(|z| 0.5 * (0.01 * z.norm()).powi(2)).collect();
+    let x: Vec<C64> = h
+        .iter()
+        .zip(&v)
+        .map(|(z, v)| z + C64::new(rng.next(), rng.next()) * v.sqrt())
+        .collect();
+    let fm = ForwardModel::new(&eng, &Model3, &w, 1, &outs, None).unwrap();
+    let data = FrfData {
+        freq_hz: w.iter().map(|w| w / TAU).collect(),
+        n_out: 4,
+        values: x,
+        coherence: None,
+    };
+    let noise = NoiseModel {
+        scale: Scale::Fixed { variances: v },
+        errors: ErrorLaw::Gaussian,
+        model_error: 0.0,
+    };
+    let lik = FrfLikelihood::new(fm, data, noise, &[1, 2, 3, 4]).unwrap();
+    let priors = TRUTH
+        .iter()
+        .map(|t| Prior::LogUniform {
+            lo: t / 10.0,
+            hi: t * 10.0,
+        })
+        .collect();
+    let mut post = FrfPosterior::new(lik, priors).unwrap();
+    let start = post.unconstrained(&[TRUTH[0] * 1.2, TRUTH[1] * 0.8, TRUTH[2] * 1.2]);
+    let cands = default_candidates(&[1, 2, 3, 4], &[(0, 1), (1, 2), (2, 3), (3, 4)]);
+    let res = run_closed_loop(&mut post, &start, &cands, &ClosedLoopParams::default()).unwrap();
+    for c in &res.candidates {
+        eprintln!(
+            "shaker: round {} rank {} {} T {:.1} p {:.2e} est {:.4e} +- {:.1e} refit {:?}",
+            c.round,
+            c.rank,
+            c.effect.name(),
+            c.score,
+            c.p_value,
+            c.one_step,
+            c.one_step_sd,
+            c.refit
+        );
+    }
+    eprintln!(
+        "shaker: chi2 before {:.3} after {:.3}; {}",
+        res.before.residuals.chi2_normalised, res.after.residuals.chi2_normalised, res.conclusion
+    );
+    assert!(!res.accepted.is_empty(), "nothing accepted");
+    let (e, size, sd) = &res.accepted[0];
+    assert_eq!(e, &SHAKER, "first accepted {}", e.name());
+    let first = res.candidates.iter().find(|c| c.round == 0 && c.rank == 1);
+    assert_eq!(first.map(|c| &c.effect), Some(&SHAKER));
+    eprintln!("shaker: identified {size} +- {sd} kg (truth {value} kg)");
+    assert!(res.before.residuals.chi2_normalised > 1.5);
+}
