@@ -11,6 +11,10 @@
 //!                          direction), so with D = -w^2 m and H_PP, H_oP, H_Pi read from the
 //!                          engine (every measured point is an engine input):
 //!                          H'_oi = H_oi - H_oP G D H_Pi,   G = (1 + D H_PP)^-1           (Sherman-Morrison-Woodbury)
+//!   shaker (m_s on k_s):   force F read on the shaker's side of the stinger, at drive point d:
+//!                          H''_od = H'_od s,   s = k_s / (k_s - w^2 m_s (1 + k_s H'_dd))
+//!                          (armature -w^2 m_s x_s = F - f, stinger f = k_s (x_s - x_d));
+//!                          m_s -> 0 gives H', k_s -> inf a point mass m_s at d
 //! ```
 //!
 //! Structural effects are exact algebraic transforms of the certified engine's receptances at
@@ -19,7 +23,10 @@
 //! scaling evaluates the engine at another frequency inside its certified band). The point
 //! mass acts in the measured direction only (a sensor's translational inertia along its axis);
 //! its x and y inertia are not modelled. The derivative in the beam factor is a central
-//! difference (step 1e-6) of the exact transform; every other derivative is analytic.
+//! difference (step 1e-6) of the exact transform; every other derivative is analytic. The
+//! shaker acts after the point masses (on the drive-point receptance with the masses on); it
+//! is tested against the full model with the moving mass as an extra DOF
+//! ([`crate::fe::StructuralModel::with_shaker`], tests/suite/structural_effects.rs).
 
 use crate::common::C64;
 use crate::frf::FrfEngine;
