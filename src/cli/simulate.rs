@@ -4,7 +4,7 @@
 use super::common::{print_json, progress, spinner, Global};
 use anyhow::Context;
 use rfmlab::data::{FrfSet, Quantity};
-use rfmlab::experiment::plant::EnginePlant;
+use rfmlab::experiment::plant::{EnginePlant, ShakerSidePlant};
 use rfmlab::experiment::{simulate_level, ChannelLabel};
 use rfmlab::study::experiment::load_experiment;
 use serde_json::json;
@@ -44,7 +44,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
             )
         })
         .collect();
-    let model = if masses.is_empty() {
+    let mut model = if masses.is_empty() {
         built.model.clone()
     } else {
         built
@@ -52,6 +52,28 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
             .with_point_masses(&masses)
             .map_err(anyhow::Error::msg)?
     };
+    if let Some(((x0, x1), loss)) = ex.degraded_bond {
+        let spec = rfmlab::study::build::joint_spec(&ex.structure)
+            .context("degraded_bond needs the mesher's structure")?;
+        let region = rfmlab::fe::region::adhesive_region_stiffness(
+            &spec,
+            x0,
+            x1,
+            &format!("{file}: degraded_bond.x_start"),
+        )?;
+        model = model
+            .with_degraded_region(&region.s_region, loss)
+            .map_err(anyhow::Error::msg)?;
+        if !g.quiet {
+            eprintln!(
+                "degraded bond: {} adhesive elements over x = [{:.4}, {:.4}] m at {:.1} % of the modulus",
+                region.n_elements,
+                region.x_range_m.0,
+                region.x_range_m.1,
+                100.0 * (1.0 - loss)
+            );
+        }
+    }
     let sp = spinner(g, "preparing the FRF engine");
     let engine = super::engine::plant_engine(&model, built.excitation, &ex, g)?;
     sp.finish_and_clear();
@@ -72,11 +94,19 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
     for (k, lv) in ex.levels.iter().enumerate() {
         let law = rfmlab::material::model_from_name(&lv.law, lv.branches)?;
         let modulus = |w: f64| law.modulus(&lv.params, w);
-        let plant = EnginePlant {
+        let engine_plant = EnginePlant {
             engine: engine.as_ref(),
             modulus: &modulus,
             input_col: 0,
             drive_output: built.excitation,
+        };
+        let shaker_plant = ex.shaker_side_force.map(|shaker| ShakerSidePlant {
+            inner: &engine_plant,
+            shaker,
+        });
+        let plant: &dyn rfmlab::experiment::Plant = match &shaker_plant {
+            Some(p) => p,
+            None => &engine_plant,
         };
         let mut chain = ex.chain.clone();
         chain.force_rms_n = lv.force_rms_n;
@@ -84,7 +114,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         chain.gains = ex.gains.clone();
         chain.delays_s = ex.delays_s.clone();
         let t = std::time::Instant::now();
-        let sim = simulate_level(&plant, &chain).with_context(|| format!("level {}", lv.name))?;
+        let sim = simulate_level(plant, &chain).with_context(|| format!("level {}", lv.name))?;
         let level = sim.to_frf_level(&lv.name, &labels)?;
         debug_assert_eq!(level.quantity, Quantity::Accelerance);
         let mut tj = sim.truth.to_json();
@@ -147,6 +177,8 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         "mode": if ex.frequency_domain { "frequency" } else { "time" },
         "seed": ex.seed,
         "sensor_masses": ex.sensors.iter().map(|(id, m)| json!({"point": id, "mass_kg": m})).collect::<Vec<_>>(),
+        "degraded_bond": ex.degraded_bond.map(|((x0, x1), loss)| json!({"x_start_m": x0, "x_end_m": x1, "loss": loss})),
+        "shaker_side_force": ex.shaker_side_force.map(|s| json!({"shaker_mass_kg": s.armature_mass_kg, "stinger_stiffness_n_m": s.stinger_stiffness_n_m})),
         "files": written.iter().map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned())).collect::<Vec<_>>(),
         "levels": truths,
     });

@@ -539,7 +539,8 @@ pub fn run_closed_loop(
 }
 
 /// The default candidate list for an observation: a gain and a delay per channel, a point
-/// mass per measured point that is an engine input (with its id), and the beam modulus.
+/// mass per measured point that is an engine input (with its id), the beam modulus and a
+/// shaker's moving mass on the default stinger (acting at the drive point).
 pub fn default_candidates(channel_ids: &[u32], mass_points: &[(usize, u32)]) -> Vec<Effect> {
     let mut c = Vec::new();
     for &(point, id) in mass_points {
@@ -550,5 +551,8 @@ pub fn default_candidates(channel_ids: &[u32], mass_points: &[(usize, u32)]) -> 
         c.push(Effect::Delay { channel, id });
     }
     c.push(Effect::BeamModulus);
+    c.push(Effect::Shaker {
+        stiffness_n_m: crate::forward::effects::DEFAULT_STINGER_STIFFNESS_N_M,
+    });
     c
 }

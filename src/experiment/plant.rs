@@ -57,3 +57,41 @@ impl Plant for EnginePlant<'_> {
         Ok(out)
     }
 }
+
+/// A plant whose force channel reads the force on the shaker's side of the stinger (the force
+/// driving the moving mass) instead of the force into the structure: every accelerance is
+/// multiplied by the shaker's force transfer `T = k_s / (k_s - w^2 m_a + k_s m_a A_dd)`
+/// ([`super::spec::Shaker::transfer`], `A_dd` the structure's drive-point accelerance), the
+/// same algebra as the forward model's `Effect::Shaker` (`crate::forward::effects`), which
+/// its tests check against the full model with the moving mass as a DOF.
+pub struct ShakerSidePlant<'a> {
+    pub inner: &'a dyn Plant,
+    pub shaker: super::spec::Shaker,
+}
+
+impl Plant for ShakerSidePlant<'_> {
+    fn n_channels(&self) -> usize {
+        self.inner.n_channels()
+    }
+    fn drive_channel(&self) -> usize {
+        self.inner.drive_channel()
+    }
+    fn accelerance(&self, freq_hz: &[f64]) -> Result<Vec<Vec<C64>>, ExperimentError> {
+        let mut a = self.inner.accelerance(freq_hz)?;
+        let d = self.inner.drive_channel();
+        let t: Vec<C64> = freq_hz
+            .iter()
+            .zip(&a[d])
+            .map(|(&f, &a_dd)| self.shaker.transfer(f, a_dd))
+            .collect();
+        if t.iter().any(|z| !z.is_finite()) {
+            return Err(ExperimentError::Plant(
+                "the shaker-structure transfer is singular or not finite: check the shaker's armature mass and stinger stiffness".into(),
+            ));
+        }
+        for row in a.iter_mut() {
+            row.iter_mut().zip(&t).for_each(|(x, t)| *x *= t);
+        }
+        Ok(a)
+    }
+}

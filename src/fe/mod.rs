@@ -19,6 +19,7 @@ pub mod matrix_market;
 pub mod mesh;
 pub mod model;
 pub mod points;
+pub mod region;
 
 pub use error::FeError;
 pub use model::{ObservationPoint, StructuralModel};

@@ -94,3 +94,79 @@ impl StructuralModel {
         Ok(out)
     }
 }
+
+/// Copy of `a` padded with `extra` zero rows and columns, plus the `(row, col, value)` entries
+/// of `add` (duplicates summed).
+fn padded(a: &SpMat, extra: usize, add: &[(usize, usize, f64)]) -> Result<SpMat, String> {
+    use faer::sparse::Triplet;
+    let n = a.nrows();
+    let sym = a.symbolic();
+    let (cp, ri) = (sym.col_ptr(), sym.row_idx());
+    let mut trip: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(a.val().len() + add.len());
+    for j in 0..n {
+        for p in cp[j]..cp[j + 1] {
+            trip.push(Triplet::new(ri[p], j, a.val()[p]));
+        }
+    }
+    trip.extend(add.iter().map(|&(i, j, v)| Triplet::new(i, j, v)));
+    SpMat::try_new_from_triplets(n + extra, n + extra, &trip).map_err(|e| format!("{e:?}"))
+}
+
+impl StructuralModel {
+    /// A copy with a shaker attached at point `drive`: one extra DOF `x_s` (the moving mass
+    /// `m_s`, kg) joined to the point by a stinger spring `k_s` (N/m) along the point's
+    /// direction, `M' = M + m_s e_s e_s^T`, `K_b' = K_b + k_s (b_d - e_s)(b_d - e_s)^T` (b_d the
+    /// point's DOF weights), S and the damping matrices padded with zeros. Returns the model
+    /// and the index of a new observation point on the moving mass (id `armature_id`): the
+    /// FRF driven there is the response per force on the shaker's side of the stinger.
+    pub fn with_shaker(
+        &self,
+        drive: usize,
+        m_s: f64,
+        k_s: f64,
+        armature_id: u32,
+    ) -> Result<(StructuralModel, usize), String> {
+        let pt = self.points.get(drive).ok_or_else(|| {
+            format!(
+                "point index {drive} is out of range ({} points)",
+                self.points.len()
+            )
+        })?;
+        if !(m_s.is_finite() && m_s >= 0.0 && k_s.is_finite() && k_s > 0.0) {
+            return Err(format!(
+                "shaker: moving mass {m_s} kg must be >= 0 and stinger stiffness {k_s} N/m > 0"
+            ));
+        }
+        let n = self.n_dof();
+        // b = b_d - e_s
+        let mut b: Vec<(usize, f64)> = pt.dofs.clone();
+        b.push((n, -1.0));
+        let mut kb = Vec::with_capacity(b.len() * b.len());
+        for &(i, wi) in &b {
+            for &(j, wj) in &b {
+                kb.push((i, j, k_s * wi * wj));
+            }
+        }
+        let mut out = self.clone();
+        out.m = padded(&self.m, 1, &[(n, n, m_s)])?;
+        out.k_b = padded(&self.k_b, 1, &kb)?;
+        out.s = padded(&self.s, 1, &[])?;
+        out.c_b = self.c_b.as_ref().map(|c| padded(c, 1, &[])).transpose()?;
+        out.d_b = self.d_b.as_ref().map(|d| padded(d, 1, &[])).transpose()?;
+        out.points.push(ObservationPoint {
+            id: armature_id,
+            position: pt.position,
+            direction: pt.direction,
+            dofs: vec![(n, 1.0)],
+            note: format!(
+                "shaker moving mass ({m_s} kg on {k_s:.3e} N/m) at point {}",
+                pt.id
+            ),
+        });
+        out.description = format!(
+            "{} + shaker ({m_s} kg, {k_s:.3e} N/m) at point {}",
+            self.description, pt.id
+        );
+        Ok((out, self.points.len()))
+    }
+}

@@ -11,6 +11,10 @@
 //!                          direction), so with D = -w^2 m and H_PP, H_oP, H_Pi read from the
 //!                          engine (every measured point is an engine input):
 //!                          H'_oi = H_oi - H_oP G D H_Pi,   G = (1 + D H_PP)^-1           (Sherman-Morrison-Woodbury)
+//!   shaker (m_s on k_s):   force F read on the shaker's side of the stinger, at drive point d:
+//!                          H''_od = H'_od s,   s = k_s / (k_s - w^2 m_s (1 + k_s H'_dd))
+//!                          (armature -w^2 m_s x_s = F - f, stinger f = k_s (x_s - x_d));
+//!                          m_s -> 0 gives H', k_s -> inf a point mass m_s at d
 //! ```
 //!
 //! Structural effects are exact algebraic transforms of the certified engine's receptances at
@@ -19,7 +23,10 @@
 //! scaling evaluates the engine at another frequency inside its certified band). The point
 //! mass acts in the measured direction only (a sensor's translational inertia along its axis);
 //! its x and y inertia are not modelled. The derivative in the beam factor is a central
-//! difference (step 1e-6) of the exact transform; every other derivative is analytic.
+//! difference (step 1e-6) of the exact transform; every other derivative is analytic. The
+//! shaker acts after the point masses (on the drive-point receptance with the masses on); it
+//! is tested against the full model with the moving mass as an extra DOF
+//! ([`crate::fe::StructuralModel::with_shaker`], tests/suite/structural_effects.rs).
 
 use crate::common::C64;
 use crate::frf::FrfEngine;
@@ -38,7 +45,14 @@ pub enum Effect {
     PointMass { point: usize, id: u32 },
     /// Relative change of the adherends' (beam) modulus, `E_beam = (1 + b) E_beam,declared`.
     BeamModulus,
+    /// A shaker's moving mass m_s (kg) on a stinger of stiffness `stiffness_n_m` at the drive
+    /// point, with the force read on the shaker's side of the stinger (the force that drives
+    /// the moving mass). A force gauge at the structure would not see the shaker at all.
+    Shaker { stiffness_n_m: f64 },
 }
+
+/// Default stinger stiffness of a shaker candidate (N/m): a thin steel rod some 10 cm long.
+pub const DEFAULT_STINGER_STIFFNESS_N_M: f64 = 2e5;
 
 impl Effect {
     /// Name of the effect's parameter, as in tables.
@@ -48,6 +62,7 @@ impl Effect {
             Effect::Delay { id, .. } => format!("delay_ch{id}"),
             Effect::PointMass { id, .. } => format!("mass_pt{id}"),
             Effect::BeamModulus => "beam_modulus".into(),
+            Effect::Shaker { .. } => "shaker_mass".into(),
         }
     }
     /// Type of the effect (a study's `type` key).
@@ -57,6 +72,7 @@ impl Effect {
             Effect::Delay { .. } => "delay",
             Effect::PointMass { .. } => "point_mass",
             Effect::BeamModulus => "beam_modulus",
+            Effect::Shaker { .. } => "shaker",
         }
     }
     /// SI unit of the parameter.
@@ -64,7 +80,7 @@ impl Effect {
         match self {
             Effect::Gain { .. } | Effect::BeamModulus => "1",
             Effect::Delay { .. } => "s",
-            Effect::PointMass { .. } => "kg",
+            Effect::PointMass { .. } | Effect::Shaker { .. } => "kg",
         }
     }
     /// A sentence of physics for the report.
@@ -80,6 +96,9 @@ impl Effect {
                 "an undeclared mass m at point {id} (a sensor, cable or fixture) lowers the modes that move that point"
             ),
             Effect::BeamModulus => "the adherends' modulus differs from the declared one by a factor (1 + b): all beam-dominated modes shift by sqrt(1 + b)".into(),
+            Effect::Shaker { stiffness_n_m } => format!(
+                "a shaker's moving mass m_s on a {stiffness_n_m:.3e} N/m stinger at the drive point, with the force read on the shaker's side of the stinger, loads the drive point and adds a stinger-armature resonance"
+            ),
         }
     }
     /// Value at which the effect is absent.
@@ -89,20 +108,21 @@ impl Effect {
     /// Whether the parameter is one-sided (a mass is >= 0): the score test is then one-sided
     /// (Self and Liang 1987: a 50:50 mixture of chi-square 0 and 1).
     pub fn one_sided(&self) -> bool {
-        matches!(self, Effect::PointMass { .. })
+        matches!(self, Effect::PointMass { .. } | Effect::Shaker { .. })
     }
     /// Admissible range (open) of the parameter.
     pub fn bounds(&self) -> (f64, f64) {
         match self {
             Effect::Gain { .. } => (-0.9, 9.0),
             Effect::Delay { .. } => (-0.01, 0.01),
-            Effect::PointMass { .. } => (-1e-12, 10.0),
+            Effect::PointMass { .. } | Effect::Shaker { .. } => (-1e-12, 10.0),
             Effect::BeamModulus => (-0.9, 9.0),
         }
     }
     /// Default prior when the effect is free: uniform over a stated plausible range (the
     /// evidence depends on it: a ten times wider range costs ln 10 = 2.3 nats).
-    /// gain +-20 %, delay +-1 ms, mass 0-100 g, beam modulus +-20 %.
+    /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor or a shaker's moving mass), beam
+    /// modulus +-20 %.
     pub fn default_prior(&self) -> Prior {
         match self {
             Effect::Gain { .. } | Effect::BeamModulus => Prior::Uniform { lo: -0.2, hi: 0.2 },
@@ -110,11 +130,14 @@ impl Effect {
                 lo: -1e-3,
                 hi: 1e-3,
             },
-            Effect::PointMass { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
+            Effect::PointMass { .. } | Effect::Shaker { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
         }
     }
     fn is_structural(&self) -> bool {
-        matches!(self, Effect::PointMass { .. } | Effect::BeamModulus)
+        matches!(
+            self,
+            Effect::PointMass { .. } | Effect::BeamModulus | Effect::Shaker { .. }
+        )
     }
 }
 
@@ -249,6 +272,13 @@ impl Effects {
                         "effect {name}: point index {point} is not an input of the engine (a point mass needs the receptances of its point)"
                     )));
                 }
+                Effect::Shaker { stiffness_n_m }
+                    if !(stiffness_n_m.is_finite() && stiffness_n_m > 0.0) =>
+                {
+                    return Err(super::ForwardError::Setup(format!(
+                        "effect {name}: stinger stiffness {stiffness_n_m} N/m must be finite and > 0"
+                    )));
+                }
                 _ => {}
             }
             let (lo, hi) = t.effect.bounds();
@@ -349,6 +379,22 @@ impl Effects {
                 Vec::new()
             },
         };
+        // The drive point's derivatives (E' and per term), needed by a shaker.
+        let mut drive_dh: Vec<C64> = Vec::with_capacity(if derivs { nl } else { 0 });
+        let mut drive_dt: Vec<Vec<C64>> = if derivs {
+            vec![vec![zero; nl]; self.terms.len()]
+        } else {
+            Vec::new()
+        };
+        let shaker =
+            self.terms
+                .iter()
+                .zip(values)
+                .enumerate()
+                .find_map(|(t, (term, v))| match term.effect {
+                    Effect::Shaker { stiffness_n_m } => Some((t, stiffness_n_m, *v)),
+                    _ => None,
+                });
         // Targets: the outputs, then the drive point.
         let targets: Vec<usize> = outputs.iter().copied().chain([input]).collect();
         for (l, &w) in omega.iter().enumerate() {
@@ -360,6 +406,9 @@ impl Effects {
                 for (ti, &o) in targets.iter().enumerate() {
                     if ti == n {
                         res.drive.push(acc * r(o, jin));
+                        if derivs {
+                            drive_dh.push(acc * dr(o, jin));
+                        }
                     } else {
                         res.h.push(acc * r(o, jin));
                         if derivs {
@@ -421,31 +470,105 @@ impl Effects {
                 let val = acc * (r(o, jin) - corr);
                 if ti == n {
                     res.drive.push(val);
-                    continue;
+                } else {
+                    res.h.push(val);
                 }
-                res.h.push(val);
                 if derivs {
                     let dhop: Vec<C64> = masses.iter().map(|m| dr(o, m.2)).collect();
                     let dcorr: C64 = dhop.iter().zip(&u).map(|(a, b)| a * b).sum::<C64>()
                         + hop.iter().zip(&du).map(|(a, b)| a * b).sum::<C64>()
                         - hop.iter().zip(&dpp_u).map(|(a, b)| a * b).sum::<C64>();
-                    res.dh.push(acc * (dr(o, jin) - dcorr));
+                    let v = acc * (dr(o, jin) - dcorr);
+                    if ti == n {
+                        drive_dh.push(v);
+                    } else {
+                        res.dh.push(v);
+                    }
                 }
             }
             if derivs {
                 // dH'_oi/dd_p = -g_p c_p with g = H_oP A^-1 (the receptance row to the mass
                 // points with the masses on) and c = H_Pi - H_PP u; d_p = -w^2 m_p.
-                for (p, m) in masses.iter().enumerate() {
-                    let t = m.0;
-                    for (k, &o) in outputs.iter().enumerate() {
-                        let hop: Vec<C64> = masses.iter().map(|mm| r(o, mm.2)).collect();
-                        let g = row_times_inverse(&a, np, &hop);
-                        res.d_terms[t][l * n + k] = acc * (w * w) * g[p] * c[p];
+                for (k, &o) in targets.iter().enumerate() {
+                    let hop: Vec<C64> = masses.iter().map(|mm| r(o, mm.2)).collect();
+                    let g = row_times_inverse(&a, np, &hop);
+                    for (p, m) in masses.iter().enumerate() {
+                        let v = acc * (w * w) * g[p] * c[p];
+                        if k == n {
+                            drive_dt[m.0][l] = v;
+                        } else {
+                            res.d_terms[m.0][l * n + k] = v;
+                        }
                     }
                 }
             }
         }
+        if let Some((t, k_s, m_s)) = shaker {
+            apply_shaker(&mut res, omega, n, t, k_s, m_s, &drive_dh, &drive_dt);
+        }
         Ok(res)
+    }
+}
+
+/// The shaker at the drive point, applied to the accelerances in `res` (values and derivative
+/// columns) in place. With the drive-point receptance `H_dd = A_dd / (-w^2)` (point masses on)
+/// and the force `F` read on the shaker's side of the stinger,
+///
+/// ```text
+///   s = f / F = k_s / (k_s - w^2 m_s (1 + k_s H_dd)),   A'_o = A_o s
+///   ds/dtheta = s^2 w^2 m_s dH_dd/dtheta               (theta: E', any other term)
+///   ds/dm_s   = s^2 w^2 (1 + k_s H_dd) / k_s
+/// ```
+///
+/// (armature: `-w^2 m_s x_s = F - f`; stinger: `f = k_s (x_s - x_d)`; structure: `x = H f`).
+/// `res.drive` keeps the structure's drive-point accelerance (what a gauge at the structure
+/// would measure against), so a measurement model's shaker colouring is unchanged.
+#[allow(clippy::too_many_arguments)]
+fn apply_shaker(
+    res: &mut StructuralColumns,
+    omega: &[f64],
+    n: usize,
+    term: usize,
+    k_s: f64,
+    m_s: f64,
+    drive_dh: &[C64],
+    drive_dt: &[Vec<C64>],
+) {
+    // Derivative columns exist (one per term, the shaker among them) only when asked.
+    let derivs = !res.d_terms.is_empty();
+    for (l, &w) in omega.iter().enumerate() {
+        let w2 = w * w;
+        let h_dd = res.drive[l] / -w2;
+        let q = 1.0 + k_s * h_dd;
+        let s = k_s / (k_s - w2 * m_s * q);
+        let s2w2m = s * s * w2 * m_s;
+        // dH_dd = dA_dd / (-w^2)
+        let ds_de = if derivs {
+            s2w2m * drive_dh[l] / -w2
+        } else {
+            C64::new(0.0, 0.0)
+        };
+        let ds_dt: Vec<C64> = if derivs {
+            drive_dt.iter().map(|c| s2w2m * c[l] / -w2).collect()
+        } else {
+            Vec::new()
+        };
+        let ds_dm = s * s * w2 * q / k_s;
+        for k in 0..n {
+            let i = l * n + k;
+            let a = res.h[i];
+            if derivs {
+                res.dh[i] = res.dh[i] * s + a * ds_de;
+                for (t, col) in res.d_terms.iter_mut().enumerate() {
+                    col[i] = if t == term {
+                        a * ds_dm
+                    } else {
+                        col[i] * s + a * ds_dt[t]
+                    };
+                }
+            }
+            res.h[i] = a * s;
+        }
     }
 }
 

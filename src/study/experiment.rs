@@ -22,7 +22,18 @@ struct RawExperimentFile {
     sensors: Vec<RawSensor>,
     #[serde(default)]
     channels: Vec<RawChannel>,
+    degraded_bond: Option<RawDegradedBond>,
     levels: Vec<RawTruthLevel>,
+}
+
+/// A region of the adhesive with a reduced modulus: `E* (S - loss S_region)` over
+/// `x in [x_start, x_start + width]` (m).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawDegradedBond {
+    x_start: f64,
+    width: Option<f64>,
+    loss: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -62,6 +73,10 @@ struct RawChain {
 struct RawShaker {
     armature_mass: f64,
     stinger_stiffness: f64,
+    /// Where the force is read: "structure" (default: a force gauge at the structure, H1
+    /// estimates the structure's FRF) or "shaker" (the force on the shaker's side of the
+    /// stinger: the data carry the shaker's moving mass, `Effect::Shaker`).
+    force_gauge: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -122,7 +137,17 @@ pub struct Experiment {
     pub gains: Vec<C64>,
     pub delays_s: Vec<f64>,
     pub levels: Vec<TruthLevel>,
+    /// The shaker when its force is read on the shaker's side of the stinger
+    /// (`shaker.force_gauge = "shaker"`): the plant then carries the shaker (and
+    /// `chain.shaker` is None).
+    pub shaker_side_force: Option<crate::experiment::spec::Shaker>,
+    /// A degraded bond region: (x_start, x_end) in m and the loss fraction d in [0, 1), the
+    /// adhesive stiffness there scaled by (1 - d) (`degraded_bond` table).
+    pub degraded_bond: Option<((f64, f64), f64)>,
 }
+
+/// Default width (m) of a degraded bond strip: 10 mm.
+pub const DEFAULT_DEGRADED_WIDTH_M: f64 = 0.010;
 
 /// Read, parse and validate an experiment file.
 pub fn load_experiment(path: &Path) -> Result<Experiment, StudyError> {
@@ -244,15 +269,26 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         }
         (None, None) => {}
     }
+    let mut shaker_side_force = None;
     if let Some(s) = &raw.shaker {
-        chain.shaker = Some(Shaker {
+        let sh = Shaker {
             armature_mass_kg: ctx.positive("shaker.armature_mass", s.armature_mass, "kg")?,
             stinger_stiffness_n_m: ctx.positive(
                 "shaker.stinger_stiffness",
                 s.stinger_stiffness,
                 "N/m",
             )?,
-        });
+        };
+        match s.force_gauge.as_deref().unwrap_or("structure") {
+            "structure" => chain.shaker = Some(sh),
+            "shaker" => shaker_side_force = Some(sh),
+            o => {
+                return Err(ctx.err(
+                    "shaker.force_gauge",
+                    format!("\"{o}\": use \"structure\" (force gauge at the drive point) or \"shaker\" (force read on the shaker's side of the stinger)"),
+                ))
+            }
+        }
     }
     chain.mode = if frequency_domain {
         Mode::FrequencyDomain
@@ -373,6 +409,48 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
             param_names: names,
         });
     }
+    let degraded_bond = match &raw.degraded_bond {
+        None => None,
+        Some(d) => {
+            let super::StructureSource::Mesher(j) = &structure.source else {
+                return Err(ctx.err(
+                    "degraded_bond",
+                    "a degraded bond region needs the mesher's structure (source = \"mesher\"): an imported model has no adhesive geometry",
+                ));
+            };
+            let width = ctx.positive(
+                "degraded_bond.width",
+                d.width.unwrap_or(DEFAULT_DEGRADED_WIDTH_M),
+                "m",
+            )?;
+            let (a0, a1) = (
+                j.adhesive_x_start_m,
+                j.adhesive_x_start_m + j.adhesive_length_m,
+            );
+            let tol = 1e-9 * j.adhesive_length_m;
+            if !(d.x_start.is_finite() && d.x_start >= a0 - tol && d.x_start + width <= a1 + tol) {
+                return Err(ctx.err(
+                    "degraded_bond.x_start",
+                    format!(
+                        "the region [{}, {}] m is not inside the adhesive block [{a0}, {a1}] m: give x_start in [{a0}, {}] m",
+                        d.x_start,
+                        d.x_start + width,
+                        a1 - width
+                    ),
+                ));
+            }
+            if !(d.loss.is_finite() && (0.0..1.0).contains(&d.loss)) {
+                return Err(ctx.err(
+                    "degraded_bond.loss",
+                    format!(
+                        "{}: give the fraction of the modulus lost in the region, 0 <= loss < 1 (0.95 leaves 5 %)",
+                        d.loss
+                    ),
+                ));
+            }
+            Some(((d.x_start, d.x_start + width), d.loss))
+        }
+    };
     Ok(Experiment {
         file: path.to_path_buf(),
         name: e.name.clone(),
@@ -388,5 +466,7 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         gains,
         delays_s,
         levels,
+        shaker_side_force,
+        degraded_bond,
     })
 }

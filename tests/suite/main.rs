@@ -48,6 +48,7 @@ mod rfm_gauss_newton;
 mod rom;
 mod rom_joint;
 mod runner;
+mod structural_effects;
 mod uff_fuzz;
 mod uff_real_files;
 mod uff_roundtrip;
