@@ -29,8 +29,8 @@ use crate::inference::loo::{self, Loo, Waic};
 use crate::inference::prior::Prior;
 use crate::inference::special::chi2_sf;
 use crate::inference::{
-    combine_replicas, stepping_stone_replica, Posterior, Progress, SteppingStoneParams,
-    SteppingStoneReplica,
+    combine_replicas, reference_stepping_stone_replica, stepping_stone_replica, Posterior,
+    Progress, SteppingStoneParams, SteppingStoneReplica,
 };
 use crate::study::inference::Inference;
 use crate::study::Study;
@@ -220,6 +220,8 @@ fn stepping_stone_run(
     study: &Study,
     inf: &Inference,
     post: &FrfPosterior<'_>,
+    map: &crate::inference::map::MapResult,
+    samplers: &[SamplerResult],
     seed: u64,
     level: &LevelData,
     model: &str,
@@ -235,10 +237,39 @@ fn stepping_stone_run(
         ..SteppingStoneParams::default()
     };
     let dir = checkpoint_dir(study, level, model, "stepping_stone");
-    let key = format!("{}x{}-{seed:016x}", params.particles, params.replicas);
+    // The generalized path's reference (None: from the prior), and what it was fitted to.
+    let (reference, fallback) = if ss.from_reference {
+        match super::evidence_ref::reference_for(post, map, samplers, ss.widen, ss.nu) {
+            Ok(r) => (Some(r), None),
+            Err(e) => (None, Some(e)),
+        }
+    } else {
+        (None, None)
+    };
+    let (key, path_note) = match &reference {
+        Some((q, from)) => (
+            format!(
+                "{}x{}-{seed:016x}-ref{:016x}",
+                params.particles,
+                params.replicas,
+                super::evidence_ref::reference_hash(q)
+            ),
+            format!(
+                "from a Student-t reference (nu {}, sd {} x those of the {from})",
+                ss.nu, ss.widen
+            ),
+        ),
+        None => (
+            format!("{}x{}-{seed:016x}", params.particles, params.replicas),
+            match fallback {
+                Some(e) => format!("from the prior (no reference: {e})"),
+                None => "from the prior".to_string(),
+            },
+        ),
+    };
     progress(Event::Start {
         step: format!(
-            "{}: stepping-stone evidence of {model} ({} replicas x {} particles)",
+            "{}: stepping-stone evidence of {model} ({} replicas x {} particles, {path_note})",
             level.name, params.replicas, params.particles
         ),
         total: params.replicas as u64,
@@ -255,8 +286,13 @@ fn stepping_stone_run(
             progress(Event::Advance);
             continue;
         }
-        let rep = stepping_stone_replica(post, &params, r, &|_: Progress| ())
-            .map_err(|e| fail(format!("stepping-stone of {model} at {}", level.name), e))?;
+        let rep = match &reference {
+            Some((q, _)) => {
+                reference_stepping_stone_replica(post, q, &params, r, &|_: Progress| ())
+            }
+            None => stepping_stone_replica(post, &params, r, &|_: Progress| ()),
+        }
+        .map_err(|e| fail(format!("stepping-stone of {model} at {}", level.name), e))?;
         rungs.push(rep.rungs.len());
         save_replica(&file, &rep);
         replicas.push(rep);
@@ -270,7 +306,7 @@ fn stepping_stone_run(
         .map(|r| format!("{:.2}", r.log_evidence))
         .collect();
     let notes = vec![format!(
-        "stepping-stone: {} replicas x {} particles ({} loaded from checkpoints; rungs per run replica {:?}), replica log evidences [{}]",
+        "stepping-stone {path_note}: {} replicas x {} particles ({} loaded from checkpoints; rungs per run replica {:?}), replica log evidences [{}]",
         params.replicas,
         params.particles,
         loaded,
@@ -398,9 +434,9 @@ pub fn compare(
             });
         }
     }
-    if let Some((mut row, notes)) =
-        stepping_stone_run(study, inf, post, seed, level, model, progress)?
-    {
+    if let Some((mut row, notes)) = stepping_stone_run(
+        study, inf, post, map, samplers, seed, level, model, progress,
+    )? {
         row.log_evidence += lin_shift;
         c.evidence.push(row);
         c.notes.extend(notes);
