@@ -28,8 +28,8 @@ pub mod whiten;
 
 pub use nuts::{sample_nuts, ChainDraws, NutsParams, NutsRun};
 pub use reference::{
-    reference_stepping_stone, reference_stepping_stone_replica, Reference, ReferenceError,
-    ReferencePosterior,
+    importance_evidence, reference_stepping_stone, reference_stepping_stone_replica, ImportanceRun,
+    Reference, ReferenceError, ReferencePosterior,
 };
 pub use sampling::{no_progress, Progress, SamplerError};
 pub use stepping_stone::{

@@ -441,6 +441,24 @@ pub fn compare(
         c.evidence.push(row);
         c.notes.extend(notes);
     }
+    // TMCMC's final importance reweighting, with the comparison part (stepping-stone) only.
+    if let Some(ss) = &inf.stepping_stone {
+        match super::evidence_ref::tmcmc_reweighted(post, samplers, ss.widen, ss.nu, seed) {
+            Some(Ok((lz, se, n, secs, note))) => {
+                c.evidence.push(EvidenceRow {
+                    estimator: "tmcmc_is".into(),
+                    prior: "declared".into(),
+                    log_evidence: lz + lin_shift,
+                    se,
+                    n_loglik: n,
+                    seconds: secs,
+                });
+                c.notes.push(note);
+            }
+            Some(Err(e)) => c.notes.push(format!("tmcmc_is not computed: {e}")),
+            None => {}
+        }
+    }
     // The posterior draws of the criteria: NUTS's when it ran, else TMCMC's.
     let Some(s) = samplers
         .iter()
