@@ -1,6 +1,9 @@
 //! Model comparison at one level and model, computed while the posterior is alive (called
-//! from [`super::bayes::infer_level`] after the samplers): the stepping-stone evidence, the
-//! evidence under priors widened ten-fold, the pointwise log likelihood per line with PSIS-LOO
+//! from [`super::bayes::infer_level`] after the samplers): the stepping-stone evidence (by
+//! default from a reference fitted to the posterior draws, [`crate::inference::reference`],
+//! built in `runner/evidence_ref.rs`), TMCMC's final importance reweighting (`tmcmc_is`, with
+//! the stepping-stone only), the evidence under priors widened ten-fold, the pointwise log
+//! likelihood per line with PSIS-LOO
 //! and WAIC, and posterior predictive criteria (FRAC per FRF, SCC(w), ACC(w) over thinned
 //! draws; standardised residuals and a chi-square test per channel at the MAP). Across models
 //! (Bayes factors, model probabilities) it is done when writing, in
