@@ -8,9 +8,9 @@ use std::sync::Mutex;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
 use rfmlab::inference::{
-    no_progress, reference_stepping_stone, sample_nuts, sample_tmcmc, stepping_stone, unit_rng,
-    DensityError, NutsParams, Posterior, Progress, Reference, SamplerError, SteppingStoneParams,
-    TmcmcParams,
+    importance_evidence, no_progress, reference_stepping_stone, sample_nuts, sample_tmcmc,
+    stepping_stone, unit_rng, DensityError, NutsParams, Posterior, Progress, Reference,
+    SamplerError, SteppingStoneParams, TmcmcParams,
 };
 
 // ---------------------------------------------------------------- small dense linear algebra
@@ -471,6 +471,22 @@ fn reference_stepping_stone_matches_the_closed_form_with_few_calls() {
     let truth = post.log_evidence();
     let tm = sample_tmcmc(&post, &tmcmc_params(1000, 3), None, &no_progress).unwrap();
     let q = Reference::from_draws(&tm.x, 1.5, 5.0).unwrap();
+    // TMCMC's final importance reweighting from the same reference: 4000 independent draws.
+    for seed in 1..=4 {
+        let is = importance_evidence(&post, &q, 4000, seed).unwrap();
+        let err = is.log_evidence - truth;
+        eprintln!(
+            "importance reweighting seed {seed}: error {err:+.4}, se {:.4}, ESS {:.2}",
+            is.log_evidence_se, is.ess
+        );
+        assert!(
+            err.abs() < 0.05 && err.abs() < 3.5 * is.log_evidence_se,
+            "{err} {is:?}"
+        );
+    }
+    let one = in_pool(1, || importance_evidence(&post, &q, 500, 5)).unwrap();
+    let two = in_pool(2, || importance_evidence(&post, &q, 500, 5)).unwrap();
+    assert_eq!(one, two);
     let mut errs = Vec::new();
     for seed in 1..=4 {
         let p = SteppingStoneParams {
