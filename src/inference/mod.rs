@@ -19,6 +19,7 @@ pub mod loo;
 pub mod map;
 pub mod nuts;
 pub mod prior;
+pub mod reference;
 pub mod sampling;
 pub mod special;
 pub mod stepping_stone;
@@ -26,6 +27,10 @@ pub mod tmcmc;
 pub mod whiten;
 
 pub use nuts::{sample_nuts, ChainDraws, NutsParams, NutsRun};
+pub use reference::{
+    importance_evidence, reference_stepping_stone, reference_stepping_stone_replica, ImportanceRun,
+    Reference, ReferenceError, ReferencePosterior,
+};
 pub use sampling::{no_progress, Progress, SamplerError};
 pub use stepping_stone::{
     combine_replicas, stepping_stone, stepping_stone_replica, SteppingStoneParams,

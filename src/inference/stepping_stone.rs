@@ -1,6 +1,9 @@
 //! Stepping-stone estimate of the log evidence (Xie, Lewis, Fan, Kuo and Chen 2011, Syst. Biol.
 //! 60(2)) on draws from a resample-move particle population (Del Moral, Doucet and Jasra 2006,
-//! JRSS B 68(3)), with its standard error from independent replicas. Independent of TMCMC: its
+//! JRSS B 68(3)), with its standard error from independent replicas. This module's path starts
+//! at the prior; [`super::reference`] runs it from a reference density close to the posterior
+//! (the generalized stepping-stone, the runner's default), which needs 1-2 rungs instead of
+//! dozens. Independent of TMCMC: its
 //! own ladder, its own populations and random streams; it shares only the Metropolis kernel and
 //! the resampling of [`super::sampling`].
 //!

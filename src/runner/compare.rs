@@ -1,6 +1,9 @@
 //! Model comparison at one level and model, computed while the posterior is alive (called
-//! from [`super::bayes::infer_level`] after the samplers): the stepping-stone evidence, the
-//! evidence under priors widened ten-fold, the pointwise log likelihood per line with PSIS-LOO
+//! from [`super::bayes::infer_level`] after the samplers): the stepping-stone evidence (by
+//! default from a reference fitted to the posterior draws, [`crate::inference::reference`],
+//! built in `runner/evidence_ref.rs`), TMCMC's final importance reweighting (`tmcmc_is`, with
+//! the stepping-stone only), the evidence under priors widened ten-fold, the pointwise log
+//! likelihood per line with PSIS-LOO
 //! and WAIC, and posterior predictive criteria (FRAC per FRF, SCC(w), ACC(w) over thinned
 //! draws; standardised residuals and a chi-square test per channel at the MAP). Across models
 //! (Bayes factors, model probabilities) it is done when writing, in
@@ -29,8 +32,8 @@ use crate::inference::loo::{self, Loo, Waic};
 use crate::inference::prior::Prior;
 use crate::inference::special::chi2_sf;
 use crate::inference::{
-    combine_replicas, stepping_stone_replica, Posterior, Progress, SteppingStoneParams,
-    SteppingStoneReplica,
+    combine_replicas, reference_stepping_stone_replica, stepping_stone_replica, Posterior,
+    Progress, SteppingStoneParams, SteppingStoneReplica,
 };
 use crate::study::inference::Inference;
 use crate::study::Study;
@@ -220,6 +223,8 @@ fn stepping_stone_run(
     study: &Study,
     inf: &Inference,
     post: &FrfPosterior<'_>,
+    map: &crate::inference::map::MapResult,
+    samplers: &[SamplerResult],
     seed: u64,
     level: &LevelData,
     model: &str,
@@ -235,10 +240,39 @@ fn stepping_stone_run(
         ..SteppingStoneParams::default()
     };
     let dir = checkpoint_dir(study, level, model, "stepping_stone");
-    let key = format!("{}x{}-{seed:016x}", params.particles, params.replicas);
+    // The generalized path's reference (None: from the prior), and what it was fitted to.
+    let (reference, fallback) = if ss.from_reference {
+        match super::evidence_ref::reference_for(post, map, samplers, ss.widen, ss.nu) {
+            Ok(r) => (Some(r), None),
+            Err(e) => (None, Some(e)),
+        }
+    } else {
+        (None, None)
+    };
+    let (key, path_note) = match &reference {
+        Some((q, from)) => (
+            format!(
+                "{}x{}-{seed:016x}-ref{:016x}",
+                params.particles,
+                params.replicas,
+                super::evidence_ref::reference_hash(q)
+            ),
+            format!(
+                "from a Student-t reference (nu {}, sd {} x those of the {from})",
+                ss.nu, ss.widen
+            ),
+        ),
+        None => (
+            format!("{}x{}-{seed:016x}", params.particles, params.replicas),
+            match fallback {
+                Some(e) => format!("from the prior (no reference: {e})"),
+                None => "from the prior".to_string(),
+            },
+        ),
+    };
     progress(Event::Start {
         step: format!(
-            "{}: stepping-stone evidence of {model} ({} replicas x {} particles)",
+            "{}: stepping-stone evidence of {model} ({} replicas x {} particles, {path_note})",
             level.name, params.replicas, params.particles
         ),
         total: params.replicas as u64,
@@ -255,8 +289,13 @@ fn stepping_stone_run(
             progress(Event::Advance);
             continue;
         }
-        let rep = stepping_stone_replica(post, &params, r, &|_: Progress| ())
-            .map_err(|e| fail(format!("stepping-stone of {model} at {}", level.name), e))?;
+        let rep = match &reference {
+            Some((q, _)) => {
+                reference_stepping_stone_replica(post, q, &params, r, &|_: Progress| ())
+            }
+            None => stepping_stone_replica(post, &params, r, &|_: Progress| ()),
+        }
+        .map_err(|e| fail(format!("stepping-stone of {model} at {}", level.name), e))?;
         rungs.push(rep.rungs.len());
         save_replica(&file, &rep);
         replicas.push(rep);
@@ -270,7 +309,7 @@ fn stepping_stone_run(
         .map(|r| format!("{:.2}", r.log_evidence))
         .collect();
     let notes = vec![format!(
-        "stepping-stone: {} replicas x {} particles ({} loaded from checkpoints; rungs per run replica {:?}), replica log evidences [{}]",
+        "stepping-stone {path_note}: {} replicas x {} particles ({} loaded from checkpoints; rungs per run replica {:?}), replica log evidences [{}]",
         params.replicas,
         params.particles,
         loaded,
@@ -398,12 +437,30 @@ pub fn compare(
             });
         }
     }
-    if let Some((mut row, notes)) =
-        stepping_stone_run(study, inf, post, seed, level, model, progress)?
-    {
+    if let Some((mut row, notes)) = stepping_stone_run(
+        study, inf, post, map, samplers, seed, level, model, progress,
+    )? {
         row.log_evidence += lin_shift;
         c.evidence.push(row);
         c.notes.extend(notes);
+    }
+    // TMCMC's final importance reweighting, with the comparison part (stepping-stone) only.
+    if let Some(ss) = &inf.stepping_stone {
+        match super::evidence_ref::tmcmc_reweighted(post, samplers, ss.widen, ss.nu, seed) {
+            Some(Ok((lz, se, n, secs, note))) => {
+                c.evidence.push(EvidenceRow {
+                    estimator: "tmcmc_is".into(),
+                    prior: "declared".into(),
+                    log_evidence: lz + lin_shift,
+                    se,
+                    n_loglik: n,
+                    seconds: secs,
+                });
+                c.notes.push(note);
+            }
+            Some(Err(e)) => c.notes.push(format!("tmcmc_is not computed: {e}")),
+            None => {}
+        }
     }
     // The posterior draws of the criteria: NUTS's when it ran, else TMCMC's.
     let Some(s) = samplers

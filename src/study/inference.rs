@@ -40,6 +40,9 @@
 //! [inference.stepping_stone]   # with samplers = [..., "stepping_stone"]: evidence only
 //! particles = 250              # per replica
 //! replicas = 8                 # the standard error comes from their spread
+//! path = "reference"           # from a Student-t fitted to the posterior draws (default) or "prior"
+//! widen = 1.5                  # reference sd over the draws' sd
+//! nu = 5.0                     # reference degrees of freedom ("inf" not allowed: use 1e9 for a Gaussian)
 //! ```
 
 use super::validate::Ctx;
@@ -124,6 +127,9 @@ pub struct RawTmcmc {
 pub struct RawSteppingStone {
     pub particles: Option<usize>,
     pub replicas: Option<usize>,
+    pub path: Option<String>,
+    pub widen: Option<f64>,
+    pub nu: Option<f64>,
 }
 
 /// Stepping-stone settings (evidence only; see [`crate::inference::stepping_stone`]).
@@ -133,6 +139,13 @@ pub struct SteppingStoneSettings {
     pub particles: usize,
     /// Independent replicas (at least 2: the standard error comes from their spread).
     pub replicas: usize,
+    /// `true`: generalized stepping-stone from a reference fitted to the posterior draws
+    /// ([`crate::inference::reference`]); `false`: from the prior.
+    pub from_reference: bool,
+    /// The reference's standard deviations over the draws'.
+    pub widen: f64,
+    /// The reference's degrees of freedom.
+    pub nu: f64,
 }
 
 /// The noise model as declared (the number of averages may come from the data file).
@@ -383,6 +396,36 @@ pub(super) fn inference(
                 8,
                 2,
             )?,
+            from_reference: match ss.and_then(|s| s.path.as_deref()) {
+                None | Some("reference") => true,
+                Some("prior") => false,
+                Some(other) => {
+                    return Err(ctx.err(
+                        format!("{key}.stepping_stone.path"),
+                        format!("unknown path \"{other}\": use \"reference\" (from a density fitted to the posterior draws) or \"prior\""),
+                    ))
+                }
+            },
+            widen: match ss.and_then(|s| s.widen) {
+                None => 1.5,
+                Some(w) if w >= 1.0 && w.is_finite() => w,
+                Some(w) => {
+                    return Err(ctx.err(
+                        format!("{key}.stepping_stone.widen"),
+                        format!("{w}: give a factor of at least 1 on the draws' standard deviations, e.g. 1.5"),
+                    ))
+                }
+            },
+            nu: match ss.and_then(|s| s.nu) {
+                None => 5.0,
+                Some(n) if n > 2.0 && n.is_finite() => n,
+                Some(n) => {
+                    return Err(ctx.err(
+                        format!("{key}.stepping_stone.nu"),
+                        format!("{n}: give degrees of freedom above 2 (e.g. 5; 1e9 for a Gaussian)"),
+                    ))
+                }
+            },
         })
     } else {
         None

@@ -218,7 +218,7 @@ fn bad_inference_input_exits_2_naming_the_key() {
     let dir = tempfile::tempdir().unwrap();
     let (f, _) = write_study(dir.path(), "bad", "");
     let good = std::fs::read_to_string(&f).unwrap();
-    let cases: [(&str, &str, &str); 7] = [
+    let cases: [(&str, &str, &str); 9] = [
         (
             "# Priors: log-uniform",
             "[inference.priors.model4]\nE0 = { family = \"beta\", lo = 1e6, hi = 1e8 }\n# Priors: log-uniform",
@@ -232,7 +232,9 @@ fn bad_inference_input_exits_2_naming_the_key() {
         ("n_averages = 189.5", "n_averages = -3", "inference.noise.n_averages"),
         ("chains = 2", "chains = 0", "inference.nuts.chains"),
         ("[inference.nuts]", "[inference.nuts]\ntarget_accept = 1.5", "inference.nuts.target_accept"),
-        ("samplers = [\"nuts\", \"tmcmc\"]", "samplers = [\"gibbs\"]", "inference.samplers[0]"),
+        ("samplers = [\"nuts\", \"tmcmc\", \"stepping_stone\"]", "samplers = [\"gibbs\"]", "inference.samplers[0]"),
+        ("path = \"reference\"", "path = \"bridge\"", "inference.stepping_stone.path"),
+        ("replicas = 8", "replicas = 8\nwiden = 0.5", "inference.stepping_stone.widen"),
         ("model = \"coherence\"", "model = \"laplace\"", "inference.noise.model"),
     ];
     for (from, to, key) in cases {

@@ -8,8 +8,9 @@ use std::sync::Mutex;
 use rand::rngs::StdRng;
 use rand_distr::{Distribution, StandardNormal};
 use rfmlab::inference::{
-    no_progress, sample_nuts, sample_tmcmc, stepping_stone, unit_rng, DensityError, NutsParams,
-    Posterior, Progress, SamplerError, SteppingStoneParams, TmcmcParams,
+    importance_evidence, no_progress, reference_stepping_stone, sample_nuts, sample_tmcmc,
+    stepping_stone, unit_rng, DensityError, NutsParams, Posterior, Progress, Reference,
+    SamplerError, SteppingStoneParams, TmcmcParams,
 };
 
 // ---------------------------------------------------------------- small dense linear algebra
@@ -457,6 +458,100 @@ fn stepping_stone_evidence_of_a_narrow_likelihood_under_a_wide_prior() {
             assert!(q.acceptance > 0.05 && q.acceptance < 0.8, "{q:?}");
         }
     }
+}
+
+/// Generalized stepping-stone on the narrow 5-D Gaussian: reference fitted to TMCMC's particles
+/// (what the runner does without NUTS), widened 1.5x, Student-t with 5 degrees of freedom.
+/// Over 4 seeds: each within 0.05 nats of the closed form and within 3.5 of its own se, and the
+/// path from the reference costs a fraction of the path from the prior (same replicas and
+/// particles).
+#[test]
+fn reference_stepping_stone_matches_the_closed_form_with_few_calls() {
+    let post = narrow_5d();
+    let truth = post.log_evidence();
+    let tm = sample_tmcmc(&post, &tmcmc_params(1000, 3), None, &no_progress).unwrap();
+    let q = Reference::from_draws(&tm.x, 1.5, 5.0).unwrap();
+    // TMCMC's final importance reweighting from the same reference: 4000 independent draws.
+    for seed in 1..=4 {
+        let is = importance_evidence(&post, &q, 4000, seed).unwrap();
+        let err = is.log_evidence - truth;
+        eprintln!(
+            "importance reweighting seed {seed}: error {err:+.4}, se {:.4}, ESS {:.2}",
+            is.log_evidence_se, is.ess
+        );
+        assert!(
+            err.abs() < 0.05 && err.abs() < 3.5 * is.log_evidence_se,
+            "{err} {is:?}"
+        );
+    }
+    let one = in_pool(1, || importance_evidence(&post, &q, 500, 5)).unwrap();
+    let two = in_pool(2, || importance_evidence(&post, &q, 500, 5)).unwrap();
+    assert_eq!(one, two);
+    let mut errs = Vec::new();
+    for seed in 1..=4 {
+        let p = SteppingStoneParams {
+            particles: 250,
+            replicas: 8,
+            seed,
+            ..SteppingStoneParams::default()
+        };
+        let g = reference_stepping_stone(&post, &q, &p, &no_progress).unwrap();
+        let err = g.log_evidence - truth;
+        eprintln!(
+            "reference stepping-stone seed {seed}: log Z {:.4} (closed form {truth:.4}, error {err:+.4}, se {:.4}), rungs {:?}, {} likelihood calls",
+            g.log_evidence,
+            g.log_evidence_se,
+            g.replicas.iter().map(|r| r.rungs.len()).collect::<Vec<_>>(),
+            g.n_loglik
+        );
+        assert!(err.abs() < 0.05, "seed {seed}: error {err}");
+        assert!(
+            err.abs() < 3.5 * g.log_evidence_se,
+            "seed {seed}: error {err} vs se {}",
+            g.log_evidence_se
+        );
+        assert!(g.log_evidence_se > 0.0 && g.log_evidence_se < 0.05);
+        errs.push((err, g.n_loglik));
+        if seed == 1 {
+            let prior_path = stepping_stone(&post, &p, &no_progress).unwrap();
+            eprintln!(
+                "prior-path stepping-stone, same settings: error {:+.4}, se {:.4}, {} likelihood calls",
+                prior_path.log_evidence - truth,
+                prior_path.log_evidence_se,
+                prior_path.n_loglik
+            );
+            assert!(g.n_loglik * 3 < prior_path.n_loglik);
+        }
+    }
+    // The replicas' spread says how far the estimate is from the truth: the four errors are
+    // not all on one side by more than their se would allow.
+    let mean: f64 = errs.iter().map(|e| e.0).sum::<f64>() / errs.len() as f64;
+    assert!(mean.abs() < 0.03, "mean error {mean}");
+}
+
+#[test]
+fn reference_stepping_stone_is_bit_identical_with_one_and_two_threads() {
+    let post = gauss_5d();
+    let (m, c) = post.posterior();
+    let q = Reference::new(&m, &c, 1.5, 5.0).unwrap();
+    let p = SteppingStoneParams {
+        particles: 100,
+        replicas: 2,
+        seed: 8,
+        ..SteppingStoneParams::default()
+    };
+    let one = in_pool(1, || reference_stepping_stone(&post, &q, &p, &no_progress)).unwrap();
+    let two = in_pool(2, || reference_stepping_stone(&post, &q, &p, &no_progress)).unwrap();
+    assert_eq!(one, two);
+    assert_eq!(one.log_evidence.to_bits(), two.log_evidence.to_bits());
+    let other = reference_stepping_stone(
+        &post,
+        &q,
+        &SteppingStoneParams { seed: 9, ..p },
+        &no_progress,
+    )
+    .unwrap();
+    assert_ne!(one.log_evidence, other.log_evidence);
 }
 
 /// Prior N(0, 3^2 I); likelihood 0.3 N(x; (-2, 0), 0.5^2 I) + 0.7 N(x; (2, 0), 0.5^2 I). The

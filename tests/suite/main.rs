@@ -23,6 +23,7 @@ mod data_checks;
 mod default_data;
 mod default_study;
 mod effects;
+mod evidence_quadrature;
 mod experiment;
 mod fe_cantilever;
 mod fe_element;
