@@ -42,6 +42,14 @@ pub struct ClosedLoopParams {
     /// The MAP searches: the caller's start (refits: the current MAP with the score test's
     /// estimate) plus `n_starts` space-filling starts (default 6).
     pub map: MapParams,
+    /// Refits start only from the current MAP with the score test's one-step estimate (no
+    /// space-filling starts): the effect is small, so the refit's mode is next to the current
+    /// one. Default true; false runs every refit as a full multistart search (the old path,
+    /// kept for the bench `benches/closed_loop.rs`).
+    pub warm_refits: bool,
+    /// Only candidates whose score test has a p-value below this are refitted. Default 0.01
+    /// (1: the top candidates whatever their p).
+    pub p_threshold: f64,
 }
 
 impl Default for ClosedLoopParams {
@@ -55,6 +63,8 @@ impl Default for ClosedLoopParams {
                 n_starts: 6,
                 ..MapParams::default()
             },
+            warm_refits: true,
+            p_threshold: 0.01,
         }
     }
 }
@@ -331,20 +341,23 @@ pub fn score_test(
     Ok((t, p_value, s_eff / i_eff, 1.0 / i_eff.sqrt()))
 }
 
-/// Put `effects` (free terms get their default priors) into `post`, keeping the law's priors
-/// `law_priors` and the noise priors `noise_priors`.
+/// Put `effects` into `post`: the starting model's parameters (law and declared free
+/// effects, the first `base_priors.len()`) keep their priors `base_priors`, free terms added
+/// by the loop get their default priors, the noise keeps `noise_priors`.
 fn install(
     post: &mut FrfPosterior<'_>,
-    law_priors: &[Prior],
+    base_priors: &[Prior],
     noise_priors: &[Prior],
     effects: Effects,
 ) -> Result<(), ForwardError> {
-    let mut priors = law_priors.to_vec();
+    let mut priors = base_priors.to_vec();
+    let n_law = post.likelihood.forward.law.n_params();
     priors.extend(
         effects
             .terms
             .iter()
             .filter(|t| t.free)
+            .skip(base_priors.len() - n_law)
             .map(|t| t.effect.default_prior()),
     );
     priors.extend(noise_priors.iter().cloned());
@@ -366,24 +379,29 @@ fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
     })
 }
 
-/// Run the loop on `post` (its forward model without free effects) from the unconstrained
-/// start `x0`, trying `candidates`. On return `post` holds the final model.
+/// Run the loop on `post` (its forward model may hold declared effects, fixed or free) from
+/// the unconstrained start `x0`, trying `candidates` (those already in the model are
+/// skipped). On return `post` holds the final model.
 pub fn run_closed_loop(
     post: &mut FrfPosterior<'_>,
     x0: &[f64],
     candidates: &[Effect],
     params: &ClosedLoopParams,
 ) -> Result<ClosedLoopResult, ClosedLoopError> {
-    if post.likelihood.forward.effects.n_free() > 0 {
-        return Err(ClosedLoopError::Setup(
-            "the loop starts from a model without free effects".into(),
-        ));
-    }
     post.likelihood.forward.linear_bias = None;
-    let nl = post.likelihood.forward.law.n_params();
+    // The starting model's parameters: the law's and any declared free effects'.
+    let nl = post.likelihood.forward.n_params();
     let law_priors = post.priors[..nl].to_vec();
     let noise_priors = post.priors[nl..].to_vec();
     let none = &|| {};
+    let refit_map = if params.warm_refits {
+        MapParams {
+            n_starts: 0,
+            ..params.map.clone()
+        }
+    } else {
+        params.map.clone()
+    };
     let mut current = find_map(&*post, Some(x0), &params.map, none)?;
     let before = fit_of(post, &current)?;
     let mut accepted: Vec<(Effect, f64, f64)> = Vec::new();
@@ -392,7 +410,15 @@ pub fn run_closed_loop(
         let phys = current.map_physical.clone();
         let mut scored = Vec::new();
         for c in candidates {
-            if accepted.iter().any(|(e, _, _)| e == c) {
+            if accepted.iter().any(|(e, _, _)| e == c)
+                || post
+                    .likelihood
+                    .forward
+                    .effects
+                    .terms
+                    .iter()
+                    .any(|t| t.effect.name() == c.name())
+            {
                 continue;
             }
             let (t, p, est, sd) = score_test(post, &phys, c)?;
@@ -416,6 +442,9 @@ pub fn run_closed_loop(
         let mut best: Option<(usize, MapResult)> = None;
         for ci in 0..params.top.min(scored.len()) {
             let c = &scored[ci];
+            if !(c.p_value < params.p_threshold) {
+                continue;
+            }
             let prior = c.effect.default_prior();
             let (lo, hi) = match prior {
                 Prior::Uniform { lo, hi } => (lo, hi),
@@ -434,7 +463,7 @@ pub fn run_closed_loop(
             p0.push(start);
             p0.extend_from_slice(&phys[np_now..]);
             let x_start = post.unconstrained(&p0);
-            let r = match find_map(&*post, Some(&x_start), &params.map, none) {
+            let r = match find_map(&*post, Some(&x_start), &refit_map, none) {
                 Ok(r) => r,
                 Err(e) => {
                     scored[ci].refit = Some(Refit {
@@ -550,5 +579,23 @@ pub fn default_candidates(channel_ids: &[u32], mass_points: &[(usize, u32)]) -> 
         c.push(Effect::Delay { channel, id });
     }
     c.push(Effect::BeamModulus);
+    c
+}
+
+/// Law candidates: one more Maxwell branch with its corner frequency `1 / (2 pi tau)` on the
+/// 1-2-5 series inside the band `band_hz` (the branch's modulus the parameter; a relaxation
+/// time is not identified at zero modulus, so the score test runs on a grid of them).
+pub fn maxwell_candidates(band_hz: (f64, f64)) -> Vec<Effect> {
+    let mut c = Vec::new();
+    for decade in -2..6 {
+        for m in [1.0, 2.0, 5.0] {
+            let f = m * 10f64.powi(decade);
+            if f >= band_hz.0 && f <= band_hz.1 {
+                c.push(Effect::MaxwellBranch {
+                    tau_s: 1.0 / (std::f64::consts::TAU * f),
+                });
+            }
+        }
+    }
     c
 }

@@ -34,10 +34,27 @@ pub struct DiagnoseLevel {
     pub relative_norm_after: f64,
     pub frac_before: Vec<f64>,
     pub frac_after: Vec<f64>,
+    /// Wall time (s) of the loop at this level (MAP, score tests, refits, evidence).
+    pub loop_seconds: f64,
 }
 
 fn out_err(e: crate::output::OutputError) -> RunError {
     RunError::Output(e)
+}
+
+/// The loop's settings from the study's `[closed_loop]` section (defaults without one).
+pub fn params_of(study: &Study) -> ClosedLoopParams {
+    let d = ClosedLoopParams::default();
+    match &study.closed_loop {
+        None => d,
+        Some(s) => ClosedLoopParams {
+            threshold_nats: s.evidence_threshold_nats,
+            top: s.top,
+            max_rounds: s.max_effects + 1,
+            p_threshold: s.p_threshold,
+            ..d
+        },
+    }
 }
 
 /// Run the loop on `study` (model `model`, else the first of `[inference] models`).
@@ -98,10 +115,17 @@ pub fn diagnose_study(
             .map(|(o, id)| (*o, *id))
             .collect();
         let mut candidates = default_candidates(&level.response_ids, &mass_points);
+        let band = (
+            level.freq_hz.first().copied().unwrap_or(0.0),
+            level.freq_hz.last().copied().unwrap_or(0.0),
+        );
+        candidates.extend(crate::closed_loop::maxwell_candidates(band));
         // The beam factor's exact scaling needs an adherend without viscous damping C_b.
         if built.model.c_b.is_some() {
             candidates.retain(|c| !matches!(c, crate::forward::Effect::BeamModulus));
         }
+        let candidates = super::declared::admitted(candidates, study.closed_loop.as_ref());
+        let t_loop = std::time::Instant::now();
         let res = run_closed_loop(&mut post, &x0, &candidates, params).map_err(|e| {
             RunError::Analysis {
                 analysis: format!("closed loop of {name} at {}", level.name),
@@ -122,6 +146,7 @@ pub fn diagnose_study(
             relative_norm_after: res.after.residuals.relative_norm,
             frac_before: res.before.residuals.frac.clone(),
             frac_after: res.after.residuals.frac.clone(),
+            loop_seconds: t_loop.elapsed().as_secs_f64(),
         });
         results.push((
             level.name.clone(),

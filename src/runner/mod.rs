@@ -25,6 +25,7 @@ pub mod bayes;
 pub mod closed_loop;
 pub mod compare;
 mod compute;
+pub mod declared;
 mod leakage;
 pub mod levels;
 pub mod material;
