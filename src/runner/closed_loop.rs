@@ -57,11 +57,67 @@ pub fn params_of(study: &Study) -> ClosedLoopParams {
     }
 }
 
-/// Run the loop on `study` (model `model`, else the first of `[inference] models`).
+/// Run the loop on `study` (model `model`, else the first of `[inference] models`); results in
+/// `<output_dir>.diagnose/`.
 pub fn diagnose_study(
     study: &Study,
     model: Option<&str>,
     params: &ClosedLoopParams,
+) -> Result<DiagnoseSummary, RunError> {
+    let out = super::sibling(&study.output_dir, "diagnose");
+    let parent = out.parent().unwrap_or(std::path::Path::new("."));
+    let dir_name = out
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "diagnose".into());
+    diagnose_into(study, model, params, parent, &dir_name, true)
+}
+
+/// `rfmlab run`'s hook: when the study has `[closed_loop]` (enabled) and `[inference]`, run the
+/// loop with its settings into `<out_dir>/closed_loop/` and append its summary to
+/// `<out_dir>/report.md`. Returns the files written (relative to `out_dir`).
+pub fn run_hook(study: &Study, out_dir: &std::path::Path) -> Result<Vec<String>, RunError> {
+    let enabled = study.closed_loop.as_ref().is_some_and(|c| c.enabled);
+    if !enabled || study.inference.is_none() {
+        return Ok(Vec::new());
+    }
+    let s = diagnose_into(study, None, &params_of(study), out_dir, "closed_loop", true)?;
+    let md_path = s.output_dir.join("closed_loop.md");
+    let md = std::fs::read_to_string(&md_path).unwrap_or_default();
+    let report = out_dir.join("report.md");
+    if report.is_file() {
+        let mut text = std::fs::read_to_string(&report).map_err(|e| {
+            RunError::Output(crate::output::OutputError::io(&report, "read report", e))
+        })?;
+        // The loop's markdown, its headings one level down and its figures under closed_loop/.
+        let _ = writeln!(text, "\n## Closed loop (`[closed_loop]`)\n");
+        for line in md.lines().skip(1) {
+            let line = line.replace("](residuals_", "](closed_loop/residuals_");
+            if line.starts_with('#') {
+                let _ = writeln!(text, "#{line}");
+            } else {
+                let _ = writeln!(text, "{line}");
+            }
+        }
+        std::fs::write(&report, text).map_err(|e| {
+            RunError::Output(crate::output::OutputError::io(&report, "write report", e))
+        })?;
+    }
+    let mut files = vec!["closed_loop/closed_loop.md".to_string()];
+    for name in ["residuals", "candidates", "closed_loop"] {
+        files.push(format!("closed_loop/{name}.parquet"));
+    }
+    Ok(files)
+}
+
+/// [`diagnose_study`] into `<parent>/<dir_name>/`, with the residual figures when `figures`.
+pub fn diagnose_into(
+    study: &Study,
+    model: Option<&str>,
+    params: &ClosedLoopParams,
+    parent: &std::path::Path,
+    dir_name: &str,
+    figures: bool,
 ) -> Result<DiagnoseSummary, RunError> {
     let t0 = std::time::Instant::now();
     let Some(inf) = &study.inference else {
@@ -94,13 +150,7 @@ pub fn diagnose_study(
     let mut levels = super::load_levels(study, &built)?;
     let (engine, _, lik_engine) = super::build_engine(study, &built, &mut levels, &laws, None)?;
     let engine = lik_engine.as_deref().unwrap_or(engine.as_ref());
-    let out = super::sibling(&study.output_dir, "diagnose");
-    let parent = out.parent().unwrap_or(std::path::Path::new("."));
-    let dir_name = out
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "diagnose".into());
-    let mut dir = ResultsDir::create(parent, &dir_name).map_err(out_err)?;
+    let mut dir = ResultsDir::create(parent, dir_name).map_err(out_err)?;
     let mut summary = Vec::new();
     let mut results = Vec::new();
     for level in levels.iter().filter(|l| inf.levels.contains(&l.name)) {
@@ -162,6 +212,21 @@ pub fn diagnose_study(
         .map_err(out_err)?;
     dir.write_table(&closed_loop_table(&results)?)
         .map_err(out_err)?;
+    if figures {
+        for (level, freq, ids, res, _) in &results {
+            crate::plot::closed_loop::residual_figure(
+                dir.file_path(&format!("residuals_{level}")),
+                &format!(
+                    "{}: standardised residuals of {name} at {level}, before and after",
+                    study.name
+                ),
+                freq,
+                ids,
+                &res.before.residuals.z,
+                &res.after.residuals.z,
+            )?;
+        }
+    }
     let md = markdown(&study.name, &name, &results);
     dir.write_bytes("closed_loop.md", md.as_bytes())
         .map_err(out_err)?;
@@ -331,24 +396,29 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
         let _ = writeln!(s, "## Level {level}\n\n**{}**\n", res.conclusion);
         let _ = writeln!(
             s,
-            "| round | rank | effect | score T | p | evidence gain (nat) | size +- sd | verdict |\n|---|---|---|---|---|---|---|---|"
+            "| round | rank | effect | score T | p | evidence gain (nat) | size +- sd | 95 % interval | verdict |\n|---|---|---|---|---|---|---|---|---|"
         );
         for c in res
             .candidates
             .iter()
             .filter(|c| c.rank <= 5 || c.refit.is_some())
         {
-            let (g, sz, v) = match &c.refit {
+            let (g, sz, iv, v) = match &c.refit {
                 Some(r) => (
                     format!("{:.1}", r.evidence_gain),
                     format!("{:.4e} +- {:.1e} {}", r.size, r.sd, c.effect.unit()),
+                    format!(
+                        "[{:.4e}, {:.4e}]",
+                        r.size - 1.96 * r.sd,
+                        r.size + 1.96 * r.sd
+                    ),
                     r.verdict.clone(),
                 ),
-                None => ("".into(), "".into(), "not refitted".into()),
+                None => ("".into(), "".into(), "".into(), "not refitted".into()),
             };
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {:.1} | {:.2e} | {g} | {sz} | {v} |",
+                "| {} | {} | {} | {:.1} | {:.2e} | {g} | {sz} | {iv} | {v} |",
                 c.round,
                 c.rank,
                 c.effect.name(),
@@ -397,6 +467,10 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
                 res.after.values[i], res.after.sd[i]
             );
         }
+        let _ = writeln!(
+            s,
+            "\n![standardised residuals before and after](residuals_{level}.png)\n\n|z| per channel and line; under a correct model |z|^2 has mean 1."
+        );
         s.push('\n');
     }
     s

@@ -843,6 +843,8 @@ fn run_study_here(
         t0,
         progress,
     )?;
+    let mut files = files;
+    files.extend(closed_loop::run_hook(study, &out_dir)?);
     let models = results
         .iter()
         .flat_map(|r| {

@@ -21,6 +21,7 @@ mod closed_loop_fast;
 mod correlation;
 mod csv_io;
 mod data_checks;
+mod declared_effects;
 mod default_data;
 mod default_study;
 mod effects;
