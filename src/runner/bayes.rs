@@ -588,7 +588,7 @@ pub fn relinearise_to_map(
 /// noise reads as information: on the independent frequency-domain virtual data (whose random
 /// error also lies along dE[H1]/df) a floor of 1e-4 gave posterior sds of 1e-5 and put the truth
 /// 9 sd away, at a 5e-5 relative parameter shift (the two codes' FE discretisations).
-const LEAKAGE_EPS_MIN: f64 = 1e-2;
+pub(crate) const LEAKAGE_EPS_MIN: f64 = 1e-2;
 
 /// Passes of (estimate the channels' correlation at the MAP, search the MAP again).
 const CORRELATION_PASSES: usize = 2;

@@ -176,6 +176,12 @@ pub fn diagnose_into(
         }
         let candidates = super::declared::admitted(candidates, study.closed_loop.as_ref());
         let t_loop = std::time::Instant::now();
+        let x0 = match inf.channel_correlation {
+            Some((kind, window)) => {
+                set_correlation(&mut post, &x0, &params.map, kind, window, level)?
+            }
+            None => x0,
+        };
         let res = run_closed_loop(&mut post, &x0, &candidates, params).map_err(|e| {
             RunError::Analysis {
                 analysis: format!("closed loop of {name} at {}", level.name),
@@ -237,6 +243,59 @@ pub fn diagnose_into(
         levels: summary,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Correlated channels (`inference.noise.channel_correlation`): the correlation per line from
+/// the standardised residuals of the starting model's MAP (returned, unconstrained, as the
+/// loop's start), held fixed during the loop (as in
+/// `runner::bayes`, one pass; with a missing effect the residuals hold it too, so the
+/// correlation is estimated once, before, not re-estimated per candidate).
+fn set_correlation(
+    post: &mut crate::inference::likelihood::FrfPosterior<'_>,
+    x0: &[f64],
+    map: &crate::inference::map::MapParams,
+    kind: crate::study::inference::CorrelationKind,
+    window: usize,
+    level: &super::LevelData,
+) -> Result<Vec<f64>, RunError> {
+    use crate::inference::likelihood::ChannelCorrelation;
+    use crate::study::inference::CorrelationKind;
+    let fail = |m: String| RunError::Analysis {
+        analysis: format!("channel correlation for the closed loop at {}", level.name),
+        message: m,
+    };
+    let r = crate::inference::map::find_map(&*post, Some(x0), map, &|| ())
+        .map_err(|e| fail(e.to_string()))?;
+    let np = post.likelihood.forward.n_params();
+    let (pl, pn) = r.map_physical.split_at(np);
+    let s = post
+        .likelihood
+        .standardised(pl, pn)
+        .map_err(|e| fail(e.to_string()))?;
+    let n_out = post.likelihood.data.n_out;
+    let c = match kind {
+        CorrelationKind::Estimated => ChannelCorrelation::estimate(&s, n_out, window),
+        CorrelationKind::Leakage => {
+            let pred = post
+                .likelihood
+                .forward
+                .predict(pl, false)
+                .map_err(|e| fail(e.to_string()))?;
+            ChannelCorrelation::leakage(
+                &pred.values,
+                &level.freq_hz,
+                &s,
+                n_out,
+                window,
+                super::bayes::LEAKAGE_EPS_MIN,
+            )
+        }
+    }
+    .map_err(|e| fail(e.to_string()))?;
+    post.likelihood
+        .set_channel_correlation(Some(c))
+        .map_err(|e| fail(e.to_string()))?;
+    Ok(r.map_x)
 }
 
 type LevelResult = (
