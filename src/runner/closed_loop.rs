@@ -36,6 +36,23 @@ pub struct DiagnoseLevel {
     pub frac_after: Vec<f64>,
     /// Wall time (s) of the loop at this level (MAP, score tests, refits, evidence).
     pub loop_seconds: f64,
+    /// Accepted effects in order: name, type, size (SI) and posterior sd.
+    pub accepted: Vec<(String, String, f64, f64)>,
+    /// Score-test ranking of the first round: candidate names, best first.
+    pub first_ranking: Vec<String>,
+    /// The model's parameters (law, then accepted effects), before and after.
+    pub parameters: Vec<ParameterChange>,
+}
+
+/// One parameter before and after the loop (SI), with the truth when simulated.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ParameterChange {
+    pub name: String,
+    pub before: Option<f64>,
+    pub before_sd: Option<f64>,
+    pub after: f64,
+    pub after_sd: f64,
+    pub truth: Option<f64>,
 }
 
 fn out_err(e: crate::output::OutputError) -> RunError {
@@ -203,6 +220,34 @@ pub fn diagnose_into(
             frac_before: res.before.residuals.frac.clone(),
             frac_after: res.after.residuals.frac.clone(),
             loop_seconds: t_loop.elapsed().as_secs_f64(),
+            accepted: res
+                .accepted
+                .iter()
+                .map(|(e, v, sd)| (e.name(), e.kind().to_string(), *v, *sd))
+                .collect(),
+            first_ranking: res
+                .candidates
+                .iter()
+                .filter(|c| c.round == 0)
+                .map(|c| c.effect.name())
+                .collect(),
+            parameters: res
+                .after
+                .names
+                .iter()
+                .enumerate()
+                .map(|(i, n)| {
+                    let j = res.before.names.iter().position(|m| m == n);
+                    ParameterChange {
+                        name: n.clone(),
+                        before: j.map(|j| res.before.values[j]),
+                        before_sd: j.map(|j| res.before.sd[j]),
+                        after: res.after.values[i],
+                        after_sd: res.after.sd[i],
+                        truth: truth.as_ref().and_then(|t| t.get(i).copied()),
+                    }
+                })
+                .collect(),
         });
         results.push((
             level.name.clone(),
