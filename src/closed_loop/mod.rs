@@ -331,8 +331,14 @@ pub fn score_test(
     if !(i_eff > 0.0) {
         return Ok((0.0, 1.0, 0.0, f64::INFINITY));
     }
-    let t = s_eff * s_eff / i_eff;
     let zs = s_eff / i_eff.sqrt();
+    // One-sided (a mass): the statistic is max(0, z)^2 (Self and Liang 1987), so a score
+    // pointing to a negative size ranks last.
+    let t = if candidate.one_sided() {
+        zs.max(0.0).powi(2)
+    } else {
+        zs * zs
+    };
     let p_value = if candidate.one_sided() {
         0.5 * erfc(zs / std::f64::consts::SQRT_2)
     } else {

@@ -59,6 +59,19 @@ fn out_err(e: crate::output::OutputError) -> RunError {
     RunError::Output(e)
 }
 
+/// Whether the likelihood's engine needs every measured point as an input: the study runs the
+/// loop (`[closed_loop]`, or `rfmlab diagnose`, which sets it) or declares a point mass (the
+/// Sherman-Morrison-Woodbury update needs the receptances at the mass's point).
+pub fn needs_all_inputs(study: &Study) -> bool {
+    study.closed_loop.as_ref().is_some_and(|c| c.enabled)
+        || study.declared_effects.iter().any(|d| {
+            matches!(
+                d.kind,
+                crate::study::effects::DeclaredKind::PointMass { .. }
+            )
+        })
+}
+
 /// The loop's settings from the study's `[closed_loop]` section (defaults without one).
 pub fn params_of(study: &Study) -> ClosedLoopParams {
     let d = ClosedLoopParams::default();
@@ -137,6 +150,12 @@ pub fn diagnose_into(
     figures: bool,
 ) -> Result<DiagnoseSummary, RunError> {
     let t0 = std::time::Instant::now();
+    // The loop needs every measured point as an engine input (point-mass candidates).
+    let mut with_loop = study.clone();
+    if !needs_all_inputs(&with_loop) {
+        with_loop.closed_loop = Some(crate::study::effects::ClosedLoopSettings::default());
+    }
+    let study = &with_loop;
     let Some(inf) = &study.inference else {
         return Err(super::study_err(
             study,

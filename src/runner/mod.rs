@@ -592,8 +592,15 @@ fn build_engine(
             let lik_engine = match &study.inference {
                 None => None,
                 Some(_) => {
+                    // The closed loop and declared point masses need the receptances of
+                    // every measured point: then all inputs.
+                    let lik_inputs = if closed_loop::needs_all_inputs(study) {
+                        rom.inputs().to_vec()
+                    } else {
+                        vec![built.excitation]
+                    };
                     let lik_rom = rom
-                        .with_inputs(&[built.excitation])
+                        .with_inputs(&lik_inputs)
                         .map_err(|e| RunError::Engine(e.to_string()))?;
                     let mut lp: Vec<crate::rom::PencilSweep> = Vec::new();
                     for level in levels {
