@@ -264,6 +264,18 @@ pub fn score_test(
     phys: &[f64],
     candidate: &Effect,
 ) -> Result<(f64, f64, f64, f64), ForwardError> {
+    score_test_step(post, phys, candidate).map(|(t, p, e, sd, _)| (t, p, e, sd))
+}
+
+/// [`score_test`] and the Gauss-Newton step of the model's parameters that goes with the
+/// one-step size: `dp = I_pp^-1 (S_p - I_pe de)` (halved until admissible), the refit's start
+/// (the law's parameters absorbed the effect; starting them where the effect's size would put
+/// them keeps the refit in the right basin). Returns (T, p, size, sd, model parameters).
+pub fn score_test_step(
+    post: &FrfPosterior<'_>,
+    phys: &[f64],
+    candidate: &Effect,
+) -> Result<(f64, f64, f64, f64, Vec<f64>), ForwardError> {
     let lik = &post.likelihood;
     let np = lik.forward.n_params();
     let mut fm_effects = lik.forward.effects.clone();
@@ -329,7 +341,7 @@ pub fn score_test(
     let s_eff = s[m] - a.iter().zip(&s[..m]).map(|(a, b)| a * b).sum::<f64>();
     let i_eff = fi[m * d + m] - a.iter().zip(&iep).map(|(a, b)| a * b).sum::<f64>();
     if !(i_eff > 0.0) {
-        return Ok((0.0, 1.0, 0.0, f64::INFINITY));
+        return Ok((0.0, 1.0, 0.0, f64::INFINITY, phys[..np].to_vec()));
     }
     let zs = s_eff / i_eff.sqrt();
     // One-sided (a mass): the statistic is max(0, z)^2 (Self and Liang 1987), so a score
@@ -344,7 +356,22 @@ pub fn score_test(
     } else {
         erfc(zs.abs() / std::f64::consts::SQRT_2)
     };
-    Ok((t, p_value, s_eff / i_eff, 1.0 / i_eff.sqrt()))
+    let de = s_eff / i_eff;
+    let rhs: Vec<f64> = (0..m).map(|j| s[j] - iep[j] * de).collect();
+    let dp = chol_solve(&l, m, &rhs);
+    let mut start = phys[..np].to_vec();
+    let mut f = 1.0;
+    for _ in 0..12 {
+        let trial: Vec<f64> = (0..np).map(|i| p[i] + f * dp[i] * scale[i]).collect();
+        let mut full = trial.clone();
+        full.push(candidate.null_value());
+        if fm.check(&full).is_ok() {
+            start = trial;
+            break;
+        }
+        f *= 0.5;
+    }
+    Ok((t, p_value, de, 1.0 / i_eff.sqrt(), start))
 }
 
 /// Put `effects` into `post`: the starting model's parameters (law and declared free
@@ -415,6 +442,7 @@ pub fn run_closed_loop(
     for round in 0..params.max_rounds {
         let phys = current.map_physical.clone();
         let mut scored = Vec::new();
+        let mut starts: Vec<(String, Vec<f64>)> = Vec::new();
         for c in candidates {
             if accepted.iter().any(|(e, _, _)| e == c)
                 || post
@@ -427,7 +455,8 @@ pub fn run_closed_loop(
             {
                 continue;
             }
-            let (t, p, est, sd) = score_test(post, &phys, c)?;
+            let (t, p, est, sd, st) = score_test_step(post, &phys, c)?;
+            starts.push((c.name(), st));
             scored.push(Candidate {
                 round,
                 effect: c.clone(),
@@ -465,11 +494,35 @@ pub fn run_closed_loop(
                 free: true,
             });
             install(post, &law_priors, &noise_priors, eff)?;
-            let mut p0 = phys[..np_now].to_vec();
+            let mut p0 = starts
+                .iter()
+                .find(|(n, _)| *n == c.effect.name())
+                .map_or_else(|| phys[..np_now].to_vec(), |(_, v)| v.clone());
             p0.push(start);
             p0.extend_from_slice(&phys[np_now..]);
             let x_start = post.unconstrained(&p0);
-            let r = match find_map(&*post, Some(&x_start), &refit_map, none) {
+            // The warm refit; when it fails or its Laplace Hessian is not positive definite
+            // (stopped short of the mode), the full multistart search from the same start.
+            let warm = find_map(&*post, Some(&x_start), &refit_map, none);
+            let warm_ok = warm.as_ref().is_ok_and(|r| r.laplace.positive_definite);
+            let refit = if params.warm_refits && !warm_ok {
+                match (warm, find_map(&*post, Some(&x_start), &params.map, none)) {
+                    (Ok(a), Ok(b)) => Ok(
+                        if b.laplace.positive_definite
+                            || b.starts[b.best].objective < a.starts[a.best].objective
+                        {
+                            b
+                        } else {
+                            a
+                        },
+                    ),
+                    (Ok(a), Err(_)) => Ok(a),
+                    (Err(_), b) => b,
+                }
+            } else {
+                warm
+            };
+            let r = match refit {
                 Ok(r) => r,
                 Err(e) => {
                     scored[ci].refit = Some(Refit {

@@ -240,7 +240,7 @@ pub(super) fn effects(
         }
         let prior = match &r.prior {
             None => None,
-            Some(p) if r.free => Some(super::inference::prior(ctx, &format!("{key}.prior"), p)?),
+            Some(p) if r.free => Some(effect_prior(ctx, &format!("{key}.prior"), p, nonneg)?),
             Some(_) => {
                 return Err(ctx.err(
                     format!("{key}.prior"),
@@ -263,6 +263,56 @@ pub(super) fn effects(
         });
     }
     Ok(out)
+}
+
+/// The prior of a free effect: `uniform` or `truncated_normal` over any finite range (gains,
+/// delays and the beam factor are signed); the positive families of `[inference.priors]` for
+/// the non-negative ones (mass, branch modulus).
+fn effect_prior(
+    ctx: &Ctx,
+    key: &str,
+    r: &super::inference::RawPrior,
+    nonneg: bool,
+) -> Result<Prior, StudyError> {
+    let need = |v: Option<f64>, k: &str| {
+        v.filter(|v| v.is_finite()).ok_or_else(|| {
+            ctx.err(
+                format!("{key}.{k}"),
+                format!("family \"{}\" needs a finite `{k}`", r.family),
+            )
+        })
+    };
+    let p = match r.family.as_str() {
+        "uniform" => Prior::Uniform {
+            lo: need(r.lo, "lo")?,
+            hi: need(r.hi, "hi")?,
+        },
+        "truncated_normal" => Prior::TruncatedNormal {
+            mean: need(r.mean, "mean")?,
+            sd: need(r.sd, "sd")?,
+            lo: need(r.lo, "lo")?,
+            hi: need(r.hi, "hi")?,
+        },
+        _ if nonneg => return super::inference::prior(ctx, key, r),
+        o => return Err(ctx.err(
+            format!("{key}.family"),
+            format!(
+                "prior family \"{o}\" for a signed effect: use \"uniform\" or \"truncated_normal\""
+            ),
+        )),
+    };
+    let ok = match p {
+        Prior::Uniform { lo, hi } => lo < hi && (!nonneg || lo >= 0.0),
+        Prior::TruncatedNormal { sd, lo, hi, .. } => sd > 0.0 && lo < hi && (!nonneg || lo >= 0.0),
+        _ => true,
+    };
+    if !ok {
+        return Err(ctx.err(
+            key,
+            "needs lo < hi (lo >= 0 for a mass or a branch modulus) and sd > 0",
+        ));
+    }
+    Ok(p)
 }
 
 /// Validate `[closed_loop]`.
