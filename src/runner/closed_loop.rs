@@ -129,9 +129,13 @@ pub fn run_hook(study: &Study, out_dir: &std::path::Path) -> Result<Vec<String>,
                 let _ = writeln!(text, "{line}");
             }
         }
-        std::fs::write(&report, text).map_err(|e| {
-            RunError::Output(crate::output::OutputError::io(&report, "write report", e))
-        })?;
+        // Atomically: a temporary file next to it, then a rename.
+        let tmp = out_dir.join(".report.md.tmp");
+        std::fs::write(&tmp, text)
+            .and_then(|_| std::fs::rename(&tmp, &report))
+            .map_err(|e| {
+                RunError::Output(crate::output::OutputError::io(&report, "write report", e))
+            })?;
     }
     let mut files = vec!["closed_loop/closed_loop.md".to_string()];
     for name in ["residuals", "candidates", "closed_loop"] {

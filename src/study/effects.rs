@@ -294,12 +294,14 @@ fn effect_prior(
             hi: need(r.hi, "hi")?,
         },
         _ if nonneg => return super::inference::prior(ctx, key, r),
-        o => return Err(ctx.err(
-            format!("{key}.family"),
-            format!(
+        o => {
+            return Err(ctx.err(
+                format!("{key}.family"),
+                format!(
                 "prior family \"{o}\" for a signed effect: use \"uniform\" or \"truncated_normal\""
             ),
-        )),
+            ))
+        }
     };
     let ok = match p {
         Prior::Uniform { lo, hi } => lo < hi && (!nonneg || lo >= 0.0),
