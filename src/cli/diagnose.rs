@@ -12,9 +12,10 @@ pub struct DiagnoseArgs {
     /// The model to diagnose (default: the first of `[inference] models`).
     #[arg(long)]
     pub model: Option<String>,
-    /// Laplace log-evidence gain (nats) an effect needs to be accepted.
-    #[arg(long, default_value_t = 5.0)]
-    pub threshold_nats: f64,
+    /// Laplace log-evidence gain (nats) an effect needs to be accepted (default: the study's
+    /// `[closed_loop] evidence_threshold`, else 5).
+    #[arg(long)]
+    pub threshold_nats: Option<f64>,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
@@ -29,17 +30,19 @@ fn wrap(e: RunError) -> anyhow::Error {
 }
 
 pub fn run(a: &DiagnoseArgs, g: &Global) -> anyhow::Result<()> {
-    if !(a.threshold_nats.is_finite() && a.threshold_nats >= 0.0) {
-        return Err(anyhow::Error::new(InputError(format!(
-            "--threshold-nats {} must be a non-negative number of nats (default 5)",
-            a.threshold_nats
-        ))));
+    if let Some(t) = a.threshold_nats {
+        if !(t.is_finite() && t >= 0.0) {
+            return Err(anyhow::Error::new(InputError(format!(
+                "--threshold-nats {t} must be a non-negative number of nats (default 5)"
+            ))));
+        }
     }
     let study = super::common::load_study(&a.study)?;
     let sp = super::common::spinner(g, "closing the loop");
+    let from_study = rfmlab::runner::closed_loop::params_of(&study);
     let params = ClosedLoopParams {
-        threshold_nats: a.threshold_nats,
-        ..ClosedLoopParams::default()
+        threshold_nats: a.threshold_nats.unwrap_or(from_study.threshold_nats),
+        ..from_study
     };
     let summary = rfmlab::runner::closed_loop::diagnose_study(&study, a.model.as_deref(), &params)
         .map_err(wrap)?;

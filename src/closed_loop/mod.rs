@@ -42,6 +42,14 @@ pub struct ClosedLoopParams {
     /// The MAP searches: the caller's start (refits: the current MAP with the score test's
     /// estimate) plus `n_starts` space-filling starts (default 6).
     pub map: MapParams,
+    /// Refits start only from the current MAP with the score test's one-step estimate (no
+    /// space-filling starts): the effect is small, so the refit's mode is next to the current
+    /// one. Default true; false runs every refit as a full multistart search (the old path,
+    /// kept for the bench `benches/closed_loop.rs`).
+    pub warm_refits: bool,
+    /// Only candidates whose score test has a p-value below this are refitted. Default 0.01
+    /// (1: the top candidates whatever their p).
+    pub p_threshold: f64,
 }
 
 impl Default for ClosedLoopParams {
@@ -55,6 +63,8 @@ impl Default for ClosedLoopParams {
                 n_starts: 6,
                 ..MapParams::default()
             },
+            warm_refits: true,
+            p_threshold: 0.01,
         }
     }
 }
@@ -254,6 +264,18 @@ pub fn score_test(
     phys: &[f64],
     candidate: &Effect,
 ) -> Result<(f64, f64, f64, f64), ForwardError> {
+    score_test_step(post, phys, candidate).map(|(t, p, e, sd, _)| (t, p, e, sd))
+}
+
+/// [`score_test`] and the Gauss-Newton step of the model's parameters that goes with the
+/// one-step size: `dp = I_pp^-1 (S_p - I_pe de)` (halved until admissible), the refit's start
+/// (the law's parameters absorbed the effect; starting them where the effect's size would put
+/// them keeps the refit in the right basin). Returns (T, p, size, sd, model parameters).
+pub fn score_test_step(
+    post: &FrfPosterior<'_>,
+    phys: &[f64],
+    candidate: &Effect,
+) -> Result<(f64, f64, f64, f64, Vec<f64>), ForwardError> {
     let lik = &post.likelihood;
     let np = lik.forward.n_params();
     let mut fm_effects = lik.forward.effects.clone();
@@ -319,32 +341,56 @@ pub fn score_test(
     let s_eff = s[m] - a.iter().zip(&s[..m]).map(|(a, b)| a * b).sum::<f64>();
     let i_eff = fi[m * d + m] - a.iter().zip(&iep).map(|(a, b)| a * b).sum::<f64>();
     if !(i_eff > 0.0) {
-        return Ok((0.0, 1.0, 0.0, f64::INFINITY));
+        return Ok((0.0, 1.0, 0.0, f64::INFINITY, phys[..np].to_vec()));
     }
-    let t = s_eff * s_eff / i_eff;
     let zs = s_eff / i_eff.sqrt();
+    // One-sided (a mass): the statistic is max(0, z)^2 (Self and Liang 1987), so a score
+    // pointing to a negative size ranks last.
+    let t = if candidate.one_sided() {
+        zs.max(0.0).powi(2)
+    } else {
+        zs * zs
+    };
     let p_value = if candidate.one_sided() {
         0.5 * erfc(zs / std::f64::consts::SQRT_2)
     } else {
         erfc(zs.abs() / std::f64::consts::SQRT_2)
     };
-    Ok((t, p_value, s_eff / i_eff, 1.0 / i_eff.sqrt()))
+    let de = s_eff / i_eff;
+    let rhs: Vec<f64> = (0..m).map(|j| s[j] - iep[j] * de).collect();
+    let dp = chol_solve(&l, m, &rhs);
+    let mut start = phys[..np].to_vec();
+    let mut f = 1.0;
+    for _ in 0..12 {
+        let trial: Vec<f64> = (0..np).map(|i| p[i] + f * dp[i] * scale[i]).collect();
+        let mut full = trial.clone();
+        full.push(candidate.null_value());
+        if fm.check(&full).is_ok() {
+            start = trial;
+            break;
+        }
+        f *= 0.5;
+    }
+    Ok((t, p_value, de, 1.0 / i_eff.sqrt(), start))
 }
 
-/// Put `effects` (free terms get their default priors) into `post`, keeping the law's priors
-/// `law_priors` and the noise priors `noise_priors`.
+/// Put `effects` into `post`: the starting model's parameters (law and declared free
+/// effects, the first `base_priors.len()`) keep their priors `base_priors`, free terms added
+/// by the loop get their default priors, the noise keeps `noise_priors`.
 fn install(
     post: &mut FrfPosterior<'_>,
-    law_priors: &[Prior],
+    base_priors: &[Prior],
     noise_priors: &[Prior],
     effects: Effects,
 ) -> Result<(), ForwardError> {
-    let mut priors = law_priors.to_vec();
+    let mut priors = base_priors.to_vec();
+    let n_law = post.likelihood.forward.law.n_params();
     priors.extend(
         effects
             .terms
             .iter()
             .filter(|t| t.free)
+            .skip(base_priors.len() - n_law)
             .map(|t| t.effect.default_prior()),
     );
     priors.extend(noise_priors.iter().cloned());
@@ -366,24 +412,29 @@ fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
     })
 }
 
-/// Run the loop on `post` (its forward model without free effects) from the unconstrained
-/// start `x0`, trying `candidates`. On return `post` holds the final model.
+/// Run the loop on `post` (its forward model may hold declared effects, fixed or free) from
+/// the unconstrained start `x0`, trying `candidates` (those already in the model are
+/// skipped). On return `post` holds the final model.
 pub fn run_closed_loop(
     post: &mut FrfPosterior<'_>,
     x0: &[f64],
     candidates: &[Effect],
     params: &ClosedLoopParams,
 ) -> Result<ClosedLoopResult, ClosedLoopError> {
-    if post.likelihood.forward.effects.n_free() > 0 {
-        return Err(ClosedLoopError::Setup(
-            "the loop starts from a model without free effects".into(),
-        ));
-    }
     post.likelihood.forward.linear_bias = None;
-    let nl = post.likelihood.forward.law.n_params();
+    // The starting model's parameters: the law's and any declared free effects'.
+    let nl = post.likelihood.forward.n_params();
     let law_priors = post.priors[..nl].to_vec();
     let noise_priors = post.priors[nl..].to_vec();
     let none = &|| {};
+    let refit_map = if params.warm_refits {
+        MapParams {
+            n_starts: 0,
+            ..params.map.clone()
+        }
+    } else {
+        params.map.clone()
+    };
     let mut current = find_map(&*post, Some(x0), &params.map, none)?;
     let before = fit_of(post, &current)?;
     let mut accepted: Vec<(Effect, f64, f64)> = Vec::new();
@@ -391,11 +442,21 @@ pub fn run_closed_loop(
     for round in 0..params.max_rounds {
         let phys = current.map_physical.clone();
         let mut scored = Vec::new();
+        let mut starts: Vec<(String, Vec<f64>)> = Vec::new();
         for c in candidates {
-            if accepted.iter().any(|(e, _, _)| e == c) {
+            if accepted.iter().any(|(e, _, _)| e == c)
+                || post
+                    .likelihood
+                    .forward
+                    .effects
+                    .terms
+                    .iter()
+                    .any(|t| t.effect.name() == c.name())
+            {
                 continue;
             }
-            let (t, p, est, sd) = score_test(post, &phys, c)?;
+            let (t, p, est, sd, st) = score_test_step(post, &phys, c)?;
+            starts.push((c.name(), st));
             scored.push(Candidate {
                 round,
                 effect: c.clone(),
@@ -416,6 +477,9 @@ pub fn run_closed_loop(
         let mut best: Option<(usize, MapResult)> = None;
         for ci in 0..params.top.min(scored.len()) {
             let c = &scored[ci];
+            if !(c.p_value < params.p_threshold) {
+                continue;
+            }
             let prior = c.effect.default_prior();
             let (lo, hi) = match prior {
                 Prior::Uniform { lo, hi } => (lo, hi),
@@ -430,11 +494,35 @@ pub fn run_closed_loop(
                 free: true,
             });
             install(post, &law_priors, &noise_priors, eff)?;
-            let mut p0 = phys[..np_now].to_vec();
+            let mut p0 = starts
+                .iter()
+                .find(|(n, _)| *n == c.effect.name())
+                .map_or_else(|| phys[..np_now].to_vec(), |(_, v)| v.clone());
             p0.push(start);
             p0.extend_from_slice(&phys[np_now..]);
             let x_start = post.unconstrained(&p0);
-            let r = match find_map(&*post, Some(&x_start), &params.map, none) {
+            // The warm refit; when it fails or its Laplace Hessian is not positive definite
+            // (stopped short of the mode), the full multistart search from the same start.
+            let warm = find_map(&*post, Some(&x_start), &refit_map, none);
+            let warm_ok = warm.as_ref().is_ok_and(|r| r.laplace.positive_definite);
+            let refit = if params.warm_refits && !warm_ok {
+                match (warm, find_map(&*post, Some(&x_start), &params.map, none)) {
+                    (Ok(a), Ok(b)) => Ok(
+                        if b.laplace.positive_definite
+                            || b.starts[b.best].objective < a.starts[a.best].objective
+                        {
+                            b
+                        } else {
+                            a
+                        },
+                    ),
+                    (Ok(a), Err(_)) => Ok(a),
+                    (Err(_), b) => b,
+                }
+            } else {
+                warm
+            };
+            let r = match refit {
                 Ok(r) => r,
                 Err(e) => {
                     scored[ci].refit = Some(Refit {
@@ -554,5 +642,23 @@ pub fn default_candidates(channel_ids: &[u32], mass_points: &[(usize, u32)]) -> 
     c.push(Effect::Shaker {
         stiffness_n_m: crate::forward::effects::DEFAULT_STINGER_STIFFNESS_N_M,
     });
+    c
+}
+
+/// Law candidates: one more Maxwell branch with its corner frequency `1 / (2 pi tau)` on the
+/// 1-2-5 series inside the band `band_hz` (the branch's modulus the parameter; a relaxation
+/// time is not identified at zero modulus, so the score test runs on a grid of them).
+pub fn maxwell_candidates(band_hz: (f64, f64)) -> Vec<Effect> {
+    let mut c = Vec::new();
+    for decade in -2..6 {
+        for m in [1.0, 2.0, 5.0] {
+            let f = m * 10f64.powi(decade);
+            if f >= band_hz.0 && f <= band_hz.1 {
+                c.push(Effect::MaxwellBranch {
+                    tau_s: 1.0 / (std::f64::consts::TAU * f),
+                });
+            }
+        }
+    }
     c
 }

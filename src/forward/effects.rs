@@ -7,6 +7,7 @@
 //!   delay of channel k:    E[H1]_k -> exp(-j w tau) E[H1]_k                            d/dtau = -j w (...)
 //!   beam modulus factor:   K_b + j D_b -> (1 + b)(K_b + j D_b), so (no viscous C_b)
 //!                          H(w, E*; b) = H(w / sqrt(1 + b), E* / (1 + b); 0) / (1 + b)   (exact scaling)
+//!   Maxwell branch (tau):  E*(w) -> E*(w) + E_k j w tau / (1 + j w tau)                  d/dE_k = dH/dE' j w tau / (1 + j w tau)
 //!   point mass at point P: M -> M + m b_P b_P^T (b_P the point's DOF weights; the measured
 //!                          direction), so with D = -w^2 m and H_PP, H_oP, H_Pi read from the
 //!                          engine (every measured point is an engine input):
@@ -49,6 +50,9 @@ pub enum Effect {
     /// point, with the force read on the shaker's side of the stinger (the force that drives
     /// the moving mass). A force gauge at the structure would not see the shaker at all.
     Shaker { stiffness_n_m: f64 },
+    /// One more Maxwell branch in the adhesive's law with relaxation time `tau_s` (s):
+    /// `E* -> E* + E_k j w tau / (1 + j w tau)`, the parameter the branch modulus `E_k` (Pa).
+    MaxwellBranch { tau_s: f64 },
 }
 
 /// Default stinger stiffness of a shaker candidate (N/m): a thin steel rod some 10 cm long.
@@ -63,6 +67,9 @@ impl Effect {
             Effect::PointMass { id, .. } => format!("mass_pt{id}"),
             Effect::BeamModulus => "beam_modulus".into(),
             Effect::Shaker { .. } => "shaker_mass".into(),
+            Effect::MaxwellBranch { tau_s } => {
+                format!("maxwell_fc{:.0}hz", 1.0 / (std::f64::consts::TAU * tau_s))
+            }
         }
     }
     /// Type of the effect (a study's `type` key).
@@ -73,6 +80,7 @@ impl Effect {
             Effect::PointMass { .. } => "point_mass",
             Effect::BeamModulus => "beam_modulus",
             Effect::Shaker { .. } => "shaker",
+            Effect::MaxwellBranch { .. } => "maxwell_branch",
         }
     }
     /// SI unit of the parameter.
@@ -81,6 +89,7 @@ impl Effect {
             Effect::Gain { .. } | Effect::BeamModulus => "1",
             Effect::Delay { .. } => "s",
             Effect::PointMass { .. } | Effect::Shaker { .. } => "kg",
+            Effect::MaxwellBranch { .. } => "Pa",
         }
     }
     /// A sentence of physics for the report.
@@ -99,6 +108,10 @@ impl Effect {
             Effect::Shaker { stiffness_n_m } => format!(
                 "a shaker's moving mass m_s on a {stiffness_n_m:.3e} N/m stinger at the drive point, with the force read on the shaker's side of the stinger, loads the drive point and adds a stinger-armature resonance"
             ),
+            Effect::MaxwellBranch { tau_s } => format!(
+                "the adhesive relaxes also near {:.1} Hz (tau = {tau_s:.3e} s): one more Maxwell branch E_k j w tau / (1 + j w tau) adds stiffness above and loss around that frequency (the law's relaxation spectrum is too narrow, e.g. a fractional-law adhesive)",
+                1.0 / (std::f64::consts::TAU * tau_s)
+            ),
         }
     }
     /// Value at which the effect is absent.
@@ -108,7 +121,10 @@ impl Effect {
     /// Whether the parameter is one-sided (a mass is >= 0): the score test is then one-sided
     /// (Self and Liang 1987: a 50:50 mixture of chi-square 0 and 1).
     pub fn one_sided(&self) -> bool {
-        matches!(self, Effect::PointMass { .. } | Effect::Shaker { .. })
+        matches!(
+            self,
+            Effect::PointMass { .. } | Effect::Shaker { .. } | Effect::MaxwellBranch { .. }
+        )
     }
     /// Admissible range (open) of the parameter.
     pub fn bounds(&self) -> (f64, f64) {
@@ -117,12 +133,13 @@ impl Effect {
             Effect::Delay { .. } => (-0.01, 0.01),
             Effect::PointMass { .. } | Effect::Shaker { .. } => (-1e-12, 10.0),
             Effect::BeamModulus => (-0.9, 9.0),
+            Effect::MaxwellBranch { .. } => (-1e-6, 1e11),
         }
     }
     /// Default prior when the effect is free: uniform over a stated plausible range (the
     /// evidence depends on it: a ten times wider range costs ln 10 = 2.3 nats).
     /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor or a shaker's moving mass), beam
-    /// modulus +-20 %.
+    /// modulus +-20 %, Maxwell branch modulus 0-20 MPa (a few times the stiffness of the paper's adhesive, E0 about 5 MPa).
     pub fn default_prior(&self) -> Prior {
         match self {
             Effect::Gain { .. } | Effect::BeamModulus => Prior::Uniform { lo: -0.2, hi: 0.2 },
@@ -131,6 +148,18 @@ impl Effect {
                 hi: 1e-3,
             },
             Effect::PointMass { .. } | Effect::Shaker { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
+            Effect::MaxwellBranch { .. } => Prior::Uniform { lo: 0.0, hi: 2e7 },
+        }
+    }
+    /// The factor `dE*/dE_k = j w tau / (1 + j w tau)` of a Maxwell branch at `omega` (zero
+    /// for every other effect).
+    pub fn law_factor(&self, omega_rad_s: f64) -> C64 {
+        match self {
+            Effect::MaxwellBranch { tau_s } => {
+                let jwt = C64::new(0.0, omega_rad_s * tau_s);
+                jwt / (1.0 + jwt)
+            }
+            _ => C64::new(0.0, 0.0),
         }
     }
     fn is_structural(&self) -> bool {
@@ -279,6 +308,11 @@ impl Effects {
                         "effect {name}: stinger stiffness {stiffness_n_m} N/m must be finite and > 0"
                     )));
                 }
+                Effect::MaxwellBranch { tau_s } if !(tau_s.is_finite() && tau_s > 0.0) => {
+                    return Err(super::ForwardError::Setup(format!(
+                        "effect {name}: relaxation time {tau_s} s must be positive"
+                    )));
+                }
                 _ => {}
             }
             let (lo, hi) = t.effect.bounds();
@@ -311,7 +345,7 @@ impl Effects {
         if derivs {
             // The beam factor's column by a central difference of the exact transform.
             for (t, term) in self.terms.iter().enumerate() {
-                if matches!(term.effect, Effect::BeamModulus) {
+                if matches!(term.effect, Effect::BeamModulus) && term.free {
                     let step = 1e-6;
                     let mut vp = values.to_vec();
                     vp[t] += step;

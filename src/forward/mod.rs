@@ -199,7 +199,20 @@ impl<'a> ForwardModel<'a> {
         let nl = self.law.n_params();
         let (pl, pe) = p.split_at(nl);
         let values = self.effects.values(pe);
-        let modulus: Vec<C64> = omega.iter().map(|&w| self.law.modulus(pl, w)).collect();
+        // The law, plus any extra Maxwell branches (law effects).
+        let modulus: Vec<C64> = omega
+            .iter()
+            .map(|&w| {
+                self.law.modulus(pl, w)
+                    + self
+                        .effects
+                        .terms
+                        .iter()
+                        .zip(&values)
+                        .map(|(t, v)| t.effect.law_factor(w) * v)
+                        .sum::<C64>()
+            })
+            .collect();
         let sc = self.effects.structural(
             self.obs.engine,
             self.obs.input,
@@ -227,7 +240,17 @@ impl<'a> ForwardModel<'a> {
                 }
             }
             for (t, term) in self.effects.terms.iter().enumerate() {
-                if term.free {
+                if !term.free {
+                    continue;
+                }
+                if matches!(term.effect, Effect::MaxwellBranch { .. }) {
+                    // A law effect: dH/dE' times dE*/dE_k.
+                    jm.push(
+                        (0..omega.len() * n)
+                            .map(|o| sc.dh[o] * term.effect.law_factor(omega[o / n]))
+                            .collect(),
+                    );
+                } else {
                     jm.push(sc.d_terms[t].clone());
                 }
             }
@@ -236,17 +259,13 @@ impl<'a> ForwardModel<'a> {
         Ok((out, sc.drive))
     }
 
-    /// Channel effects (gains, delays) applied at the lines to `out` (values and Jacobian).
-    fn apply_channel_effects(&self, p: &[f64], out: &mut Prediction) {
-        if self.effects.is_empty() {
-            return;
-        }
-        let nl = self.law.n_params();
-        let values = self.effects.values(&p[nl..]);
+    /// The channel effects' factor `(1 + g) exp(-j w tau)` at the lines, `[line * n_out + k]`,
+    /// for the values `values` of all terms.
+    fn channel_factor(&self, values: &[f64]) -> Vec<C64> {
         let n = self.obs.outputs.len();
         let one = C64::new(1.0, 0.0);
         let mut factor = vec![one; self.obs.omega_rad_s.len() * n];
-        for (term, v) in self.effects.terms.iter().zip(&values) {
+        for (term, v) in self.effects.terms.iter().zip(values) {
             match term.effect {
                 Effect::Gain { channel, .. } => {
                     for f in factor.iter_mut().skip(channel).step_by(n) {
@@ -261,6 +280,18 @@ impl<'a> ForwardModel<'a> {
                 _ => {}
             }
         }
+        factor
+    }
+
+    /// Channel effects (gains, delays) applied at the lines to `out` (values and Jacobian).
+    fn apply_channel_effects(&self, p: &[f64], out: &mut Prediction) {
+        if self.effects.is_empty() {
+            return;
+        }
+        let nl = self.law.n_params();
+        let values = self.effects.values(&p[nl..]);
+        let n = self.obs.outputs.len();
+        let factor = self.channel_factor(&values);
         out.values
             .iter_mut()
             .zip(&factor)
@@ -590,8 +621,15 @@ pub struct Linearised<'m> {
     dedp: Vec<C64>,
     /// The kernel rows (fixed at p), when there is a measurement model.
     rows: Option<Cow<'m, [Vec<KernelTerm>]>>,
-    /// Jacobian columns added at the lines (the linearised bias), `[q][line * n_out + k]`.
+    /// Jacobian columns added at the lines (the linearised bias, or the channel effects'
+    /// columns), `[q][line * n_out + k]` (empty: none).
     extra: Vec<Vec<C64>>,
+    /// With effects: the Jacobian columns of the structural part on the evaluation grid,
+    /// `[q][j * n_out + k]` (empty: none), in place of `dh` and `dedp`.
+    grid_jac: Vec<Vec<C64>>,
+    /// With effects: the channel factor at the lines (the structural part's cotangent is
+    /// `c conj(f)`).
+    factor: Option<Vec<C64>>,
 }
 
 impl Linearised<'_> {
@@ -601,10 +639,23 @@ impl Linearised<'_> {
         let zero = C64::new(0.0, 0.0);
         // b_j,k: the cotangent pulled back to the evaluation grid, conjugated (so that
         // g_q = Re sum_j,k b_jk dh_jk dE/dp_q(j)).
+        let scaled: Vec<C64>;
+        let (c_lines, c) = match &self.factor {
+            Some(f) => {
+                scaled = c.iter().zip(f).map(|(z, f)| z * f.conj()).collect();
+                (c, &scaled[..])
+            }
+            None => (c, c),
+        };
+        let grid_len = if self.grid_jac.is_empty() {
+            self.dh.len()
+        } else {
+            self.grid_jac.iter().map(Vec::len).max().unwrap_or(0)
+        };
         let b: Vec<C64> = match &self.rows {
             None => c.iter().map(|z| z.conj()).collect(),
             Some(rows) => {
-                let mut b = vec![zero; self.dh.len()];
+                let mut b = vec![zero; grid_len];
                 for (l, terms) in rows.iter().enumerate() {
                     let cl = &c[l * n..(l + 1) * n];
                     for t in terms {
@@ -624,10 +675,15 @@ impl Linearised<'_> {
         let mut g: Vec<f64> = (0..self.n_params)
             .map(|q| {
                 self.extra.get(q).map_or(0.0, |e| {
-                    e.iter().zip(c).map(|(a, z)| (z.conj() * a).re).sum()
+                    e.iter().zip(c_lines).map(|(a, z)| (z.conj() * a).re).sum()
                 })
             })
             .collect();
+        for (q, col) in self.grid_jac.iter().enumerate() {
+            if !col.is_empty() {
+                g[q] += b.iter().zip(col).map(|(x, y)| (x * y).re).sum::<f64>();
+            }
+        }
         for (j, (bj, dj)) in b.chunks(n).zip(self.dh.chunks(n)).enumerate() {
             let s: C64 = bj.iter().zip(dj).map(|(x, y)| x * y).sum();
             for (q, gq) in g.iter_mut().enumerate() {
@@ -645,17 +701,7 @@ impl ForwardModel<'_> {
     pub fn linearise(&self, p: &[f64]) -> Result<Linearised<'_>, ForwardError> {
         self.check(p)?;
         if !self.effects.is_empty() {
-            // With effects, the full Jacobian columns at the lines (one forward pass each).
-            let pred = self.predict(p, true)?;
-            return Ok(Linearised {
-                values: pred.values,
-                n_out: self.obs.outputs.len(),
-                n_params: p.len(),
-                dh: Vec::new(),
-                dedp: Vec::new(),
-                rows: None,
-                extra: pred.jac,
-            });
+            return self.linearise_with_effects(p);
         }
         let np = self.law.n_params();
         let measurement = self
@@ -693,6 +739,85 @@ impl ForwardModel<'_> {
             dedp,
             rows,
             extra,
+            grid_jac: Vec::new(),
+            factor: None,
+        })
+    }
+}
+
+impl ForwardModel<'_> {
+    /// [`ForwardModel::linearise`] with effects: the Jacobian columns of the structure and law
+    /// on the evaluation grid (the lines, or the measurement model's fine grid), pulled back by
+    /// one adjoint pass of the kernel instead of one forward pass per column; channel effects
+    /// act at the lines (the cotangent of the structural part is `c conj(f)` for the channel
+    /// factor `f`; the gain and delay columns are kept at the lines).
+    fn linearise_with_effects(&self, p: &[f64]) -> Result<Linearised<'_>, ForwardError> {
+        let nl = self.law.n_params();
+        let n = self.obs.outputs.len();
+        let measurement = self.obs.measurement.as_ref();
+        let omega = match measurement {
+            None => self.obs.omega_rad_s.clone(),
+            Some(m) => m.fine_omega(),
+        };
+        let (grid, drive) = self.exact_on(&omega, p, true)?;
+        let (mut values, rows) = match measurement {
+            None => (grid.values, None),
+            Some(m) => {
+                let rows = m.rows_for_drive(&drive);
+                (MeasurementModel::apply(&rows, &grid.values, n), Some(rows))
+            }
+        };
+        let all = self.effects.values(&p[nl..]);
+        let factor = self.channel_factor(&all);
+        values.iter_mut().zip(&factor).for_each(|(a, f)| *a *= f);
+        let mut grid_jac = grid.jac;
+        let mut extra = vec![Vec::new(); p.len()];
+        let mut q = nl;
+        for (term, v) in self.effects.terms.iter().zip(&all) {
+            if !term.free {
+                continue;
+            }
+            let col: Option<Vec<C64>> = match term.effect {
+                Effect::Gain { channel, .. } => Some(
+                    (0..values.len())
+                        .map(|o| {
+                            if o % n == channel {
+                                values[o] / (1.0 + v)
+                            } else {
+                                C64::new(0.0, 0.0)
+                            }
+                        })
+                        .collect(),
+                ),
+                Effect::Delay { channel, .. } => Some(
+                    (0..values.len())
+                        .map(|o| {
+                            if o % n == channel {
+                                C64::new(0.0, -self.obs.omega_rad_s[o / n]) * values[o]
+                            } else {
+                                C64::new(0.0, 0.0)
+                            }
+                        })
+                        .collect(),
+                ),
+                _ => None,
+            };
+            if let Some(col) = col {
+                extra[q] = col;
+                grid_jac[q] = Vec::new();
+            }
+            q += 1;
+        }
+        Ok(Linearised {
+            values,
+            n_out: n,
+            n_params: p.len(),
+            dh: Vec::new(),
+            dedp: Vec::new(),
+            rows,
+            extra,
+            grid_jac,
+            factor: Some(factor),
         })
     }
 }

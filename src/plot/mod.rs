@@ -9,6 +9,7 @@
 //! axes, non-positive values are skipped: lines are broken there. An empty curve, a curve
 //! whose x and y lengths differ, or a panel with nothing to draw is an error, never a panic.
 
+pub mod closed_loop;
 mod draw;
 mod error;
 pub mod posterior;

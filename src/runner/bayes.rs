@@ -201,6 +201,16 @@ pub fn build_posterior<'a>(
             e,
         )
     })?;
+    // Declared effects (`[[structure.effects]]`): fixed ones change the model, free ones are
+    // parameters after the law's.
+    let mut forward = forward;
+    let ids: Vec<u32> = study.structure.points.iter().map(|p| p.id).collect();
+    let (effects, effect_priors) = super::declared::level_effects(study, &ids, level)?;
+    if !effects.is_empty() {
+        forward
+            .set_effects(effects)
+            .map_err(|e| fail(format!("declared effects at {}", level.name), e))?;
+    }
     let noise = inf.noise.resolve(n_averages(study, inf, level)?);
     let data = FrfData {
         freq_hz: level.freq_hz.clone(),
@@ -216,6 +226,7 @@ pub fn build_posterior<'a>(
         )
     })?;
     let mut priors = inf.priors.get(model_name).cloned().unwrap_or_default();
+    priors.extend(effect_priors);
     for _ in 0..lik.n_tau() {
         priors.push(inf.noise_scale_prior.clone());
     }
@@ -230,8 +241,19 @@ pub fn build_posterior<'a>(
 pub(crate) fn initial_x(post: &FrfPosterior<'_>, p_law: &[f64]) -> Vec<f64> {
     let mut phys = p_law.to_vec();
     let lik = &post.likelihood;
+    // Declared free effects start at their declared values.
+    if phys.len() < lik.forward.n_params() {
+        phys.extend(
+            lik.forward
+                .effects
+                .terms
+                .iter()
+                .filter(|t| t.free)
+                .map(|t| t.value),
+        );
+    }
     if lik.n_tau() > 0 {
-        let pred = lik.forward.predict(p_law, false).ok();
+        let pred = lik.forward.predict(&phys, false).ok();
         let n = lik.data.n_out;
         let groups = lik.n_tau();
         let mut num = vec![0.0; groups];
@@ -566,7 +588,7 @@ pub fn relinearise_to_map(
 /// noise reads as information: on the independent frequency-domain virtual data (whose random
 /// error also lies along dE[H1]/df) a floor of 1e-4 gave posterior sds of 1e-5 and put the truth
 /// 9 sd away, at a 5e-5 relative parameter shift (the two codes' FE discretisations).
-const LEAKAGE_EPS_MIN: f64 = 1e-2;
+pub(crate) const LEAKAGE_EPS_MIN: f64 = 1e-2;
 
 /// Passes of (estimate the channels' correlation at the MAP, search the MAP again).
 const CORRELATION_PASSES: usize = 2;

@@ -34,19 +34,132 @@ pub struct DiagnoseLevel {
     pub relative_norm_after: f64,
     pub frac_before: Vec<f64>,
     pub frac_after: Vec<f64>,
+    /// Wall time (s) of the loop at this level (MAP, score tests, refits, evidence).
+    pub loop_seconds: f64,
+    /// Accepted effects in order: name, type, size (SI) and posterior sd.
+    pub accepted: Vec<(String, String, f64, f64)>,
+    /// Score-test ranking of the first round: candidate names, best first.
+    pub first_ranking: Vec<String>,
+    /// The model's parameters (law, then accepted effects), before and after.
+    pub parameters: Vec<ParameterChange>,
+}
+
+/// One parameter before and after the loop (SI), with the truth when simulated.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ParameterChange {
+    pub name: String,
+    pub before: Option<f64>,
+    pub before_sd: Option<f64>,
+    pub after: f64,
+    pub after_sd: f64,
+    pub truth: Option<f64>,
 }
 
 fn out_err(e: crate::output::OutputError) -> RunError {
     RunError::Output(e)
 }
 
-/// Run the loop on `study` (model `model`, else the first of `[inference] models`).
+/// Whether the likelihood's engine needs every measured point as an input: the study runs the
+/// loop (`[closed_loop]`, or `rfmlab diagnose`, which sets it) or declares a point mass (the
+/// Sherman-Morrison-Woodbury update needs the receptances at the mass's point).
+pub fn needs_all_inputs(study: &Study) -> bool {
+    study.closed_loop.as_ref().is_some_and(|c| c.enabled)
+        || study.declared_effects.iter().any(|d| {
+            matches!(
+                d.kind,
+                crate::study::effects::DeclaredKind::PointMass { .. }
+            )
+        })
+}
+
+/// The loop's settings from the study's `[closed_loop]` section (defaults without one).
+pub fn params_of(study: &Study) -> ClosedLoopParams {
+    let d = ClosedLoopParams::default();
+    match &study.closed_loop {
+        None => d,
+        Some(s) => ClosedLoopParams {
+            threshold_nats: s.evidence_threshold_nats,
+            top: s.top,
+            max_rounds: s.max_effects + 1,
+            p_threshold: s.p_threshold,
+            ..d
+        },
+    }
+}
+
+/// Run the loop on `study` (model `model`, else the first of `[inference] models`); results in
+/// `<output_dir>.diagnose/`.
 pub fn diagnose_study(
     study: &Study,
     model: Option<&str>,
     params: &ClosedLoopParams,
 ) -> Result<DiagnoseSummary, RunError> {
+    let out = super::sibling(&study.output_dir, "diagnose");
+    let parent = out.parent().unwrap_or(std::path::Path::new("."));
+    let dir_name = out
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "diagnose".into());
+    diagnose_into(study, model, params, parent, &dir_name, true)
+}
+
+/// `rfmlab run`'s hook: when the study has `[closed_loop]` (enabled) and `[inference]`, run the
+/// loop with its settings into `<out_dir>/closed_loop/` and append its summary to
+/// `<out_dir>/report.md`. Returns the files written (relative to `out_dir`).
+pub fn run_hook(study: &Study, out_dir: &std::path::Path) -> Result<Vec<String>, RunError> {
+    let enabled = study.closed_loop.as_ref().is_some_and(|c| c.enabled);
+    if !enabled || study.inference.is_none() {
+        return Ok(Vec::new());
+    }
+    let s = diagnose_into(study, None, &params_of(study), out_dir, "closed_loop", true)?;
+    let md_path = s.output_dir.join("closed_loop.md");
+    let md = std::fs::read_to_string(&md_path).unwrap_or_default();
+    let report = out_dir.join("report.md");
+    if report.is_file() {
+        let mut text = std::fs::read_to_string(&report).map_err(|e| {
+            RunError::Output(crate::output::OutputError::io(&report, "read report", e))
+        })?;
+        // The loop's markdown, its headings one level down and its figures under closed_loop/.
+        let _ = writeln!(text, "\n## Closed loop (`[closed_loop]`)\n");
+        for line in md.lines().skip(1) {
+            let line = line.replace("](residuals_", "](closed_loop/residuals_");
+            if line.starts_with('#') {
+                let _ = writeln!(text, "#{line}");
+            } else {
+                let _ = writeln!(text, "{line}");
+            }
+        }
+        // Atomically: a temporary file next to it, then a rename.
+        let tmp = out_dir.join(".report.md.tmp");
+        std::fs::write(&tmp, text)
+            .and_then(|_| std::fs::rename(&tmp, &report))
+            .map_err(|e| {
+                RunError::Output(crate::output::OutputError::io(&report, "write report", e))
+            })?;
+    }
+    let mut files = vec!["closed_loop/closed_loop.md".to_string()];
+    for name in ["residuals", "candidates", "closed_loop"] {
+        files.push(format!("closed_loop/{name}.parquet"));
+    }
+    Ok(files)
+}
+
+/// [`diagnose_study`] into `<parent>/<dir_name>/`, with the residual figures when `figures`.
+pub fn diagnose_into(
+    study: &Study,
+    model: Option<&str>,
+    params: &ClosedLoopParams,
+    parent: &std::path::Path,
+    dir_name: &str,
+    figures: bool,
+) -> Result<DiagnoseSummary, RunError> {
     let t0 = std::time::Instant::now();
+    // The loop needs every measured point as an engine input (point-mass candidates).
+    let mut with_loop = study.clone();
+    if !needs_all_inputs(&with_loop) {
+        with_loop.closed_loop = Some(crate::study::effects::ClosedLoopSettings::default());
+    }
+    let study = &with_loop;
     let Some(inf) = &study.inference else {
         return Err(super::study_err(
             study,
@@ -77,13 +190,7 @@ pub fn diagnose_study(
     let mut levels = super::load_levels(study, &built)?;
     let (engine, _, lik_engine) = super::build_engine(study, &built, &mut levels, &laws, None)?;
     let engine = lik_engine.as_deref().unwrap_or(engine.as_ref());
-    let out = super::sibling(&study.output_dir, "diagnose");
-    let parent = out.parent().unwrap_or(std::path::Path::new("."));
-    let dir_name = out
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "diagnose".into());
-    let mut dir = ResultsDir::create(parent, &dir_name).map_err(out_err)?;
+    let mut dir = ResultsDir::create(parent, dir_name).map_err(out_err)?;
     let mut summary = Vec::new();
     let mut results = Vec::new();
     for level in levels.iter().filter(|l| inf.levels.contains(&l.name)) {
@@ -98,10 +205,23 @@ pub fn diagnose_study(
             .map(|(o, id)| (*o, *id))
             .collect();
         let mut candidates = default_candidates(&level.response_ids, &mass_points);
+        let band = (
+            level.freq_hz.first().copied().unwrap_or(0.0),
+            level.freq_hz.last().copied().unwrap_or(0.0),
+        );
+        candidates.extend(crate::closed_loop::maxwell_candidates(band));
         // The beam factor's exact scaling needs an adherend without viscous damping C_b.
         if built.model.c_b.is_some() {
             candidates.retain(|c| !matches!(c, crate::forward::Effect::BeamModulus));
         }
+        let candidates = super::declared::admitted(candidates, study.closed_loop.as_ref());
+        let t_loop = std::time::Instant::now();
+        let x0 = match inf.channel_correlation {
+            Some((kind, window)) => {
+                set_correlation(&mut post, &x0, &params.map, kind, window, level)?
+            }
+            None => x0,
+        };
         let res = run_closed_loop(&mut post, &x0, &candidates, params).map_err(|e| {
             RunError::Analysis {
                 analysis: format!("closed loop of {name} at {}", level.name),
@@ -122,6 +242,35 @@ pub fn diagnose_study(
             relative_norm_after: res.after.residuals.relative_norm,
             frac_before: res.before.residuals.frac.clone(),
             frac_after: res.after.residuals.frac.clone(),
+            loop_seconds: t_loop.elapsed().as_secs_f64(),
+            accepted: res
+                .accepted
+                .iter()
+                .map(|(e, v, sd)| (e.name(), e.kind().to_string(), *v, *sd))
+                .collect(),
+            first_ranking: res
+                .candidates
+                .iter()
+                .filter(|c| c.round == 0)
+                .map(|c| c.effect.name())
+                .collect(),
+            parameters: res
+                .after
+                .names
+                .iter()
+                .enumerate()
+                .map(|(i, n)| {
+                    let j = res.before.names.iter().position(|m| m == n);
+                    ParameterChange {
+                        name: n.clone(),
+                        before: j.map(|j| res.before.values[j]),
+                        before_sd: j.map(|j| res.before.sd[j]),
+                        after: res.after.values[i],
+                        after_sd: res.after.sd[i],
+                        truth: truth.as_ref().and_then(|t| t.get(i).copied()),
+                    }
+                })
+                .collect(),
         });
         results.push((
             level.name.clone(),
@@ -137,6 +286,21 @@ pub fn diagnose_study(
         .map_err(out_err)?;
     dir.write_table(&closed_loop_table(&results)?)
         .map_err(out_err)?;
+    if figures {
+        for (level, freq, ids, res, _) in &results {
+            crate::plot::closed_loop::residual_figure(
+                dir.file_path(&format!("residuals_{level}")),
+                &format!(
+                    "{}: standardised residuals of {name} at {level}, before and after",
+                    study.name
+                ),
+                freq,
+                ids,
+                &res.before.residuals.z,
+                &res.after.residuals.z,
+            )?;
+        }
+    }
     let md = markdown(&study.name, &name, &results);
     dir.write_bytes("closed_loop.md", md.as_bytes())
         .map_err(out_err)?;
@@ -147,6 +311,59 @@ pub fn diagnose_study(
         levels: summary,
         seconds: t0.elapsed().as_secs_f64(),
     })
+}
+
+/// Correlated channels (`inference.noise.channel_correlation`): the correlation per line from
+/// the standardised residuals of the starting model's MAP (returned, unconstrained, as the
+/// loop's start), held fixed during the loop (as in
+/// `runner::bayes`, one pass; with a missing effect the residuals hold it too, so the
+/// correlation is estimated once, before, not re-estimated per candidate).
+fn set_correlation(
+    post: &mut crate::inference::likelihood::FrfPosterior<'_>,
+    x0: &[f64],
+    map: &crate::inference::map::MapParams,
+    kind: crate::study::inference::CorrelationKind,
+    window: usize,
+    level: &super::LevelData,
+) -> Result<Vec<f64>, RunError> {
+    use crate::inference::likelihood::ChannelCorrelation;
+    use crate::study::inference::CorrelationKind;
+    let fail = |m: String| RunError::Analysis {
+        analysis: format!("channel correlation for the closed loop at {}", level.name),
+        message: m,
+    };
+    let r = crate::inference::map::find_map(&*post, Some(x0), map, &|| ())
+        .map_err(|e| fail(e.to_string()))?;
+    let np = post.likelihood.forward.n_params();
+    let (pl, pn) = r.map_physical.split_at(np);
+    let s = post
+        .likelihood
+        .standardised(pl, pn)
+        .map_err(|e| fail(e.to_string()))?;
+    let n_out = post.likelihood.data.n_out;
+    let c = match kind {
+        CorrelationKind::Estimated => ChannelCorrelation::estimate(&s, n_out, window),
+        CorrelationKind::Leakage => {
+            let pred = post
+                .likelihood
+                .forward
+                .predict(pl, false)
+                .map_err(|e| fail(e.to_string()))?;
+            ChannelCorrelation::leakage(
+                &pred.values,
+                &level.freq_hz,
+                &s,
+                n_out,
+                window,
+                super::bayes::LEAKAGE_EPS_MIN,
+            )
+        }
+    }
+    .map_err(|e| fail(e.to_string()))?;
+    post.likelihood
+        .set_channel_correlation(Some(c))
+        .map_err(|e| fail(e.to_string()))?;
+    Ok(r.map_x)
 }
 
 type LevelResult = (
@@ -306,24 +523,29 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
         let _ = writeln!(s, "## Level {level}\n\n**{}**\n", res.conclusion);
         let _ = writeln!(
             s,
-            "| round | rank | effect | score T | p | evidence gain (nat) | size +- sd | verdict |\n|---|---|---|---|---|---|---|---|"
+            "| round | rank | effect | score T | p | evidence gain (nat) | size +- sd | 95 % interval | verdict |\n|---|---|---|---|---|---|---|---|---|"
         );
         for c in res
             .candidates
             .iter()
             .filter(|c| c.rank <= 5 || c.refit.is_some())
         {
-            let (g, sz, v) = match &c.refit {
+            let (g, sz, iv, v) = match &c.refit {
                 Some(r) => (
                     format!("{:.1}", r.evidence_gain),
                     format!("{:.4e} +- {:.1e} {}", r.size, r.sd, c.effect.unit()),
+                    format!(
+                        "[{:.4e}, {:.4e}]",
+                        r.size - 1.96 * r.sd,
+                        r.size + 1.96 * r.sd
+                    ),
                     r.verdict.clone(),
                 ),
-                None => ("".into(), "".into(), "not refitted".into()),
+                None => ("".into(), "".into(), "".into(), "not refitted".into()),
             };
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {:.1} | {:.2e} | {g} | {sz} | {v} |",
+                "| {} | {} | {} | {:.1} | {:.2e} | {g} | {sz} | {iv} | {v} |",
                 c.round,
                 c.rank,
                 c.effect.name(),
@@ -372,6 +594,10 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
                 res.after.values[i], res.after.sd[i]
             );
         }
+        let _ = writeln!(
+            s,
+            "\n![standardised residuals before and after](residuals_{level}.png)\n\n|z| per channel and line; under a correct model |z|^2 has mean 1."
+        );
         s.push('\n');
     }
     s

@@ -26,6 +26,7 @@ pub mod closed_loop;
 pub mod compare;
 mod compute;
 mod evidence_ref;
+pub mod declared;
 mod leakage;
 pub mod levels;
 pub mod material;
@@ -592,8 +593,15 @@ fn build_engine(
             let lik_engine = match &study.inference {
                 None => None,
                 Some(_) => {
+                    // The closed loop and declared point masses need the receptances of
+                    // every measured point: then all inputs.
+                    let lik_inputs = if closed_loop::needs_all_inputs(study) {
+                        rom.inputs().to_vec()
+                    } else {
+                        vec![built.excitation]
+                    };
                     let lik_rom = rom
-                        .with_inputs(&[built.excitation])
+                        .with_inputs(&lik_inputs)
                         .map_err(|e| RunError::Engine(e.to_string()))?;
                     let mut lp: Vec<crate::rom::PencilSweep> = Vec::new();
                     for level in levels {
@@ -843,6 +851,8 @@ fn run_study_here(
         t0,
         progress,
     )?;
+    let mut files = files;
+    files.extend(closed_loop::run_hook(study, &out_dir)?);
     let models = results
         .iter()
         .flat_map(|r| {

@@ -223,7 +223,7 @@ pub struct Inference {
     pub basins: Option<super::comparison::BasinSettings>,
 }
 
-fn prior(ctx: &Ctx, key: &str, r: &RawPrior) -> Result<Prior, StudyError> {
+pub(super) fn prior(ctx: &Ctx, key: &str, r: &RawPrior) -> Result<Prior, StudyError> {
     let need = |v: Option<f64>, k: &str| {
         v.ok_or_else(|| {
             ctx.err(

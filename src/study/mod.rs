@@ -232,6 +232,10 @@ pub struct Study {
     pub analyses: Analyses,
     /// The `[inference]` section, when the study asks for posteriors.
     pub inference: Option<inference::Inference>,
+    /// Effects the study declares (`[[structure.effects]]`); every forward model carries them.
+    pub declared_effects: Vec<effects::DeclaredEffect>,
+    /// The `[closed_loop]` section, when given.
+    pub closed_loop: Option<effects::ClosedLoopSettings>,
 }
 
 mod validate;
@@ -257,6 +261,7 @@ pub(crate) fn resolve(file: &Path, p: &str) -> PathBuf {
 
 pub mod build;
 pub mod comparison;
+pub mod effects;
 pub mod experiment;
 pub mod inference;
 pub mod material;

@@ -17,6 +17,8 @@ pub struct RawStudy {
     pub analyses: Option<RawAnalyses>,
     /// Bayesian inference (see [`super::inference`]).
     pub inference: Option<super::inference::RawInference>,
+    /// The closed loop (see [`super::effects`]).
+    pub closed_loop: Option<super::effects::RawClosedLoop>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -44,6 +46,9 @@ pub struct RawStructure {
     pub excitation: Option<u32>,
     /// Imported model (source = "matrix_market").
     pub import: Option<RawImport>,
+    /// Declared effects (see [`super::effects`]).
+    #[serde(default)]
+    pub effects: Vec<super::effects::RawEffect>,
 }
 
 #[derive(Debug, Deserialize)]

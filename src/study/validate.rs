@@ -95,6 +95,12 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
         None => None,
         Some(r) => Some(super::inference::inference(&ctx, r, &models, &level_names)?),
     };
+    let point_ids: Vec<u32> = structure.points.iter().map(|p| p.id).collect();
+    let declared_effects = super::effects::effects(&ctx, &raw.structure.effects, &point_ids)?;
+    let closed_loop = match &raw.closed_loop {
+        None => None,
+        Some(r) => Some(super::effects::closed_loop(&ctx, r)?),
+    };
     let sha256 = {
         let mut h = Sha256::new();
         h.update(text.as_bytes());
@@ -120,6 +126,8 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
         solver,
         analyses,
         inference,
+        declared_effects,
+        closed_loop,
     })
 }
 
