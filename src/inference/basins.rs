@@ -182,7 +182,10 @@ mod tests {
             .collect();
         for (e, (x, _)) in ends.iter().zip(&polished) {
             assert_eq!(e[0].signum(), x[0].signum(), "{e:?} -> {x:?}");
-            assert!((x[0].abs() - 1.0).abs() < 0.05 && x[1].abs() < 1e-6, "{x:?}");
+            assert!(
+                (x[0].abs() - 1.0).abs() < 0.05 && x[1].abs() < 1e-6,
+                "{x:?}"
+            );
         }
         let pts: Vec<Option<Vec<f64>>> = polished.iter().map(|(x, _)| Some(x.clone())).collect();
         let obj: Vec<f64> = polished.iter().map(|(_, f)| *f).collect();

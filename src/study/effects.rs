@@ -66,14 +66,24 @@ pub struct RawClosedLoop {
 /// Where a declared effect acts, by the study's ids (resolved to engine indices by the runner).
 #[derive(Clone, Debug, PartialEq)]
 pub enum DeclaredKind {
-    PointMass { point: u32 },
-    Gain { channel: u32 },
-    Delay { channel: u32 },
+    PointMass {
+        point: u32,
+    },
+    Gain {
+        channel: u32,
+    },
+    Delay {
+        channel: u32,
+    },
     BeamModulus,
-    MaxwellBranch { tau_s: f64 },
+    MaxwellBranch {
+        tau_s: f64,
+    },
     /// A shaker's moving mass on a stinger (N/m) at the drive point, force read on the shaker
     /// side.
-    Shaker { stiffness_n_m: f64 },
+    Shaker {
+        stiffness_n_m: f64,
+    },
 }
 
 /// A validated declared effect.

@@ -291,7 +291,7 @@ impl Setup {
                 )
                 .map_err(|e| e.to_string())?;
                 let mean = forward.predict(params, false).map_err(|e| e.to_string())?;
-                let mut rng = unit_rng(seed, 0x6e6f_6973_65);
+                let mut rng = unit_rng(seed, 0x006e_6f69_7365);
                 let mut v = Vec::with_capacity(values.len());
                 for (o, (x, g2)) in values.iter_mut().zip(&coherence).enumerate() {
                     let m = mean.values[o];

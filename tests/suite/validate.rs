@@ -266,7 +266,10 @@ fn hive_dataset_reads_as_one_table(three: &Path, one: &Path) {
 #[test]
 fn ci_smoke_noise_model_data_units_and_two_shards() {
     let exp = EXPERIMENT
-        .replace("lines_hz = [1.0, 500.0, 1.0]", "lines_hz = [20.0, 400.0, 4.0]")
+        .replace(
+            "lines_hz = [1.0, 500.0, 1.0]",
+            "lines_hz = [20.0, 400.0, 4.0]",
+        )
         .replace("averages = 200", "averages = 50");
     let val = r#"
 [validation]
@@ -303,20 +306,34 @@ half_width_sd = 7.0
     // real and imaginary parts, so sum |z|^2 / (2 N) = 1 +- 3 sqrt(1 / N).
     let (law, truth) = rfmlab::validate::law_and_truth(&setup, "model4").unwrap();
     let sim = setup.simulate(law.as_ref(), &truth, 77).unwrap();
-    let v = sim.variances.as_ref().expect("noise-model data carry variances");
+    let v = sim
+        .variances
+        .as_ref()
+        .expect("noise-model data carry variances");
     let post = setup.posterior(law.as_ref(), &sim, &truth, 0.1).unwrap();
     let z = post.likelihood.standardised(&truth, &[]).unwrap();
     assert_eq!(z.len(), v.len());
     let n = z.len() as f64;
     let ms = z.iter().map(|c| c.norm_sqr()).sum::<f64>() / (2.0 * n);
-    assert!((ms - 1.0).abs() < 3.0 / n.sqrt(), "mean square {ms} over {n} values");
+    assert!(
+        (ms - 1.0).abs() < 3.0 / n.sqrt(),
+        "mean square {ms} over {n} values"
+    );
 
     let one = dir.path().join("one");
     run_and_write(&spec, &setup, 0.0, Shard::ALL, &one, &|| ()).unwrap();
     merge_and_summarise(&spec, &one, false, "test").unwrap();
     let two = dir.path().join("two");
     for i in 0..2 {
-        run_and_write(&spec, &setup, 0.0, Shard { index: i, count: 2 }, &two, &|| ()).unwrap();
+        run_and_write(
+            &spec,
+            &setup,
+            0.0,
+            Shard { index: i, count: 2 },
+            &two,
+            &|| (),
+        )
+        .unwrap();
     }
     merge_and_summarise(&spec, &two, false, "test").unwrap();
     for name in ["sbc", "coverage", "selection", "quadrature"] {
