@@ -388,31 +388,13 @@ pub fn infer_level(
             // residuals, then the MAP again under it; twice, so the correlation is that of
             // the residuals of the MAP it defines (the second pass moves it little).
             for _ in 0..CORRELATION_PASSES {
-                let (pl, pn) = map.map_physical.split_at(nl);
-                let s = post
-                    .likelihood
-                    .standardised(pl, pn)
-                    .map_err(|e| fail(format!("residuals of {name} at {}", level.name), e))?;
-                let n_out = post.likelihood.data.n_out;
-                let c = match kind {
-                    CorrelationKind::Estimated => ChannelCorrelation::estimate(&s, n_out, window),
-                    CorrelationKind::Leakage => {
-                        let pred = post
-                            .likelihood
-                            .forward
-                            .predict(pl, false)
-                            .map_err(|e| fail(format!("prediction of {name}"), e))?;
-                        ChannelCorrelation::leakage(
-                            &pred.values,
-                            &level.freq_hz,
-                            &s,
-                            n_out,
-                            window,
-                            LEAKAGE_EPS_MIN,
+                let c = correlation_at(&post, &map.map_physical, kind, window, &level.freq_hz)
+                    .map_err(|e| {
+                        fail(
+                            format!("channel correlation of {name} at {}", level.name),
+                            e,
                         )
-                    }
-                }
-                .map_err(|e| fail(format!("channel correlation of {name}"), e))?;
+                    })?;
                 post.likelihood
                     .set_channel_correlation(Some(c))
                     .map_err(|e| {
@@ -589,6 +571,38 @@ pub fn relinearise_to_map(
 /// error also lies along dE[H1]/df) a floor of 1e-4 gave posterior sds of 1e-5 and put the truth
 /// 9 sd away, at a 5e-5 relative parameter shift (the two codes' FE discretisations).
 pub(crate) const LEAKAGE_EPS_MIN: f64 = 1e-2;
+
+/// The channels' error correlation per line (`inference.noise.channel_correlation`) from the
+/// standardised residuals at the physical parameters `physical` (law's, then noise scales):
+/// estimated from the residuals over `window` lines, or the Welch H1's leakage structure
+/// (rank one along dE[H1]/df plus an isotropic share floored at [`LEAKAGE_EPS_MIN`]). Used by
+/// the inference and by the closed loop, so both see the same correlation.
+pub(crate) fn correlation_at(
+    post: &FrfPosterior<'_>,
+    physical: &[f64],
+    kind: CorrelationKind,
+    window: usize,
+    freq_hz: &[f64],
+) -> Result<ChannelCorrelation, String> {
+    let (pl, pn) = physical.split_at(post.likelihood.forward.n_params());
+    let s = post
+        .likelihood
+        .standardised(pl, pn)
+        .map_err(|e| format!("residuals: {e}"))?;
+    let n_out = post.likelihood.data.n_out;
+    match kind {
+        CorrelationKind::Estimated => ChannelCorrelation::estimate(&s, n_out, window),
+        CorrelationKind::Leakage => {
+            let pred = post
+                .likelihood
+                .forward
+                .predict(pl, false)
+                .map_err(|e| format!("prediction: {e}"))?;
+            ChannelCorrelation::leakage(&pred.values, freq_hz, &s, n_out, window, LEAKAGE_EPS_MIN)
+        }
+    }
+    .map_err(|e| e.to_string())
+}
 
 /// Passes of (estimate the channels' correlation at the MAP, search the MAP again).
 const CORRELATION_PASSES: usize = 2;

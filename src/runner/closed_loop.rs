@@ -326,40 +326,14 @@ fn set_correlation(
     window: usize,
     level: &super::LevelData,
 ) -> Result<Vec<f64>, RunError> {
-    use crate::inference::likelihood::ChannelCorrelation;
-    use crate::study::inference::CorrelationKind;
     let fail = |m: String| RunError::Analysis {
         analysis: format!("channel correlation for the closed loop at {}", level.name),
         message: m,
     };
     let r = crate::inference::map::find_map(&*post, Some(x0), map, &|| ())
         .map_err(|e| fail(e.to_string()))?;
-    let np = post.likelihood.forward.n_params();
-    let (pl, pn) = r.map_physical.split_at(np);
-    let s = post
-        .likelihood
-        .standardised(pl, pn)
-        .map_err(|e| fail(e.to_string()))?;
-    let n_out = post.likelihood.data.n_out;
-    let c = match kind {
-        CorrelationKind::Estimated => ChannelCorrelation::estimate(&s, n_out, window),
-        CorrelationKind::Leakage => {
-            let pred = post
-                .likelihood
-                .forward
-                .predict(pl, false)
-                .map_err(|e| fail(e.to_string()))?;
-            ChannelCorrelation::leakage(
-                &pred.values,
-                &level.freq_hz,
-                &s,
-                n_out,
-                window,
-                super::bayes::LEAKAGE_EPS_MIN,
-            )
-        }
-    }
-    .map_err(|e| fail(e.to_string()))?;
+    let c = super::bayes::correlation_at(post, &r.map_physical, kind, window, &level.freq_hz)
+        .map_err(fail)?;
     post.likelihood
         .set_channel_correlation(Some(c))
         .map_err(|e| fail(e.to_string()))?;
