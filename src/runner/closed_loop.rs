@@ -137,9 +137,28 @@ pub fn run_hook(study: &Study, out_dir: &std::path::Path) -> Result<Vec<String>,
                 RunError::Output(crate::output::OutputError::io(&report, "write report", e))
             })?;
     }
-    let mut files = vec!["closed_loop/closed_loop.md".to_string()];
-    for name in ["residuals", "candidates", "closed_loop"] {
-        files.push(format!("closed_loop/{name}.parquet"));
+    // Every file the loop wrote (tables, its markdown, figures), listed in the manifest that
+    // the study's run wrote before the loop, and report.md hashed again (the loop appended).
+    let mut files: Vec<String> = std::fs::read_dir(&s.output_dir)
+        .map_err(|e| RunError::Output(crate::output::OutputError::io(&s.output_dir, "list", e)))?
+        .filter_map(|e| e.ok())
+        .filter(|e| e.path().is_file())
+        .filter_map(|e| e.file_name().to_str().map(String::from))
+        .filter(|n| !n.starts_with('.'))
+        .map(|n| format!("closed_loop/{n}"))
+        .collect();
+    files.sort();
+    let manifest_path = out_dir.join("manifest.json");
+    if manifest_path.is_file() {
+        use crate::output::{sha256_file, Manifest};
+        let mut m = Manifest::read(&manifest_path).map_err(RunError::Output)?;
+        m.files.retain(|f| f.name != "report.md");
+        for name in std::iter::once("report.md".to_string()).chain(files.iter().cloned()) {
+            let hash = sha256_file(out_dir.join(&name)).ok();
+            m.add_file(name, hash);
+        }
+        m.add_timing("closed loop", s.seconds);
+        m.write(&manifest_path).map_err(RunError::Output)?;
     }
     Ok(files)
 }
