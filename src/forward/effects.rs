@@ -198,7 +198,7 @@ pub(crate) struct StructuralColumns {
 
 /// Dense complex solve of a small system (Gaussian elimination with partial pivoting);
 /// returns `None` when singular.
-fn small_solve(a: &[C64], n: usize, b: &[C64], nrhs: usize) -> Option<Vec<C64>> {
+pub(super) fn small_solve(a: &[C64], n: usize, b: &[C64], nrhs: usize) -> Option<Vec<C64>> {
     let mut a = a.to_vec();
     let mut x = b.to_vec();
     for c in 0..n {

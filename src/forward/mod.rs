@@ -13,6 +13,7 @@
 //! the exact accelerance at the lines.
 
 pub mod effects;
+pub mod fixed;
 pub mod measurement;
 
 use crate::common::C64;

@@ -122,6 +122,23 @@ pub trait FrfEngine: Send + Sync {
     ) -> Option<Result<Vec<EngineMode>, FrfError>> {
         None
     }
+
+    /// [`FrfEngine::complex_modes`] of the structure with point masses `(output index, kg)`
+    /// added (M -> M + sum m b_k b_k^T), when this engine can (the ROM projects the masses
+    /// exactly: V^T b_k is its reduced load); `None` sends callers to the full model with the
+    /// masses. No masses: the plain modes.
+    fn complex_modes_with_masses(
+        &self,
+        modulus_pa: C64,
+        n_modes: usize,
+        masses: &[(usize, f64)],
+    ) -> Option<Result<Vec<EngineMode>, FrfError>> {
+        if masses.is_empty() {
+            self.complex_modes(modulus_pa, n_modes)
+        } else {
+            None
+        }
+    }
 }
 
 /// A complex mode as an engine sees it: eigenvalue lambda = w_r^2 (1 + j eta), its

@@ -317,6 +317,26 @@ impl FrfEngine for ReducedModel {
     ) -> Option<Result<Vec<EngineMode>, FrfError>> {
         Some(ReducedModel::complex_modes(self, modulus_pa, n_modes).map_err(FrfError::from))
     }
+    fn complex_modes_with_masses(
+        &self,
+        modulus_pa: C64,
+        n_modes: usize,
+        masses: &[(usize, f64)],
+    ) -> Option<Result<Vec<EngineMode>, FrfError>> {
+        if let Some(&(p, _)) = masses.iter().find(|(p, _)| *p >= self.n_out) {
+            return Some(Err(FrfError::BadInput(p)));
+        }
+        // M_r + sum m (V^T b)(V^T b)^T: the exact projection of the added masses.
+        let mut r = self.clone();
+        for &(p, m) in masses {
+            for i in 0..self.n_r {
+                for j in 0..self.n_r {
+                    r.m_r[(i, j)] += m * self.b_r[(i, p)] * self.b_r[(j, p)];
+                }
+            }
+        }
+        Some(ReducedModel::complex_modes(&r, modulus_pa, n_modes).map_err(FrfError::from))
+    }
 }
 
 /// Check that `inputs` index observation points.

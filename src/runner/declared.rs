@@ -3,6 +3,7 @@
 //! the closed loop's candidate list under a study's `[closed_loop]` settings.
 
 use super::{LevelData, RunError};
+use crate::forward::fixed::FixedEffectsEngine;
 use crate::forward::{Effect, EffectTerm, Effects};
 use crate::inference::prior::Prior;
 use crate::study::effects::{ClosedLoopSettings, DeclaredKind};
@@ -92,4 +93,95 @@ pub fn admitted(all: Vec<Effect>, settings: Option<&ClosedLoopSettings>) -> Vec<
             .filter(|e| s.admits(e.kind(), &e.name()))
             .collect(),
     }
+}
+
+/// The deterministic analyses' view of a level with declared effects: the engine with the
+/// fixed point masses and beam factor ([`FixedEffectsEngine`]; free effects at their declared
+/// values) and the full model with them (for the modes when the engine cannot give them).
+pub struct DeterministicView<'a> {
+    pub engine: FixedEffectsEngine<'a>,
+    pub built: crate::study::build::BuiltModel,
+}
+
+/// [`DeterministicView`] of `level`, or `None` when no declared effect changes the structure.
+pub fn deterministic_view<'a>(
+    study: &Study,
+    engine: &'a dyn crate::frf::FrfEngine,
+    built: &crate::study::build::BuiltModel,
+    level: &LevelData,
+) -> Result<Option<DeterministicView<'a>>, RunError> {
+    if study.declared_effects.is_empty() {
+        return Ok(None);
+    }
+    let ids: Vec<u32> = built.model.points.iter().map(|p| p.id).collect();
+    let (effects, _) = level_effects(study, &ids, level)?;
+    let fail = |m: String| RunError::Analysis {
+        analysis: format!(
+            "declared effects in the deterministic analyses at {}",
+            level.name
+        ),
+        message: m,
+    };
+    let wrapped = FixedEffectsEngine::new(engine, &effects).map_err(|e| {
+        fail(format!(
+            "{e}: a declared point mass must sit at a measured point (the RFM's engine has the measured points as inputs)"
+        ))
+    })?;
+    if wrapped.is_identity() {
+        return Ok(None);
+    }
+    let mut model = built
+        .model
+        .with_point_masses(&wrapped.masses())
+        .map_err(fail)?;
+    let s = 1.0 + wrapped.beam_factor();
+    model.k_b.val_mut().iter_mut().for_each(|v| *v *= s);
+    if let Some(d) = model.d_b.as_mut() {
+        d.val_mut().iter_mut().for_each(|v| *v *= s);
+    }
+    Ok(Some(DeterministicView {
+        engine: wrapped,
+        built: crate::study::build::BuiltModel {
+            model,
+            mesh: built.mesh.clone(),
+            excitation: built.excitation,
+            dof_axes: built.dof_axes.clone(),
+        },
+    }))
+}
+
+/// A report sentence on the declared effects in the deterministic analyses: point masses and
+/// the beam factor enter the RFM, IEM and FRAC; gains, delays, the shaker and law effects
+/// only the likelihood and the closed loop. `None` without declared effects.
+pub fn deterministic_note(study: &Study) -> Option<String> {
+    if study.declared_effects.is_empty() {
+        return None;
+    }
+    let (mut inside, mut outside) = (Vec::new(), Vec::new());
+    for d in &study.declared_effects {
+        match d.kind {
+            DeclaredKind::PointMass { .. } | DeclaredKind::BeamModulus => {
+                inside.push(d.key.clone())
+            }
+            _ => outside.push(d.key.clone()),
+        }
+    }
+    let mut s = String::from("Declared effects (`[[structure.effects]]`): ");
+    if !inside.is_empty() {
+        s.push_str(&format!(
+            "{} (point masses, beam modulus) are in the deterministic analyses (RFM, IEM, FRAC: the engine's receptances and modes transformed exactly) and in the Bayesian layer at their declared values",
+            inside.join(", ")
+        ));
+    }
+    if !outside.is_empty() {
+        if !inside.is_empty() {
+            s.push_str("; ");
+        }
+        s.push_str(&format!(
+            "{} (gains, delays, shaker, law effects) are in the Bayesian layer and the closed loop only: the deterministic RFM, IEM and FRAC above run without them",
+            outside.join(", ")
+        ));
+    }
+    s.push('.');
+    Some(s)
 }

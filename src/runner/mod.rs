@@ -437,6 +437,14 @@ impl FrfEngine for RomEngine {
     ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
         FrfEngine::complex_modes(&self.rom, modulus_pa, n_modes)
     }
+    fn complex_modes_with_masses(
+        &self,
+        modulus_pa: C64,
+        n_modes: usize,
+        masses: &[(usize, f64)],
+    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
+        FrfEngine::complex_modes_with_masses(&self.rom, modulus_pa, n_modes, masses)
+    }
 }
 
 /// The modulus range the ROM must cover: every model's initial E*(w) over the band, the
@@ -798,7 +806,13 @@ fn run_study_here(
     lap("engine", &mut t);
     let mut results = Vec::new();
     for level in &levels {
-        let mut r = compute::analyse_level(study, &built, engine.as_ref(), level, &laws, progress)?;
+        // Declared point masses and beam factor change the deterministic analyses' structure.
+        let view = declared::deterministic_view(study, engine.as_ref(), &built, level)?;
+        let (det_engine, det_built): (&dyn FrfEngine, &BuiltModel) = match &view {
+            Some(v) => (&v.engine, &v.built),
+            None => (engine.as_ref(), &built),
+        };
+        let mut r = compute::analyse_level(study, det_built, det_engine, level, &laws, progress)?;
         lap(&format!("analyses {}", level.name), &mut t);
         if let Some(inf) = &study.inference {
             r.posteriors = bayes::infer_level(

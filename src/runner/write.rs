@@ -365,6 +365,9 @@ fn build_report(
         study.sha256
     ));
     rep.paragraph(&format!("FRF {engine_note}."));
+    if let Some(note) = super::declared::deterministic_note(study) {
+        rep.paragraph(&note);
+    }
     if let Some(e) = study
         .measurements
         .as_ref()

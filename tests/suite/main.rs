@@ -31,6 +31,7 @@ mod experiment;
 mod fe_cantilever;
 mod fe_element;
 mod fe_joint;
+mod fixed_effects;
 mod frf_full;
 mod iem;
 mod inference_diagnostics;
