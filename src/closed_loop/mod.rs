@@ -22,6 +22,8 @@
 //!    several candidates) and its size is plausible: at least `min_z` posterior sds from zero and
 //!    inside its prior range (not at an edge).
 
+pub mod signatures;
+
 use crate::common::C64;
 use crate::forward::{Effect, EffectTerm, Effects, ForwardError};
 use crate::inference::likelihood::FrfPosterior;
@@ -111,6 +113,8 @@ pub struct Residuals {
     pub channels: Vec<ChannelResidual>,
     /// FRAC per channel (data against prediction).
     pub frac: Vec<f64>,
+    /// Per resonance: frequency and damping change; the ratio below the first resonance.
+    pub signatures: signatures::Signatures,
 }
 
 /// One candidate in one round.
@@ -244,7 +248,9 @@ pub fn residuals(post: &FrfPosterior<'_>, phys: &[f64]) -> Result<Residuals, For
         let hs: Vec<C64> = idx.iter().map(|&o| pred.values[o]).collect();
         frac.push(crate::correlation::frac(&xs, &hs));
     }
+    let signatures = signatures::signatures(&lik.data.freq_hz, x, &pred.values, &v, n);
     Ok(Residuals {
+        signatures,
         z,
         chi2,
         dof,

@@ -305,6 +305,8 @@ pub fn diagnose_into(
         .map_err(out_err)?;
     dir.write_table(&closed_loop_table(&results)?)
         .map_err(out_err)?;
+    dir.write_table(&signatures_table(&results)?)
+        .map_err(out_err)?;
     if figures {
         for (level, freq, ids, res, _) in &results {
             crate::plot::closed_loop::residual_figure(
@@ -400,6 +402,46 @@ fn residuals_table(results: &[LevelResult]) -> Result<Table, RunError> {
         .and_then(|t| t.push_u32("channel", "", ch))
         .and_then(|t| t.push_f64("z_re", "1", re))
         .and_then(|t| t.push_f64("z_im", "1", im))
+        .map_err(out_err)?;
+    Ok(t)
+}
+
+/// `signatures`: level, stage, one row per resonance of the prediction: its frequency and
+/// loss factor, the data's relative frequency change and loss-factor change with sds.
+fn signatures_table(results: &[LevelResult]) -> Result<Table, RunError> {
+    let (mut lv, mut st) = (Vec::new(), Vec::new());
+    let mut cols: [Vec<f64>; 6] = Default::default();
+    for (level, _, _, res, _) in results {
+        for (stage, r) in [
+            ("before", &res.before.residuals),
+            ("after", &res.after.residuals),
+        ] {
+            for x in &r.signatures.resonances {
+                lv.push(level.clone());
+                st.push(stage.to_string());
+                for (c, v) in cols.iter_mut().zip([
+                    x.freq_hz,
+                    x.loss_factor,
+                    x.freq_shift,
+                    x.freq_shift_sd,
+                    x.loss_change,
+                    x.loss_change_sd,
+                ]) {
+                    c.push(v);
+                }
+            }
+        }
+    }
+    let [f, eta, df, df_sd, de, de_sd] = cols;
+    let mut t = Table::new("signatures");
+    t.push_str("level", lv)
+        .and_then(|t| t.push_str("stage", st))
+        .and_then(|t| t.push_f64("resonance_hz", "Hz", f))
+        .and_then(|t| t.push_f64("loss_factor", "1", eta))
+        .and_then(|t| t.push_f64("freq_shift", "1", df))
+        .and_then(|t| t.push_f64("freq_shift_sd", "1", df_sd))
+        .and_then(|t| t.push_f64("loss_change", "1", de))
+        .and_then(|t| t.push_f64("loss_change_sd", "1", de_sd))
         .map_err(out_err)?;
     Ok(t)
 }
@@ -591,7 +633,57 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
             s,
             "\n![standardised residuals before and after](residuals_{level}.png)\n\n|z| per channel and line; under a correct model |z|^2 has mean 1."
         );
+        signatures_markdown(&mut s, b, a);
         s.push('\n');
     }
     s
+}
+
+/// The residual signatures per resonance before and after (`closed_loop::signatures`): the
+/// data's frequency and loss-factor change against the model, in sds, and the findings.
+fn signatures_markdown(
+    s: &mut String,
+    b: &crate::closed_loop::Residuals,
+    a: &crate::closed_loop::Residuals,
+) {
+    use std::fmt::Write as _;
+    let (rb, ra) = (&b.signatures.resonances, &a.signatures.resonances);
+    if rb.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        s,
+        "\nResidual signatures per resonance (a local modal fit of the data against the model's own modal terms; z in sds of the data's noise):\n\n| resonance (Hz) | df/f before (z) | df/f after (z) | d(loss factor) before (z) | after (z) |\n|---|---|---|---|---|"
+    );
+    for r in rb {
+        let after = ra
+            .iter()
+            .min_by(|x, y| {
+                (x.freq_hz - r.freq_hz)
+                    .abs()
+                    .total_cmp(&(y.freq_hz - r.freq_hz).abs())
+            })
+            .filter(|x| (x.freq_hz - r.freq_hz).abs() < 0.05 * r.freq_hz);
+        let (fa, la) = after.map_or(("-".to_string(), "-".to_string()), |x| {
+            (
+                format!("{:+.3} % ({:.1})", 100.0 * x.freq_shift, x.freq_z()),
+                format!("{:+.2e} ({:.1})", x.loss_change, x.loss_z()),
+            )
+        });
+        let _ = writeln!(
+            s,
+            "| {:.1} | {:+.3} % ({:.1}) | {fa} | {:+.2e} ({:.1}) | {la} |",
+            r.freq_hz,
+            100.0 * r.freq_shift,
+            r.freq_z(),
+            r.loss_change,
+            r.loss_z()
+        );
+    }
+    for (when, res) in [("before", b), ("after", a)] {
+        let f = res.signatures.findings(5.0);
+        if !f.is_empty() {
+            let _ = writeln!(s, "\nSignatures beyond 5 sd {when}: {}.", f.join("; "));
+        }
+    }
 }
