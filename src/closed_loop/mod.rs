@@ -26,7 +26,9 @@ pub mod signatures;
 
 use crate::common::C64;
 use crate::forward::{Effect, EffectTerm, Effects, ForwardError};
-use crate::inference::likelihood::FrfPosterior;
+use crate::inference::likelihood::{FrfLikelihood, FrfPosterior};
+
+pub mod start;
 use crate::inference::map::{chol_solve, cholesky, find_map, MapError, MapParams, MapResult};
 use crate::inference::prior::{erfc, Prior};
 
@@ -284,27 +286,7 @@ pub fn score_test_step(
 ) -> Result<(f64, f64, f64, f64, Vec<f64>), ForwardError> {
     let lik = &post.likelihood;
     let np = lik.forward.n_params();
-    let mut fm_effects = lik.forward.effects.clone();
-    fm_effects.terms.push(EffectTerm {
-        effect: candidate.clone(),
-        value: candidate.null_value(),
-        free: true,
-    });
-    // A forward model sharing the observation, with the candidate free at zero.
-    let fm = crate::forward::ForwardModel {
-        obs: crate::forward::Observation::new(
-            lik.forward.obs.engine,
-            &lik.forward.obs.omega_rad_s,
-            lik.forward.obs.input,
-            &lik.forward.obs.outputs,
-            lik.forward.obs.measurement.clone(),
-        )?,
-        law: lik.forward.law,
-        linear_bias: None,
-        effects: Effects::default(),
-    };
-    let mut fm = fm;
-    fm.set_effects(fm_effects)?;
+    let fm = candidate_model(lik, candidate)?;
     let mut p: Vec<f64> = phys[..np].to_vec();
     p.push(candidate.null_value());
     let pred = fm.predict(&p, true)?;
@@ -378,6 +360,33 @@ pub fn score_test_step(
         f *= 0.5;
     }
     Ok((t, p_value, de, 1.0 / i_eff.sqrt(), start))
+}
+
+/// A forward model sharing `lik`'s observation with its effects and `candidate` free (last).
+pub(crate) fn candidate_model<'a>(
+    lik: &FrfLikelihood<'a>,
+    candidate: &Effect,
+) -> Result<crate::forward::ForwardModel<'a>, ForwardError> {
+    let mut fm_effects = lik.forward.effects.clone();
+    fm_effects.terms.push(EffectTerm {
+        effect: candidate.clone(),
+        value: candidate.null_value(),
+        free: true,
+    });
+    let mut fm = crate::forward::ForwardModel {
+        obs: crate::forward::Observation::new(
+            lik.forward.obs.engine,
+            &lik.forward.obs.omega_rad_s,
+            lik.forward.obs.input,
+            &lik.forward.obs.outputs,
+            lik.forward.obs.measurement.clone(),
+        )?,
+        law: lik.forward.law,
+        linear_bias: None,
+        effects: Effects::default(),
+    };
+    fm.set_effects(fm_effects)?;
+    Ok(fm)
 }
 
 /// Put `effects` into `post`: the starting model's parameters (law and declared free
@@ -492,7 +501,20 @@ pub fn run_closed_loop(
                 _ => (f64::NEG_INFINITY, f64::INFINITY),
             };
             let span = hi - lo;
-            let start = c.one_step.clamp(lo + 0.01 * span, hi - 0.01 * span);
+            let one_step = c.one_step.clamp(lo + 0.01 * span, hi - 0.01 * span);
+            let gn = starts
+                .iter()
+                .find(|(n, _)| *n == c.effect.name())
+                .map_or_else(|| phys[..np_now].to_vec(), |(_, v)| v.clone());
+            // (post may hold the previous candidate's refit model.)
+            install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
+            // The start: the best point of the profile over the effect's prior (the one-step
+            // size among them), see [`start::profile_start`].
+            let (start, model_start) =
+                match start::profile_start(post, &phys, &c.effect, one_step, &gn) {
+                    Ok(ps) => (ps.size, ps.params),
+                    Err(_) => (one_step, gn),
+                };
             let mut eff = base_effects_now.clone();
             eff.terms.push(EffectTerm {
                 effect: c.effect.clone(),
@@ -500,17 +522,20 @@ pub fn run_closed_loop(
                 free: true,
             });
             install(post, &law_priors, &noise_priors, eff)?;
-            let mut p0 = starts
-                .iter()
-                .find(|(n, _)| *n == c.effect.name())
-                .map_or_else(|| phys[..np_now].to_vec(), |(_, v)| v.clone());
+            let mut p0 = model_start;
             p0.push(start);
             p0.extend_from_slice(&phys[np_now..]);
             let x_start = post.unconstrained(&p0);
             // The warm refit; when it fails or its Laplace Hessian is not positive definite
             // (stopped short of the mode), the full multistart search from the same start.
             let warm = find_map(&*post, Some(&x_start), &refit_map, none);
-            let warm_ok = warm.as_ref().is_ok_and(|r| r.laplace.positive_definite);
+            // A warm refit that ends with a parameter at an edge of its prior has a Hessian
+            // that is not positive definite because of the edge, not because it stopped short:
+            // the multistart search would end there too (the fractional-law case ran 17 CPU
+            // min of such searches), so it is not run.
+            let warm_ok = warm.as_ref().is_ok_and(|r| {
+                r.laplace.positive_definite || start::at_prior_edge(&post.priors, &r.map_physical)
+            });
             let refit = if params.warm_refits && !warm_ok {
                 match (warm, find_map(&*post, Some(&x_start), &params.map, none)) {
                     (Ok(a), Ok(b)) => Ok(

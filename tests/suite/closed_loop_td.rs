@@ -149,7 +149,7 @@ fn time_domain_cases_name_the_injected_effect() {
     );
     let limit = 1.2f64.max(1.1 * clean.chi2_normalised_after);
     // (case, expected name or type, by type only, injected size)
-    let all: [(&str, &str, bool, Option<f64>); 9] = [
+    let all: [(&str, &str, bool, Option<f64>); 10] = [
         ("mass_pt4", "mass_pt4", false, Some(0.012)),
         ("mass_pt1", "mass_pt1", false, Some(0.012)),
         ("mass_pt2", "mass_pt2", false, Some(0.012)),
@@ -158,6 +158,7 @@ fn time_domain_cases_name_the_injected_effect() {
         ("beam4", "beam_modulus", false, Some(0.04)),
         ("gain_ch3", "gain_ch3", false, Some(0.04)),
         ("delay_ch4", "delay_ch4", false, Some(50e-6)),
+        ("shaker", "shaker_mass", false, Some(0.02)),
         ("fractional", "maxwell_branch", true, None),
     ];
     let n = if long() { all.len() } else { 1 };
