@@ -190,6 +190,28 @@ pub fn diagnose_into(
     let mut levels = super::load_levels(study, &built)?;
     let (engine, _, lik_engine) = super::build_engine(study, &built, &mut levels, &laws, None)?;
     let engine = lik_engine.as_deref().unwrap_or(engine.as_ref());
+    // Degraded-bond candidates and declared regions need a ROM with their terms (issue 13).
+    let bonds = super::declared::admitted(
+        super::terms::bond_candidates(study, crate::forward::effects::DEFAULT_BOND_STRIP_M),
+        study.closed_loop.as_ref(),
+    );
+    let term_rom = super::terms::term_rom_for(
+        study,
+        &built,
+        engine,
+        &super::terms::with_declared(study, &bonds),
+        super::terms::band_of(&levels),
+    )?;
+    let wrapped = match &term_rom {
+        Some((t, _)) => Some(
+            crate::rom::WithTerms::new(engine, t).map_err(|e| RunError::Engine(e.to_string()))?,
+        ),
+        None => None,
+    };
+    let engine: &dyn crate::frf::FrfEngine = match &wrapped {
+        Some(w) => w,
+        None => engine,
+    };
     let mut dir = ResultsDir::create(parent, dir_name).map_err(out_err)?;
     let mut summary = Vec::new();
     let mut results = Vec::new();
@@ -210,6 +232,7 @@ pub fn diagnose_into(
             level.freq_hz.last().copied().unwrap_or(0.0),
         );
         candidates.extend(crate::closed_loop::maxwell_candidates(band));
+        candidates.extend(bonds.iter().cloned());
         // The beam factor's exact scaling needs an adherend without viscous damping C_b.
         if built.model.c_b.is_some() {
             candidates.retain(|c| !matches!(c, crate::forward::Effect::BeamModulus));
