@@ -16,6 +16,9 @@
 //!                          H''_od = H'_od s,   s = k_s / (k_s - w^2 m_s (1 + k_s H'_dd))
 //!                          (armature -w^2 m_s x_s = F - f, stinger f = k_s (x_s - x_d));
 //!                          m_s -> 0 gives H', k_s -> inf a point mass m_s at d
+//!   degraded bond (x-range): E* S -> E* (S - d S_region), evaluated by an engine with the
+//!                          region's term (crate::rom::terms, certified against the full model
+//!                          with the strip degraded);  d/dd = -E* H_oG S_region,r H_Gi (reduced)
 //! ```
 //!
 //! Structural effects are exact algebraic transforms of the certified engine's receptances at
@@ -53,7 +56,15 @@ pub enum Effect {
     /// One more Maxwell branch in the adhesive's law with relaxation time `tau_s` (s):
     /// `E* -> E* + E_k j w tau / (1 + j w tau)`, the parameter the branch modulus `E_k` (Pa).
     MaxwellBranch { tau_s: f64 },
+    /// A degraded bond over the adhesive's x-range `[x_start_m, x_start_m + width_m]` (m):
+    /// `E* S -> E* (S - d S_region)`, the parameter the loss fraction d in [0, 1) (the
+    /// region keeps (1 - d) of its modulus). Needs an engine with the region's term
+    /// ([`crate::rom::terms`]).
+    DegradedBond { x_start_m: f64, width_m: f64 },
 }
+
+/// Default width of a degraded-bond candidate at each end of the block (m).
+pub const DEFAULT_BOND_STRIP_M: f64 = 0.010;
 
 /// Default stinger stiffness of a shaker candidate (N/m): a thin steel rod some 10 cm long.
 pub const DEFAULT_STINGER_STIFFNESS_N_M: f64 = 2e5;
@@ -70,6 +81,9 @@ impl Effect {
             Effect::MaxwellBranch { tau_s } => {
                 format!("maxwell_fc{:.0}hz", 1.0 / (std::f64::consts::TAU * tau_s))
             }
+            Effect::DegradedBond { x_start_m, width_m } => {
+                format!("bond_x{:.1}mm_w{:.1}mm", 1e3 * x_start_m, 1e3 * width_m)
+            }
         }
     }
     /// Type of the effect (a study's `type` key).
@@ -81,12 +95,13 @@ impl Effect {
             Effect::BeamModulus => "beam_modulus",
             Effect::Shaker { .. } => "shaker",
             Effect::MaxwellBranch { .. } => "maxwell_branch",
+            Effect::DegradedBond { .. } => "degraded_bond",
         }
     }
     /// SI unit of the parameter.
     pub fn unit(&self) -> &'static str {
         match self {
-            Effect::Gain { .. } | Effect::BeamModulus => "1",
+            Effect::Gain { .. } | Effect::BeamModulus | Effect::DegradedBond { .. } => "1",
             Effect::Delay { .. } => "s",
             Effect::PointMass { .. } | Effect::Shaker { .. } => "kg",
             Effect::MaxwellBranch { .. } => "Pa",
@@ -112,6 +127,11 @@ impl Effect {
                 "the adhesive relaxes also near {:.1} Hz (tau = {tau_s:.3e} s): one more Maxwell branch E_k j w tau / (1 + j w tau) adds stiffness above and loss around that frequency (the law's relaxation spectrum is too narrow, e.g. a fractional-law adhesive)",
                 1.0 / (std::f64::consts::TAU * tau_s)
             ),
+            Effect::DegradedBond { x_start_m, width_m } => format!(
+                "the bond over x = {:.1}-{:.1} mm of the adhesive block keeps only (1 - d) of its modulus (a debonded or poorly cured strip): the joint softens where the peel and shear stresses concentrate",
+                1e3 * x_start_m,
+                1e3 * (x_start_m + width_m)
+            ),
         }
     }
     /// Value at which the effect is absent.
@@ -123,7 +143,10 @@ impl Effect {
     pub fn one_sided(&self) -> bool {
         matches!(
             self,
-            Effect::PointMass { .. } | Effect::Shaker { .. } | Effect::MaxwellBranch { .. }
+            Effect::PointMass { .. }
+                | Effect::Shaker { .. }
+                | Effect::MaxwellBranch { .. }
+                | Effect::DegradedBond { .. }
         )
     }
     /// Admissible range (open) of the parameter.
@@ -134,12 +157,14 @@ impl Effect {
             Effect::PointMass { .. } | Effect::Shaker { .. } => (-1e-12, 10.0),
             Effect::BeamModulus => (-0.9, 9.0),
             Effect::MaxwellBranch { .. } => (-1e-6, 1e11),
+            Effect::DegradedBond { .. } => (-1e-9, 1.0),
         }
     }
     /// Default prior when the effect is free: uniform over a stated plausible range (the
     /// evidence depends on it: a ten times wider range costs ln 10 = 2.3 nats).
     /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor or a shaker's moving mass), beam
     /// modulus +-20 %, Maxwell branch modulus 0-20 MPa (a few times the stiffness of the paper's adhesive, E0 about 5 MPa).
+    /// Degraded bond: loss fraction uniform on [0, 1).
     pub fn default_prior(&self) -> Prior {
         match self {
             Effect::Gain { .. } | Effect::BeamModulus => Prior::Uniform { lo: -0.2, hi: 0.2 },
@@ -149,6 +174,7 @@ impl Effect {
             },
             Effect::PointMass { .. } | Effect::Shaker { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
             Effect::MaxwellBranch { .. } => Prior::Uniform { lo: 0.0, hi: 2e7 },
+            Effect::DegradedBond { .. } => Prior::Uniform { lo: 0.0, hi: 1.0 },
         }
     }
     /// The factor `dE*/dE_k = j w tau / (1 + j w tau)` of a Maxwell branch at `omega` (zero
@@ -165,7 +191,10 @@ impl Effect {
     fn is_structural(&self) -> bool {
         matches!(
             self,
-            Effect::PointMass { .. } | Effect::BeamModulus | Effect::Shaker { .. }
+            Effect::PointMass { .. }
+                | Effect::BeamModulus
+                | Effect::Shaker { .. }
+                | Effect::DegradedBond { .. }
         )
     }
 }
@@ -308,6 +337,12 @@ impl Effects {
                         "effect {name}: stinger stiffness {stiffness_n_m} N/m must be finite and > 0"
                     )));
                 }
+                Effect::DegradedBond { .. } if !engine.term_names().contains(&name) => {
+                    return Err(super::ForwardError::Setup(format!(
+                        "effect {name}: the engine has no term for this region (build it with rom::terms::build_term_rom; terms: {:?})",
+                        engine.term_names()
+                    )));
+                }
                 Effect::MaxwellBranch { tau_s } if !(tau_s.is_finite() && tau_s > 0.0) => {
                     return Err(super::ForwardError::Setup(format!(
                         "effect {name}: relaxation time {tau_s} s must be positive"
@@ -376,7 +411,6 @@ impl Effects {
         derivs: bool,
         values: &[f64],
     ) -> Result<StructuralColumns, super::ForwardError> {
-        let zero = C64::new(0.0, 0.0);
         let beam = self
             .terms
             .iter()
@@ -386,8 +420,89 @@ impl Effects {
         let scale = 1.0 + beam;
         let w_eng: Vec<f64> = omega.iter().map(|w| w / scale.sqrt()).collect();
         let e_eng: Vec<C64> = modulus.iter().map(|e| e / scale).collect();
-        let sw = engine.sweep(&w_eng, &e_eng, derivs)?;
-        let pos = |p: usize| engine.inputs().iter().position(|&j| j == p);
+        // Degraded bond regions: extra terms -d E* S_region of the engine (c = -d E*_eng,
+        // since (1 + b)(K_b + j D_b) + E* (S - d S_r) = (1 + b)(K_b + j D_b + E*_eng (S - d S_r))).
+        let names = engine.term_names();
+        let mut coefs = Vec::new();
+        let mut term_of = Vec::new();
+        for (t, (term, v)) in self.terms.iter().zip(values).enumerate() {
+            if let Effect::DegradedBond { .. } = term.effect {
+                let name = term.effect.name();
+                let index = names.iter().position(|n| *n == name).ok_or_else(|| {
+                    super::ForwardError::Setup(format!(
+                        "effect {name} needs an engine with its region's stiffness (a ROM with terms, rom::terms)"
+                    ))
+                })?;
+                coefs.push(crate::frf::TermCoef {
+                    index,
+                    value: *v,
+                    offset: C64::new(0.0, 0.0),
+                    per_modulus: -1.0,
+                });
+                term_of.push(t);
+            }
+        }
+        if coefs.is_empty() {
+            let sw = engine.sweep(&w_eng, &e_eng, derivs)?;
+            return self.transform(
+                &sw,
+                engine.inputs(),
+                input,
+                outputs,
+                omega,
+                derivs,
+                values,
+                scale,
+            );
+        }
+        let (mut sw, cols) = engine.sweep_terms(&w_eng, &e_eng, &coefs, derivs)?;
+        let mut res = self.transform(
+            &sw,
+            engine.inputs(),
+            input,
+            outputs,
+            omega,
+            derivs,
+            values,
+            scale,
+        )?;
+        if derivs {
+            // The transforms (masses, shaker) are linear in the receptances' derivative: the
+            // E' path carries dH_eng/dd (times the scale, as it divides by scale^2).
+            for (t, col) in term_of.iter().zip(cols) {
+                sw.dh_de = col.iter().map(|x| x * scale).collect();
+                let r = self.transform(
+                    &sw,
+                    engine.inputs(),
+                    input,
+                    outputs,
+                    omega,
+                    true,
+                    values,
+                    scale,
+                )?;
+                res.d_terms[*t] = r.dh;
+            }
+        }
+        Ok(res)
+    }
+
+    /// The transforms of the engine's sweep `sw` (at w / sqrt(scale), E* / scale) by the
+    /// beam factor `scale`, the point masses and the shaker.
+    #[allow(clippy::too_many_arguments)]
+    fn transform(
+        &self,
+        sw: &crate::frf::Sweep,
+        inputs: &[usize],
+        input: usize,
+        outputs: &[usize],
+        omega: &[f64],
+        derivs: bool,
+        values: &[f64],
+        scale: f64,
+    ) -> Result<StructuralColumns, super::ForwardError> {
+        let zero = C64::new(0.0, 0.0);
+        let pos = |p: usize| inputs.iter().position(|&j| j == p);
         let jin = pos(input).ok_or(crate::frf::FrfError::BadInput(input))?;
         // Masses: (term index, point, engine input position, value).
         let masses: Vec<(usize, usize, usize, f64)> = self

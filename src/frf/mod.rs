@@ -139,6 +139,41 @@ pub trait FrfEngine: Send + Sync {
             None
         }
     }
+
+    /// Names of the extra structural terms G_k this engine can add to its dynamic stiffness
+    /// ([`FrfEngine::sweep_terms`]); none by default.
+    fn term_names(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    /// A sweep of `Z(w, E*) + sum_k c_k(w, E*) G_k` with `c_k = v_k (p_k + q_k E*)`
+    /// ([`TermCoef`]): the receptances (with dH/dE' of the whole Z, which holds the `q_k` terms,
+    /// when asked) and, when asked, dH/dv_k per term in the sweep's layout. Engines without
+    /// extra terms return an error.
+    fn sweep_terms(
+        &self,
+        _omega_rad_s: &[f64],
+        _modulus_pa: &[C64],
+        _terms: &[TermCoef],
+        _with_derivatives: bool,
+    ) -> Result<(Sweep, Vec<Vec<C64>>), FrfError> {
+        Err(FrfError::Other(
+            "this FRF engine carries no extra structural terms (build a ROM with terms, rom::terms)"
+                .into(),
+        ))
+    }
+}
+
+/// Coefficient of an extra structural term G_k (index into [`FrfEngine::term_names`]):
+/// `c_k(w, E*) = value (offset + per_modulus E*)`, e.g. a degraded bond region
+/// (offset 0, per_modulus -1, value the loss fraction d) or a structural damping of the beam
+/// (offset j, per_modulus 0, G = K_b).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TermCoef {
+    pub index: usize,
+    pub value: f64,
+    pub offset: C64,
+    pub per_modulus: f64,
 }
 
 /// A complex mode as an engine sees it: eigenvalue lambda = w_r^2 (1 + j eta), its

@@ -220,7 +220,7 @@ impl<'a> BasisBuilder<'a> {
     /// M-orthogonalise the columns of `x` against V and each other ([`Self::orthonormalise`]),
     /// deflate with `deflation_tol`, append the kept ones to V and update A V and V^T A V.
     /// Returns the number of columns kept.
-    fn absorb(&mut self, x: Mat<f64>) -> usize {
+    pub(crate) fn absorb(&mut self, x: Mat<f64>) -> usize {
         let mx = self.m_times(&x);
         let (q, mq) = self.orthonormalise(&self.v, &self.av[0], x, mx, self.tol);
         let k = q.ncols();

@@ -57,7 +57,11 @@ pub fn validation_lines(params: &RomParams) -> Vec<f64> {
         .collect()
 }
 
-fn validate(model: &StructuralModel, inputs: &[usize], p: &RomParams) -> Result<(), RomError> {
+pub(crate) fn validate(
+    model: &StructuralModel,
+    inputs: &[usize],
+    p: &RomParams,
+) -> Result<(), RomError> {
     p.range.validate()?;
     check_inputs(inputs, model.points.len())?;
     if !(p.band_hz.0 >= 0.0 && p.band_hz.1 > p.band_hz.0 && p.band_hz.1.is_finite()) {
@@ -86,7 +90,7 @@ fn validate(model: &StructuralModel, inputs: &[usize], p: &RomParams) -> Result<
 }
 
 /// Reduced model from the current basis (the builder keeps its projections up to date).
-fn reduce(
+pub(crate) fn reduce(
     model: &StructuralModel,
     basis: &BasisBuilder<'_>,
     inputs: &[usize],
@@ -144,7 +148,7 @@ fn project_axis_masses(
 
 /// Full-model receptances on the validation set: for each modulus m, lines l:
 /// h[m][l] = n_out x n_in row-major.
-fn reference(
+pub(crate) fn reference(
     model: &StructuralModel,
     inputs: &[usize],
     moduli: &[C64],
@@ -213,7 +217,11 @@ pub(crate) fn certificate_error(
 /// Enrichment level `level` (0 first): 2^level (n0 - 1) + 1 log-spaced E_ref over the range,
 /// snapped to the previous levels' values (nested grids, so their Krylov sequences continue),
 /// each brought to depth d0 + level * step blocks.
-fn enrich(basis: &mut BasisBuilder<'_>, params: &RomParams, level: usize) -> Result<(), RomError> {
+pub(crate) fn enrich(
+    basis: &mut BasisBuilder<'_>,
+    params: &RomParams,
+    level: usize,
+) -> Result<(), RomError> {
     let e_lo = params.range.e_storage_pa.0;
     let e_hi = params.range.e_storage_pa.1.hypot(params.range.e_loss_pa.1);
     let n_e = ((params.n_e_ref_initial - 1) << level) + 1;

@@ -24,10 +24,12 @@ pub mod pencil;
 pub mod reduced;
 pub mod reference;
 pub(crate) mod sparse;
+pub mod terms;
 
 pub use certify::{build_basis_only, build_rom};
 pub use pencil::{PencilParams, PencilSweep};
 pub use reduced::ReducedModel;
+pub use terms::{build_term_rom, TermCertificate, TermRom, TermSpec, WithTerms};
 
 /// Declared range of the adhesive's complex modulus E* = E' + j E'' (Pa).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]

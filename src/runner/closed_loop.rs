@@ -209,6 +209,39 @@ pub fn diagnose_into(
     let mut levels = super::load_levels(study, &built)?;
     let (engine, _, lik_engine) = super::build_engine(study, &built, &mut levels, &laws, None)?;
     let engine = lik_engine.as_deref().unwrap_or(engine.as_ref());
+    // Degraded-bond candidates and declared regions need a ROM with their terms (issue 13).
+    // Opt-in: only when `[closed_loop] candidates` names them ("degraded_bond" or a strip's
+    // name). Each evaluation with a bond is a dense LU of the enriched ROM per line (56 ms per
+    // forward evaluation against about 1 ms on the pencil), and the term ROM is built and
+    // certified per run (about 7 s), so the default candidate set ("all") leaves them out.
+    let bonds: Vec<crate::forward::Effect> =
+        super::terms::bond_candidates(study, crate::forward::effects::DEFAULT_BOND_STRIP_M)
+            .into_iter()
+            .filter(|e| {
+                study.closed_loop.as_ref().is_some_and(|c| {
+                    c.candidates
+                        .as_ref()
+                        .is_some_and(|names| names.iter().any(|n| n == e.kind() || *n == e.name()))
+                })
+            })
+            .collect();
+    let term_rom = super::terms::term_rom_for(
+        study,
+        &built,
+        engine,
+        &super::terms::with_declared(study, &bonds),
+        super::terms::band_of(&levels),
+    )?;
+    let wrapped = match &term_rom {
+        Some((t, _)) => Some(
+            crate::rom::WithTerms::new(engine, t).map_err(|e| RunError::Engine(e.to_string()))?,
+        ),
+        None => None,
+    };
+    let engine: &dyn crate::frf::FrfEngine = match &wrapped {
+        Some(w) => w,
+        None => engine,
+    };
     let mut dir = ResultsDir::create(parent, dir_name).map_err(out_err)?;
     let mut summary = Vec::new();
     let mut results = Vec::new();
@@ -229,6 +262,7 @@ pub fn diagnose_into(
             level.freq_hz.last().copied().unwrap_or(0.0),
         );
         candidates.extend(crate::closed_loop::maxwell_candidates(band));
+        candidates.extend(bonds.iter().cloned());
         // The beam factor's exact scaling needs an adherend without viscous damping C_b.
         if built.model.c_b.is_some() {
             candidates.retain(|c| !matches!(c, crate::forward::Effect::BeamModulus));

@@ -63,6 +63,9 @@ pub fn level_effects(
             DeclaredKind::BeamModulus => Effect::BeamModulus,
             DeclaredKind::MaxwellBranch { tau_s } => Effect::MaxwellBranch { tau_s },
             DeclaredKind::Shaker { stiffness_n_m } => Effect::Shaker { stiffness_n_m },
+            DeclaredKind::DegradedBond { x_start_m, width_m } => {
+                Effect::DegradedBond { x_start_m, width_m }
+            }
         };
         let mut value = d.value;
         if d.free {

@@ -32,6 +32,7 @@ pub mod levels;
 pub mod material;
 pub mod redundancy;
 mod sample;
+pub mod terms;
 pub mod write;
 mod write_bayes;
 mod write_compare;

@@ -4,12 +4,14 @@
 //!
 //! ```toml
 //! [[structure.effects]]
-//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker
+//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | degraded_bond
 //! point = 4               # point id (point_mass); `channel = id` for gain and delay
 //! value = 0.012           # SI (kg, 1, s, 1, Pa)
 //! free = false            # true: a parameter to infer, with the default prior or prior = {...}
 //! # tau = 1.6e-3          # s, the relaxation time of a maxwell_branch
 //! # stinger_stiffness = 2e5  # N/m, a shaker's stinger (default 2e5); value = its moving mass (kg)
+//! # type = "degraded_bond" with x_start = 0.040 and width = 0.010 (m, inside the adhesive
+//! #   block; default width 10 mm): value = the loss fraction d in [0, 1), E* -> (1 - d) E* there
 //!
 //! [closed_loop]
 //! enabled = true
@@ -26,13 +28,14 @@ use crate::inference::prior::Prior;
 use serde::Deserialize;
 
 /// Effect types a study may name (`type = ...`).
-pub const EFFECT_TYPES: [&str; 6] = [
+pub const EFFECT_TYPES: [&str; 7] = [
     "point_mass",
     "gain",
     "delay",
     "beam_modulus",
     "maxwell_branch",
     "shaker",
+    "degraded_bond",
 ];
 
 /// `[[structure.effects]]` as written.
@@ -46,6 +49,10 @@ pub struct RawEffect {
     pub value: Option<f64>,
     pub tau: Option<f64>,
     pub stinger_stiffness: Option<f64>,
+    /// m, start of a degraded bond region.
+    pub x_start: Option<f64>,
+    /// m, width of a degraded bond region.
+    pub width: Option<f64>,
     #[serde(default)]
     pub free: bool,
     pub prior: Option<super::inference::RawPrior>,
@@ -83,6 +90,12 @@ pub enum DeclaredKind {
     /// side.
     Shaker {
         stiffness_n_m: f64,
+    },
+    /// A degraded bond over `[x_start_m, x_start_m + width_m]` (m) of the adhesive block (checked
+    /// against the block by the runner, which assembles the region).
+    DegradedBond {
+        x_start_m: f64,
+        width_m: f64,
     },
 }
 
@@ -174,6 +187,10 @@ pub(super) fn effects(
         if r.kind != "shaker" {
             not("stinger_stiffness", r.stinger_stiffness.is_some())?;
         }
+        if r.kind != "degraded_bond" {
+            not("x_start", r.x_start.is_some())?;
+            not("width", r.width.is_some())?;
+        }
         let kind = match r.kind.as_str() {
             "point_mass" => {
                 not("channel", r.channel.is_some())?;
@@ -222,6 +239,30 @@ pub(super) fn effects(
                     stiffness_n_m: ctx.positive(&format!("{key}.stinger_stiffness"), k, "N/m")?,
                 }
             }
+            "degraded_bond" => {
+                not("point", r.point.is_some())?;
+                not("channel", r.channel.is_some())?;
+                not("tau", r.tau.is_some())?;
+                let x0 = r.x_start.ok_or_else(|| {
+                    ctx.err(
+                        format!("{key}.x_start"),
+                        "type \"degraded_bond\" needs `x_start`, the start of the region in m (inside the adhesive block)",
+                    )
+                })?;
+                if !x0.is_finite() {
+                    return Err(ctx.err(
+                        format!("{key}.x_start"),
+                        format!("must be a finite position in m, got {x0}"),
+                    ));
+                }
+                let w = r
+                    .width
+                    .unwrap_or(crate::forward::effects::DEFAULT_BOND_STRIP_M);
+                DeclaredKind::DegradedBond {
+                    x_start_m: x0,
+                    width_m: ctx.positive(&format!("{key}.width"), w, "m")?,
+                }
+            }
             o => {
                 return Err(ctx.err(
                     format!("{key}.type"),
@@ -253,6 +294,7 @@ pub(super) fn effects(
             DeclaredKind::BeamModulus => ("1 (relative)", -0.9, 9.0, false),
             DeclaredKind::MaxwellBranch { .. } => ("Pa", 0.0, 1e11, true),
             DeclaredKind::Shaker { .. } => ("kg", 0.0, 10.0, true),
+            DeclaredKind::DegradedBond { .. } => ("1 (loss fraction)", 0.0, 1.0, true),
         };
         if !value.is_finite() || (nonneg && value < 0.0) {
             return Err(ctx.err(

@@ -52,6 +52,7 @@ mod rfm;
 mod rfm_gauss_newton;
 mod rom;
 mod rom_joint;
+mod rom_terms;
 mod runner;
 mod structural_effects;
 mod uff_fuzz;

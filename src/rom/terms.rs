@@ -1,0 +1,523 @@
+//! A reduced model with extra structural terms (issue 13, item 1): effects that need new
+//! matrices in the ROM (a degraded bond region, a structural damping of the beam).
+//!
+//! ```text
+//!   Z(w, E*; v) = Z(w, E*) + sum_k c_k G_k,     c_k = v_k (p_k + q_k E*)
+//!   Z_r         = V^T Z V,   G_k,r = V^T G_k V,   X = Z_r^-1 B_r,   H_ij = b_i^T x_j
+//!   dH_ij/dE'   = -x_i^T (S_r + sum_k v_k q_k G_k,r) x_j
+//!   dH_ij/dv_k  = -(p_k + q_k E*) x_i^T G_k,r x_j              (-H_oG G_k H_Gi, reduced)
+//! ```
+//!
+//! The basis is the certified ROM's (block Krylov of (K_b + e S, M) at log-spaced e,
+//! [`super::basis`]) enriched, at every enrichment level, with the Krylov vectors of the full
+//! model with each term on at a few values (`TermSpec::enrich_values`: the real part of
+//! `c_k G_k` added to K_b and S, the imaginary part to D_b), so that the responses of the
+//! modified structure lie in V. The certificate compares the reduced receptances with the
+//! full model's sparse LU with the same term on (`TermSpec::cert_values`) on a grid of
+//! moduli x lines and enriches (deeper Krylov, more e) until the error relative to the peak
+//! of each FRF is at most the tolerance, as [`super::certify::build_rom`] does for the
+//! effect-free model. A sweep is a dense LU of the n_r x n_r reduced system per line (the
+//! pencil path of [`super::pencil`] stays the engine of the effect-free model).
+//! `sh` (b_i^T S x_j, the RFM fill) is that of the effect-free S.
+
+use super::basis::BasisBuilder;
+use super::certify::{enrich, reduce, reference, validate, validation_lines, validation_moduli};
+use super::dense::DenseLu;
+use super::reduced::ReducedModel;
+use super::sparse::ModelPattern;
+use super::{RomError, RomParams};
+use crate::common::C64;
+use crate::fe::model::{SpMat, StructuralModel};
+use crate::frf::{FrfEngine, FrfError, Sweep, TermCoef};
+use faer::Mat;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// One extra term `c G` with `c = v (offset + per_modulus E*)`.
+#[derive(Clone, Debug)]
+pub struct TermSpec {
+    /// Name (what [`FrfEngine::term_names`] returns), e.g. "bond_x0.000-0.010".
+    pub name: String,
+    /// G (full model, n x n, symmetric).
+    pub matrix: SpMat,
+    pub offset: C64,
+    /// Real: a term proportional to E* scales the adhesive's stiffness.
+    pub per_modulus: f64,
+    /// Values v at which the basis takes the Krylov vectors of the full model with the term on.
+    pub enrich_values: Vec<f64>,
+    /// Values v at which the certificate compares with the full model (0 checks the effect-free
+    /// model).
+    pub cert_values: Vec<f64>,
+}
+
+impl TermSpec {
+    fn coef(&self, index: usize, value: f64) -> TermCoef {
+        TermCoef {
+            index,
+            value,
+            offset: self.offset,
+            per_modulus: self.per_modulus,
+        }
+    }
+}
+
+/// The certificate of a ROM with terms: the largest error relative to the peak of each FRF
+/// over (term, value) x moduli x lines.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct TermCertificate {
+    pub max_rel_error: f64,
+    /// Largest error per (term name, value).
+    pub per_case: Vec<(String, f64, f64)>,
+    pub basis_size: usize,
+    pub levels: usize,
+    pub n_moduli: usize,
+    pub n_lines: usize,
+    pub seconds_basis: f64,
+    pub seconds_certify: f64,
+    pub passed: bool,
+}
+
+/// Full-model receptances of one validation case: `[modulus][line][output * n_in + input]`.
+type CaseReference = Vec<Vec<Vec<C64>>>;
+/// Per-case errors of a certificate: (term name, value, error).
+type CaseErrors = Vec<(String, f64, f64)>;
+/// One line of a sweep with terms: (h, dh/dE', sh, dh/dv_k per term).
+type TermLine = (Vec<C64>, Vec<C64>, Vec<C64>, Vec<Vec<C64>>);
+
+/// A reduced model with extra projected terms.
+#[derive(Clone, Debug)]
+pub struct TermRom {
+    pub(crate) rom: ReducedModel,
+    pub(crate) g_r: Vec<Mat<f64>>,
+    pub(crate) names: Vec<String>,
+}
+
+/// `a + c b` for two sparse matrices of the same size (any patterns).
+pub fn add_scaled(a: &SpMat, b: &SpMat, c: f64) -> Result<SpMat, RomError> {
+    let mut t: Vec<faer::sparse::Triplet<usize, usize, f64>> = a
+        .triplet_iter()
+        .map(|t| faer::sparse::Triplet::new(t.row, t.col, *t.val))
+        .collect();
+    t.extend(
+        b.triplet_iter()
+            .map(|t| faer::sparse::Triplet::new(t.row, t.col, c * *t.val)),
+    );
+    SpMat::try_new_from_triplets(a.nrows(), a.ncols(), &t)
+        .map_err(|e| RomError::Model(format!("sum of sparse matrices: {e:?}")))
+}
+
+/// The full model with one term on at value `v` (real part of `c G` into K_b and S, imaginary
+/// part into D_b).
+pub fn model_with_term(
+    model: &StructuralModel,
+    spec: &TermSpec,
+    v: f64,
+) -> Result<StructuralModel, RomError> {
+    if spec.matrix.nrows() != model.n_dof() || spec.matrix.ncols() != model.n_dof() {
+        return Err(RomError::Model(format!(
+            "term {}: G is {} x {}, the model has {} DOFs",
+            spec.name,
+            spec.matrix.nrows(),
+            spec.matrix.ncols(),
+            model.n_dof()
+        )));
+    }
+    let mut out = model.clone();
+    let p = spec.offset * v;
+    if p.re != 0.0 {
+        out.k_b = add_scaled(&out.k_b, &spec.matrix, p.re)?;
+    }
+    if p.im != 0.0 {
+        out.d_b = Some(match &out.d_b {
+            Some(d) => add_scaled(d, &spec.matrix, p.im)?,
+            None => add_scaled(&spec.matrix, &spec.matrix, p.im - 1.0)?,
+        });
+    }
+    if spec.per_modulus != 0.0 {
+        out.s = add_scaled(&out.s, &spec.matrix, spec.per_modulus * v)?;
+    }
+    out.description = format!("{} + term {} at {v}", model.description, spec.name);
+    Ok(out)
+}
+
+/// Build and certify a reduced model of `model` with the extra `terms` (see the module doc),
+/// for the FRFs of all observation points x `inputs`, with the band, range, tolerance,
+/// enrichment schedule and validation grid of `params` (the certificate's reference is always
+/// the sparse LU of the modified full model).
+pub fn build_term_rom(
+    model: &StructuralModel,
+    inputs: &[usize],
+    params: &RomParams,
+    terms: &[TermSpec],
+) -> Result<(TermRom, TermCertificate), RomError> {
+    validate(model, inputs, params)?;
+    if terms.is_empty() {
+        return Err(RomError::Params(
+            "build_term_rom needs at least one term".into(),
+        ));
+    }
+    let moduli = validation_moduli(params);
+    let lines = validation_lines(params);
+    // Modified full models: for the basis and for the certificate.
+    let mut side_models = Vec::new();
+    for t in terms {
+        for &v in &t.enrich_values {
+            side_models.push(model_with_term(model, t, v)?);
+        }
+    }
+    let t0 = Instant::now();
+    let mut cases: Vec<(usize, f64, CaseReference)> = Vec::new();
+    for (k, t) in terms.iter().enumerate() {
+        for &v in &t.cert_values {
+            let m = model_with_term(model, t, v)?;
+            cases.push((k, v, reference(&m, inputs, &moduli, &lines)?));
+        }
+    }
+    let mut seconds_certify = t0.elapsed().as_secs_f64();
+    let mut seconds_basis = 0.0;
+
+    let pat = ModelPattern::new(model)?;
+    let side_pats: Vec<ModelPattern<'_>> = side_models
+        .iter()
+        .map(ModelPattern::new)
+        .collect::<Result<_, _>>()?;
+    let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
+    let mut sides: Vec<BasisBuilder<'_>> = side_pats
+        .iter()
+        .map(|p| BasisBuilder::new(p, params.deflation_tol))
+        .collect::<Result<_, _>>()?;
+    let mut best: Option<(TermRom, f64, CaseErrors)> = None;
+    let mut levels = 0;
+    for level in 0..params.max_levels.max(1) {
+        levels = level + 1;
+        let t = Instant::now();
+        enrich(&mut basis, params, level)?;
+        for side in sides.iter_mut() {
+            let before = side.size();
+            enrich(side, params, level)?;
+            let v = side.v();
+            let new = Mat::from_fn(v.nrows(), side.size() - before, |i, j| v[(i, before + j)]);
+            if new.ncols() > 0 {
+                basis.absorb(new);
+            }
+        }
+        let rom = TermRom {
+            rom: reduce(model, &basis, inputs, params),
+            g_r: terms.iter().map(|t| basis.project(&t.matrix)).collect(),
+            names: terms.iter().map(|t| t.name.clone()).collect(),
+        };
+        seconds_basis += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let mut worst = 0.0f64;
+        let mut per_case = Vec::new();
+        for (k, v, refh) in &cases {
+            let coef = [terms[*k].coef(*k, *v)];
+            let err = case_error(&rom, &coef, &moduli, &lines, refh)?;
+            worst = worst.max(err);
+            per_case.push((terms[*k].name.clone(), *v, err));
+        }
+        seconds_certify += t.elapsed().as_secs_f64();
+        best = Some((rom, worst, per_case));
+        if worst <= params.tolerance {
+            break;
+        }
+    }
+    basis.drop_factors();
+    let (rom, err, per_case) =
+        best.ok_or_else(|| RomError::Params("max_levels must be >= 1".into()))?;
+    let cert = TermCertificate {
+        max_rel_error: err,
+        per_case,
+        basis_size: rom.rom.n_r,
+        levels,
+        n_moduli: moduli.len(),
+        n_lines: lines.len(),
+        seconds_basis,
+        seconds_certify,
+        passed: err <= params.tolerance,
+    };
+    if !cert.passed && !params.allow_uncertified {
+        return Err(RomError::Uncertified {
+            error: err,
+            tolerance: params.tolerance,
+            basis_size: rom.rom.n_r,
+            levels,
+        });
+    }
+    Ok((rom, cert))
+}
+
+/// Largest error relative to the peak of each FRF of one (term, value) case.
+fn case_error(
+    rom: &TermRom,
+    coef: &[TermCoef],
+    moduli: &[C64],
+    lines: &[f64],
+    refh: &[Vec<Vec<C64>>],
+) -> Result<f64, RomError> {
+    let blk = rom.rom.n_out * rom.rom.inputs.len();
+    let mut worst = 0.0f64;
+    for (m, &e) in moduli.iter().enumerate() {
+        let (sw, _) = rom
+            .sweep_terms_impl(lines, &vec![e; lines.len()], coef, false)
+            .map_err(|x| RomError::Factorization(x.to_string()))?;
+        for k in 0..blk {
+            let peak = (0..lines.len())
+                .map(|l| refh[m][l][k].norm())
+                .fold(0.0, f64::max);
+            let err = (0..lines.len())
+                .map(|l| (sw.h[l * blk + k] - refh[m][l][k]).norm())
+                .fold(0.0, f64::max);
+            let rel = if peak > 0.0 { err / peak } else { err };
+            worst = worst.max(if rel.is_nan() { f64::INFINITY } else { rel });
+        }
+    }
+    Ok(worst)
+}
+
+impl TermRom {
+    /// Basis size n_r.
+    pub fn basis_size(&self) -> usize {
+        self.rom.n_r
+    }
+    /// The same model with fewer inputs (see [`ReducedModel::with_inputs`]).
+    pub fn with_inputs(&self, inputs: &[usize]) -> Result<TermRom, RomError> {
+        Ok(TermRom {
+            rom: self.rom.with_inputs(inputs)?,
+            g_r: self.g_r.clone(),
+            names: self.names.clone(),
+        })
+    }
+
+    fn check(&self, terms: &[TermCoef]) -> Result<(), FrfError> {
+        if let Some(t) = terms.iter().find(|t| t.index >= self.g_r.len()) {
+            return Err(FrfError::Other(format!(
+                "term index {} is not a term of the ROM ({} terms: {:?})",
+                t.index,
+                self.g_r.len(),
+                self.names
+            )));
+        }
+        Ok(())
+    }
+
+    /// One line: (h, dh/dE', sh, dh/dv_k per term), each n_out x n_in row-major.
+    fn line(
+        &self,
+        omega: f64,
+        e: C64,
+        terms: &[TermCoef],
+        derivs: bool,
+    ) -> Result<TermLine, FrfError> {
+        let r = &self.rom;
+        let n = r.n_r;
+        let no = r.n_out;
+        let ni = r.inputs.len();
+        let mut z = r.z_r(omega, e);
+        for t in terms {
+            let c = t.value * (t.offset + t.per_modulus * e);
+            let g = &self.g_r[t.index];
+            for i in 0..n {
+                for j in 0..n {
+                    z[i * n + j] += c * g[(i, j)];
+                }
+            }
+        }
+        let lu = DenseLu::factor(n, z).ok_or(FrfError::Singular {
+            freq_hz: omega / std::f64::consts::TAU,
+            modulus: e,
+        })?;
+        let cols: Vec<usize> = if derivs {
+            (0..no).collect()
+        } else {
+            r.inputs.clone()
+        };
+        let mut x: Vec<Vec<C64>> = Vec::with_capacity(cols.len());
+        let mut slot = vec![usize::MAX; no];
+        for &c in &cols {
+            let mut b: Vec<C64> = (0..n).map(|k| C64::new(r.b_r[(k, c)], 0.0)).collect();
+            lu.solve(&mut b);
+            slot[c] = x.len();
+            x.push(b);
+        }
+        let zero = C64::new(0.0, 0.0);
+        let mut h = vec![zero; no * ni];
+        for i in 0..no {
+            for (jj, &j) in r.inputs.iter().enumerate() {
+                let xj = &x[slot[j]];
+                h[i * ni + jj] = (0..n).map(|k| xj[k] * r.b_r[(k, i)]).sum();
+            }
+        }
+        if !derivs {
+            return Ok((h, Vec::new(), Vec::new(), Vec::new()));
+        }
+        // A x_j for a real symmetric A (n_r x n_r).
+        let apply = |a: &Mat<f64>, xj: &[C64]| -> Vec<C64> {
+            (0..n)
+                .map(|p| (0..n).map(|q| xj[q] * a[(p, q)]).sum())
+                .collect()
+        };
+        // S_eff = S_r + sum v_k q_k G_k,r
+        let mut s_eff = r.s_r.clone();
+        for t in terms.iter().filter(|t| t.per_modulus != 0.0) {
+            let g = &self.g_r[t.index];
+            let c = t.value * t.per_modulus;
+            for i in 0..n {
+                for j in 0..n {
+                    s_eff[(i, j)] += c * g[(i, j)];
+                }
+            }
+        }
+        let mut dh = vec![zero; no * ni];
+        let mut sh = vec![zero; no * ni];
+        let mut dt = vec![vec![zero; no * ni]; terms.len()];
+        for (jj, &j) in r.inputs.iter().enumerate() {
+            let xj = &x[slot[j]];
+            let sx = apply(&s_eff, xj);
+            let gx: Vec<Vec<C64>> = terms
+                .iter()
+                .map(|t| apply(&self.g_r[t.index], xj))
+                .collect();
+            for i in 0..no {
+                let xi = &x[slot[i]];
+                dh[i * ni + jj] = -(0..n).map(|k| xi[k] * sx[k]).sum::<C64>();
+                sh[i * ni + jj] = (0..n).map(|k| xj[k] * r.sb_r[(k, i)]).sum();
+                for (k, t) in terms.iter().enumerate() {
+                    let dc = t.offset + t.per_modulus * e;
+                    dt[k][i * ni + jj] = -dc * (0..n).map(|q| xi[q] * gx[k][q]).sum::<C64>();
+                }
+            }
+        }
+        Ok((h, dh, sh, dt))
+    }
+
+    pub(crate) fn sweep_terms_impl(
+        &self,
+        omega: &[f64],
+        modulus: &[C64],
+        terms: &[TermCoef],
+        derivs: bool,
+    ) -> Result<(Sweep, Vec<Vec<C64>>), FrfError> {
+        crate::frf::check_line_lengths(omega, modulus)?;
+        self.check(terms)?;
+        let lines: Vec<_> = omega
+            .par_iter()
+            .zip(modulus.par_iter())
+            .map(|(&w, &e)| self.line(w, e, terms, derivs))
+            .collect::<Result<_, _>>()?;
+        let (no, ni) = (self.rom.n_out, self.rom.inputs.len());
+        let mut out = Sweep::zeros(omega.len(), no, ni, derivs);
+        let blk = no * ni;
+        let mut dt = if derivs {
+            vec![vec![C64::new(0.0, 0.0); omega.len() * blk]; terms.len()]
+        } else {
+            Vec::new()
+        };
+        for (l, (h, dh, sh, d)) in lines.into_iter().enumerate() {
+            out.h[l * blk..(l + 1) * blk].copy_from_slice(&h);
+            if derivs {
+                out.dh_de[l * blk..(l + 1) * blk].copy_from_slice(&dh);
+                out.sh[l * blk..(l + 1) * blk].copy_from_slice(&sh);
+                for (k, col) in d.into_iter().enumerate() {
+                    dt[k][l * blk..(l + 1) * blk].copy_from_slice(&col);
+                }
+            }
+        }
+        Ok((out, dt))
+    }
+}
+
+impl FrfEngine for TermRom {
+    fn n_out(&self) -> usize {
+        self.rom.n_out
+    }
+    fn inputs(&self) -> &[usize] {
+        &self.rom.inputs
+    }
+    fn sweep_into(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        *out = self
+            .sweep_terms_impl(omega_rad_s, modulus_pa, &[], with_derivatives)?
+            .0;
+        Ok(())
+    }
+    fn term_names(&self) -> Vec<String> {
+        self.names.clone()
+    }
+    fn sweep_terms(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        terms: &[TermCoef],
+        with_derivatives: bool,
+    ) -> Result<(Sweep, Vec<Vec<C64>>), FrfError> {
+        self.sweep_terms_impl(omega_rad_s, modulus_pa, terms, with_derivatives)
+    }
+}
+
+/// An effect-free engine (the pencil sweep, the full model, ...) with a [`TermRom`] for sweeps
+/// with terms: plain sweeps and modes are the plain engine's (unchanged numbers), sweeps with
+/// terms the term ROM's. Both must have the same points and inputs.
+pub struct WithTerms<'a> {
+    pub plain: &'a dyn FrfEngine,
+    pub terms: &'a TermRom,
+}
+
+impl<'a> WithTerms<'a> {
+    pub fn new(plain: &'a dyn FrfEngine, terms: &'a TermRom) -> Result<Self, RomError> {
+        if plain.n_out() != terms.n_out() || plain.inputs() != terms.inputs() {
+            return Err(RomError::Params(format!(
+                "the term ROM has {} points and inputs {:?}; the engine {} and {:?}",
+                terms.n_out(),
+                terms.inputs(),
+                plain.n_out(),
+                plain.inputs()
+            )));
+        }
+        Ok(WithTerms { plain, terms })
+    }
+}
+
+impl FrfEngine for WithTerms<'_> {
+    fn n_out(&self) -> usize {
+        self.plain.n_out()
+    }
+    fn inputs(&self) -> &[usize] {
+        self.plain.inputs()
+    }
+    fn sweep_into(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        self.plain
+            .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
+    }
+    fn complex_modes(
+        &self,
+        modulus_pa: C64,
+        n_modes: usize,
+    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
+        self.plain.complex_modes(modulus_pa, n_modes)
+    }
+    fn term_names(&self) -> Vec<String> {
+        self.terms.term_names()
+    }
+    fn sweep_terms(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        terms: &[TermCoef],
+        with_derivatives: bool,
+    ) -> Result<(Sweep, Vec<Vec<C64>>), FrfError> {
+        self.terms
+            .sweep_terms_impl(omega_rad_s, modulus_pa, terms, with_derivatives)
+    }
+}
