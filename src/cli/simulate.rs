@@ -44,18 +44,42 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
             )
         })
         .collect();
+    // A compliant base: the joint with its base face free on springs (same mesh, same points).
+    let base = match &ex.base_springs {
+        None => built.model.clone(),
+        Some(springs) => {
+            let spec = rfmlab::study::build::joint_spec(&ex.structure)
+                .context("base_springs needs the mesher's structure")?;
+            let m = rfmlab::fe::base::joint_model_on_springs(
+                &spec,
+                springs,
+                &format!("{file}: base_springs"),
+            )?;
+            if !g.quiet {
+                eprintln!(
+                    "base springs: k_n = {:.4e} N/m^3, k_t = {:.4e} N/m^3 under the adhesive ({} DOFs)",
+                    springs.normal_n_m3,
+                    springs.tangential_n_m3,
+                    m.n_dof()
+                );
+            }
+            m
+        }
+    };
     let mut model = if masses.is_empty() {
-        built.model.clone()
+        base
     } else {
-        built
-            .model
-            .with_point_masses(&masses)
-            .map_err(anyhow::Error::msg)?
+        base.with_point_masses(&masses).map_err(anyhow::Error::msg)?
     };
     if let Some(((x0, x1), loss)) = ex.degraded_bond {
         let spec = rfmlab::study::build::joint_spec(&ex.structure)
             .context("degraded_bond needs the mesher's structure")?;
-        let region = rfmlab::fe::region::adhesive_region_stiffness(
+        let region_of = if ex.base_springs.is_some() {
+            rfmlab::fe::region::adhesive_region_stiffness_free_base
+        } else {
+            rfmlab::fe::region::adhesive_region_stiffness
+        };
+        let region = region_of(
             &spec,
             x0,
             x1,
@@ -178,6 +202,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         "seed": ex.seed,
         "sensor_masses": ex.sensors.iter().map(|(id, m)| json!({"point": id, "mass_kg": m})).collect::<Vec<_>>(),
         "degraded_bond": ex.degraded_bond.map(|((x0, x1), loss)| json!({"x_start_m": x0, "x_end_m": x1, "loss": loss})),
+        "base_springs": ex.base_springs.map(|b| json!({"normal_n_m3": b.normal_n_m3, "tangential_n_m3": b.tangential_n_m3, "compliance_m3_n": 1.0 / b.normal_n_m3})),
         "shaker_side_force": ex.shaker_side_force.map(|s| json!({"shaker_mass_kg": s.armature_mass_kg, "stinger_stiffness_n_m": s.stinger_stiffness_n_m})),
         "files": written.iter().map(|p| p.file_name().map(|f| f.to_string_lossy().into_owned())).collect::<Vec<_>>(),
         "levels": truths,

@@ -423,6 +423,23 @@ fn lin_comb(a: &SpMat, alpha: f64, b: &SpMat, beta: f64, what: &str) -> Result<S
 /// beam's E, nu), S (adhesive elements at E = 1 Pa, adhesive nu), damping, points.
 pub fn build_joint_model(spec: &JointSpec) -> Result<(StructuralModel, MeshInfo), FeError> {
     let (mesh, layout) = joint_mesh_from_spec(spec)?;
+    if !mesh.fixed.iter().any(|&f| f) {
+        return Err(FeError::Unconstrained {
+            key: "structure.adhesive.length".into(),
+            fix: "no node of the adhesive's lower face exists: give the adhesive a positive length and thickness".into(),
+        });
+    }
+    let (model, info, _) = assemble_joint(spec, &mesh, &layout)?;
+    Ok((model, info))
+}
+
+/// The assembly behind [`build_joint_model`] on a given mesh (its fixed nodes eliminated),
+/// with the DOF numbering (the base springs of [`super::base`] free the lower face).
+pub(crate) fn assemble_joint(
+    spec: &JointSpec,
+    mesh: &HexMesh,
+    layout: &JointLayout,
+) -> Result<(StructuralModel, MeshInfo, DofMap), FeError> {
     check_damping(&spec.damping)?;
     // points: directions and duplicates first (cheap)
     for (i, p) in spec.points.iter().enumerate() {
@@ -439,15 +456,9 @@ pub fn build_joint_model(spec: &JointSpec) -> Result<(StructuralModel, MeshInfo)
             });
         }
     }
-    if !mesh.fixed.iter().any(|&f| f) {
-        return Err(FeError::Unconstrained {
-            key: "structure.adhesive.length".into(),
-            fix: "no node of the adhesive's lower face exists: give the adhesive a positive length and thickness".into(),
-        });
-    }
     let t0 = Instant::now();
-    let dofs = DofMap::new(&mesh);
-    let asm = Assembler::new(&mesh, &dofs);
+    let dofs = DofMap::new(mesh);
+    let asm = Assembler::new(mesh, &dofs);
     let all: Vec<usize> = (0..mesh.n_elements()).collect();
     let beam_el = mesh.elements_in(Region::Beam);
     let adh_el = mesh.elements_in(Region::Adhesive);
@@ -495,7 +506,7 @@ pub fn build_joint_model(spec: &JointSpec) -> Result<(StructuralModel, MeshInfo)
     let mut points = Vec::with_capacity(spec.points.len());
     for (i, p) in spec.points.iter().enumerate() {
         points.push(map_point(
-            &mesh,
+            mesh,
             &dofs,
             lo,
             hi,
@@ -537,6 +548,7 @@ pub fn build_joint_model(spec: &JointSpec) -> Result<(StructuralModel, MeshInfo)
             description,
         },
         info,
+        dofs,
     ))
 }
 

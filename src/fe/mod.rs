@@ -11,6 +11,7 @@
 //! [`matrix_market`] import/export of externally assembled models.
 
 pub mod assembly;
+pub mod base;
 pub mod element;
 pub mod error;
 pub mod geometry;

@@ -38,6 +38,27 @@ pub fn adhesive_region_stiffness(
     x1: f64,
     key: &str,
 ) -> Result<RegionStiffness, FeError> {
+    region_stiffness(spec, x0, x1, key, false)
+}
+
+/// [`adhesive_region_stiffness`] on the DOFs of the joint with its base face free (the model
+/// of [`super::base::base_spring_model`]).
+pub fn adhesive_region_stiffness_free_base(
+    spec: &JointSpec,
+    x0: f64,
+    x1: f64,
+    key: &str,
+) -> Result<RegionStiffness, FeError> {
+    region_stiffness(spec, x0, x1, key, true)
+}
+
+fn region_stiffness(
+    spec: &JointSpec,
+    x0: f64,
+    x1: f64,
+    key: &str,
+    free_base: bool,
+) -> Result<RegionStiffness, FeError> {
     let g = &spec.geometry;
     let (a0, a1) = (
         g.adhesive_x_start_m,
@@ -52,7 +73,10 @@ pub fn adhesive_region_stiffness(
             ),
         });
     }
-    let (mesh, _) = joint_mesh_from_spec(spec)?;
+    let (mut mesh, _) = joint_mesh_from_spec(spec)?;
+    if free_base {
+        mesh.fixed.iter_mut().for_each(|f| *f = false);
+    }
     let dofs = DofMap::new(&mesh);
     let asm = Assembler::new(&mesh, &dofs);
     let adh = mesh.elements_in(Region::Adhesive);

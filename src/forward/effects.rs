@@ -61,7 +61,17 @@ pub enum Effect {
     /// region keeps (1 - d) of its modulus). Needs an engine with the region's term
     /// ([`crate::rom::terms`]).
     DegradedBond { x_start_m: f64, width_m: f64 },
+    /// A compliant base: distributed springs under the adhesive's lower face instead of a
+    /// fixed face ([`crate::fe::base`]), the parameter the normal springs' compliance
+    /// `c = 1 / k_n` (m^3/N; 0 is the fixed base), the tangential ones `k_t = k_n /
+    /// normal_over_tangential`. Needs an engine with the base's term ([`crate::rom::terms`],
+    /// a compliance term over the joint with its base free).
+    BaseSprings { normal_over_tangential: f64 },
 }
+
+/// Default ratio of normal to tangential base stiffness: that of a thin elastic layer with
+/// Poisson's ratio 0.3 (`E_oed / G = 2 (1 - nu) / (1 - 2 nu) = 3.5`).
+pub const DEFAULT_BASE_NORMAL_OVER_TANGENTIAL: f64 = 3.5;
 
 /// Default width of a degraded-bond candidate at each end of the block (m).
 pub const DEFAULT_BOND_STRIP_M: f64 = 0.010;
@@ -84,6 +94,7 @@ impl Effect {
             Effect::DegradedBond { x_start_m, width_m } => {
                 format!("bond_x{:.1}mm_w{:.1}mm", 1e3 * x_start_m, 1e3 * width_m)
             }
+            Effect::BaseSprings { .. } => "base_springs".into(),
         }
     }
     /// Type of the effect (a study's `type` key).
@@ -96,6 +107,7 @@ impl Effect {
             Effect::Shaker { .. } => "shaker",
             Effect::MaxwellBranch { .. } => "maxwell_branch",
             Effect::DegradedBond { .. } => "degraded_bond",
+            Effect::BaseSprings { .. } => "base_springs",
         }
     }
     /// SI unit of the parameter.
@@ -105,6 +117,7 @@ impl Effect {
             Effect::Delay { .. } => "s",
             Effect::PointMass { .. } | Effect::Shaker { .. } => "kg",
             Effect::MaxwellBranch { .. } => "Pa",
+            Effect::BaseSprings { .. } => "m^3/N",
         }
     }
     /// A sentence of physics for the report.
@@ -132,6 +145,9 @@ impl Effect {
                 1e3 * x_start_m,
                 1e3 * (x_start_m + width_m)
             ),
+            Effect::BaseSprings { normal_over_tangential } => format!(
+                "the base under the adhesive is not rigid: distributed springs of compliance c = 1 / k_n normal to it (and {normal_over_tangential} times softer in its plane) act in series with the adhesive layer, softening the joint much as a softer adhesive would (confounded with the adhesive's stiffness; the springs add no damping)"
+            ),
         }
     }
     /// Value at which the effect is absent.
@@ -147,6 +163,7 @@ impl Effect {
                 | Effect::Shaker { .. }
                 | Effect::MaxwellBranch { .. }
                 | Effect::DegradedBond { .. }
+                | Effect::BaseSprings { .. }
         )
     }
     /// Admissible range (open) of the parameter.
@@ -158,13 +175,14 @@ impl Effect {
             Effect::BeamModulus => (-0.9, 9.0),
             Effect::MaxwellBranch { .. } => (-1e-6, 1e11),
             Effect::DegradedBond { .. } => (-1e-9, 1.0),
+            Effect::BaseSprings { .. } => (-1e-18, 1e-6),
         }
     }
     /// Default prior when the effect is free: uniform over a stated plausible range (the
     /// evidence depends on it: a ten times wider range costs ln 10 = 2.3 nats).
     /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor or a shaker's moving mass), beam
     /// modulus +-20 %, Maxwell branch modulus 0-20 MPa (a few times the stiffness of the paper's adhesive, E0 about 5 MPa).
-    /// Degraded bond: loss fraction uniform on [0, 1).
+    /// Degraded bond: loss fraction uniform on [0, 1). Base springs: compliance 0-1e-9 m^3/N.
     pub fn default_prior(&self) -> Prior {
         match self {
             Effect::Gain { .. } | Effect::BeamModulus => Prior::Uniform { lo: -0.2, hi: 0.2 },
@@ -175,6 +193,9 @@ impl Effect {
             Effect::PointMass { .. } | Effect::Shaker { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
             Effect::MaxwellBranch { .. } => Prior::Uniform { lo: 0.0, hi: 2e7 },
             Effect::DegradedBond { .. } => Prior::Uniform { lo: 0.0, hi: 1.0 },
+            // k_n >= 1e9 N/m^3: about the adhesive layer's own E_oed / t (2e9 for the paper's
+            // 10 mm of Sikaflex); a base softer than that is not a base.
+            Effect::BaseSprings { .. } => Prior::Uniform { lo: 0.0, hi: 1e-9 },
         }
     }
     /// The factor `dE*/dE_k = j w tau / (1 + j w tau)` of a Maxwell branch at `omega` (zero
@@ -195,6 +216,7 @@ impl Effect {
                 | Effect::BeamModulus
                 | Effect::Shaker { .. }
                 | Effect::DegradedBond { .. }
+                | Effect::BaseSprings { .. }
         )
     }
 }
@@ -337,7 +359,9 @@ impl Effects {
                         "effect {name}: stinger stiffness {stiffness_n_m} N/m must be finite and > 0"
                     )));
                 }
-                Effect::DegradedBond { .. } if !engine.term_names().contains(&name) => {
+                Effect::DegradedBond { .. } | Effect::BaseSprings { .. }
+                    if !engine.term_names().contains(&name) =>
+                {
                     return Err(super::ForwardError::Setup(format!(
                         "effect {name}: the engine has no term for this region (build it with rom::terms::build_term_rom; terms: {:?})",
                         engine.term_names()
@@ -425,22 +449,28 @@ impl Effects {
         let names = engine.term_names();
         let mut coefs = Vec::new();
         let mut term_of = Vec::new();
+        // Base springs: the engine's compliance term (rom::terms::TermMap::Compliance, offset
+        // 1) at v_eng = v (1 + b): the engine's Z is the true one divided by (1 + b), springs
+        // K_s / v included, so dH/dv = dH_eng/dv_eng (the transform divides by scale^2).
         for (t, (term, v)) in self.terms.iter().zip(values).enumerate() {
-            if let Effect::DegradedBond { .. } = term.effect {
-                let name = term.effect.name();
-                let index = names.iter().position(|n| *n == name).ok_or_else(|| {
-                    super::ForwardError::Setup(format!(
-                        "effect {name} needs an engine with its region's stiffness (a ROM with terms, rom::terms)"
-                    ))
-                })?;
-                coefs.push(crate::frf::TermCoef {
-                    index,
-                    value: *v,
-                    offset: C64::new(0.0, 0.0),
-                    per_modulus: -1.0,
-                });
-                term_of.push(t);
-            }
+            let (value, offset, per_modulus, dscale) = match term.effect {
+                Effect::DegradedBond { .. } => (*v, 0.0, -1.0, scale),
+                Effect::BaseSprings { .. } => (*v * scale, 1.0, 0.0, scale * scale),
+                _ => continue,
+            };
+            let name = term.effect.name();
+            let index = names.iter().position(|n| *n == name).ok_or_else(|| {
+                super::ForwardError::Setup(format!(
+                    "effect {name} needs an engine with its term (a ROM with terms, rom::terms)"
+                ))
+            })?;
+            coefs.push(crate::frf::TermCoef {
+                index,
+                value,
+                offset: C64::new(offset, 0.0),
+                per_modulus,
+            });
+            term_of.push((t, dscale));
         }
         if coefs.is_empty() {
             let sw = engine.sweep(&w_eng, &e_eng, derivs)?;
@@ -469,8 +499,8 @@ impl Effects {
         if derivs {
             // The transforms (masses, shaker) are linear in the receptances' derivative: the
             // E' path carries dH_eng/dd (times the scale, as it divides by scale^2).
-            for (t, col) in term_of.iter().zip(cols) {
-                sw.dh_de = col.iter().map(|x| x * scale).collect();
+            for ((t, dscale), col) in term_of.iter().zip(cols) {
+                sw.dh_de = col.iter().map(|x| x * dscale).collect();
                 let r = self.transform(
                     &sw,
                     engine.inputs(),

@@ -214,8 +214,15 @@ pub fn diagnose_into(
     // name). Each evaluation with a bond is a dense LU of the enriched ROM per line (56 ms per
     // forward evaluation against about 1 ms on the pencil), and the term ROM is built and
     // certified per run (about 7 s), so the default candidate set ("all") leaves them out.
-    let bonds: Vec<crate::forward::Effect> =
-        super::terms::bond_candidates(study, crate::forward::effects::DEFAULT_BOND_STRIP_M)
+    // Base springs (a compliance term over the free-base joint) likewise.
+    let mut term_candidates =
+        super::terms::bond_candidates(study, crate::forward::effects::DEFAULT_BOND_STRIP_M);
+    if crate::study::build::joint_spec(&study.structure).is_some() {
+        term_candidates.push(crate::forward::Effect::BaseSprings {
+            normal_over_tangential: crate::forward::effects::DEFAULT_BASE_NORMAL_OVER_TANGENTIAL,
+        });
+    }
+    let bonds: Vec<crate::forward::Effect> = term_candidates
             .into_iter()
             .filter(|e| {
                 study.closed_loop.as_ref().is_some_and(|c| {

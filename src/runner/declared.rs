@@ -66,6 +66,11 @@ pub fn level_effects(
             DeclaredKind::DegradedBond { x_start_m, width_m } => {
                 Effect::DegradedBond { x_start_m, width_m }
             }
+            DeclaredKind::BaseSprings {
+                normal_over_tangential,
+            } => Effect::BaseSprings {
+                normal_over_tangential,
+            },
         };
         let mut value = d.value;
         if d.free {

@@ -1,19 +1,67 @@
 //! Engines for effects that need new matrices (issue 13, item 1): the degraded-bond regions
-//! among a run's effects become the extra terms of a certified ROM ([`crate::rom::terms`])
-//! that wraps the run's effect-free engine ([`crate::rom::terms::WithTerms`]), so the
-//! effect-free forward model keeps its engine and its numbers.
+//! and base springs among a run's effects become the extra terms of a certified ROM
+//! ([`crate::rom::terms`]) that wraps the run's effect-free engine
+//! ([`crate::rom::terms::WithTerms`]), so the effect-free forward model keeps its engine and
+//! its numbers.
+//!
+//! With base springs the term ROM's model is the joint with its base face free
+//! ([`crate::fe::base`]) holding springs of compliance `BASE_V_REF`, and the springs' term is a
+//! compliance ([`crate::rom::terms::TermMap::Compliance`]): at compliance 0 (floored at
+//! `BASE_V_FLOOR`, springs 1e10 times stiffer than the prior's stiffest) it is the fixed base,
+//! certified against the full model like every other value.
 
 use super::{RunError, Study};
 use crate::common::C64;
 use crate::forward::Effect;
 use crate::frf::FrfEngine;
-use crate::rom::terms::{build_term_rom, TermCertificate, TermRom, TermSpec};
+use crate::rom::terms::{build_term_rom, TermCertificate, TermMap, TermRom, TermSpec};
 use crate::study::build::BuiltModel;
 
 /// Loss fractions whose full-model Krylov vectors enrich the basis, and those the certificate
 /// checks (0 is the effect-free model).
 const BOND_ENRICH: [f64; 2] = [0.5, 0.95];
 const BOND_CERT: [f64; 3] = [0.0, 0.5, 0.95];
+/// Base springs (compliance 1 / k_n, m^3/N): the term ROM model's own springs, the floor of
+/// the rigid limit, the enrichment and certificate values (the default prior is 0-1e-9).
+const BASE_V_REF: f64 = 1e-10;
+const BASE_V_FLOOR: f64 = 1e-19;
+const BASE_ENRICH: [f64; 3] = [0.0, 1e-11, 1e-9];
+const BASE_CERT: [f64; 4] = [0.0, 1e-11, 1e-10, 1e-9];
+
+/// The base springs' term: the joint of `spec` with its base face free on springs of
+/// compliance `BASE_V_REF` (the term ROM's model), and the springs' compliance term
+/// (`G = K_n + K_t / normal_over_tangential`, named as [`Effect::BaseSprings`]).
+pub fn base_springs_term(
+    spec: &crate::fe::joint::JointSpec,
+    normal_over_tangential: f64,
+) -> Result<(crate::fe::StructuralModel, TermSpec), String> {
+    let b = crate::fe::base::base_spring_model(spec).map_err(|e| e.to_string())?;
+    let g = b
+        .combined(normal_over_tangential)
+        .map_err(|e| e.to_string())?;
+    let mut m = b.free.clone();
+    m.k_b = crate::rom::terms::add_scaled(&m.k_b, &g, 1.0 / BASE_V_REF).map_err(|e| e.to_string())?;
+    m.description = format!(
+        "{} on base springs of compliance {BASE_V_REF:e} m^3/N",
+        m.description
+    );
+    let t = TermSpec {
+        name: Effect::BaseSprings {
+            normal_over_tangential,
+        }
+        .name(),
+        matrix: g,
+        offset: C64::new(1.0, 0.0),
+        per_modulus: 0.0,
+        enrich_values: BASE_ENRICH.to_vec(),
+        cert_values: BASE_CERT.to_vec(),
+        map: TermMap::Compliance {
+            v_ref: BASE_V_REF,
+            v_floor: BASE_V_FLOOR,
+        },
+    };
+    Ok((m, t))
+}
 
 /// The degraded-bond candidates of the loop: a strip of `width_m` at each end of the block.
 pub fn bond_candidates(study: &Study, width_m: f64) -> Vec<Effect> {
@@ -51,6 +99,34 @@ pub fn term_rom_for(
     band_hz: (f64, f64),
 ) -> Result<Option<(TermRom, TermCertificate)>, RunError> {
     let mut specs: Vec<TermSpec> = Vec::new();
+    // Base springs change the model's DOFs (the base face is free): every term then lives on
+    // the free-base joint.
+    let base = effects
+        .iter()
+        .find(|(e, _)| matches!(e, Effect::BaseSprings { .. }));
+    let joint = |key: &String, what: &str| {
+        crate::study::build::joint_spec(&study.structure).ok_or_else(|| {
+            super::study_err(
+                study,
+                key.clone(),
+                format!("{what} needs the mesher's structure (source = \"mesher\"): an imported model has no adhesive elements"),
+            )
+        })
+    };
+    let mut model = None;
+    if let Some((e, key)) = base {
+        let Effect::BaseSprings {
+            normal_over_tangential,
+        } = *e
+        else {
+            unreachable!("matched above")
+        };
+        let spec = joint(key, "base springs")?;
+        let (m, t) = base_springs_term(&spec, normal_over_tangential)
+            .map_err(|err| super::study_err(study, key.clone(), err))?;
+        specs.push(t);
+        model = Some(m);
+    }
     for (e, key) in effects {
         let Effect::DegradedBond { x_start_m, width_m } = *e else {
             continue;
@@ -58,20 +134,14 @@ pub fn term_rom_for(
         if specs.iter().any(|s| s.name == e.name()) {
             continue;
         }
-        let spec = crate::study::build::joint_spec(&study.structure).ok_or_else(|| {
-            super::study_err(
-                study,
-                key.clone(),
-                "a degraded bond needs the mesher's structure (source = \"mesher\"): an imported model has no adhesive elements to split",
-            )
-        })?;
-        let r = crate::fe::region::adhesive_region_stiffness(
-            &spec,
-            x_start_m,
-            x_start_m + width_m,
-            key,
-        )
-        .map_err(|err| super::study_err(study, key.clone(), err.to_string()))?;
+        let spec = joint(key, "a degraded bond")?;
+        let region = if model.is_some() {
+            crate::fe::region::adhesive_region_stiffness_free_base
+        } else {
+            crate::fe::region::adhesive_region_stiffness
+        };
+        let r = region(&spec, x_start_m, x_start_m + width_m, key)
+            .map_err(|err| super::study_err(study, key.clone(), err.to_string()))?;
         specs.push(TermSpec {
             name: e.name(),
             matrix: r.s_region,
@@ -79,6 +149,7 @@ pub fn term_rom_for(
             per_modulus: -1.0,
             enrich_values: BOND_ENRICH.to_vec(),
             cert_values: BOND_CERT.to_vec(),
+            map: Default::default(),
         });
     }
     if specs.is_empty() {
@@ -92,7 +163,12 @@ pub fn term_rom_for(
         n_cert_moduli_per_axis: 2,
         ..Default::default()
     };
-    let (rom, cert) = build_term_rom(&built.model, engine.inputs(), &params, &specs)
+    let (rom, cert) = build_term_rom(
+        model.as_ref().unwrap_or(&built.model),
+        engine.inputs(),
+        &params,
+        &specs,
+    )
         .map_err(|e| RunError::Engine(e.to_string()))?;
     Ok(Some((rom, cert)))
 }
@@ -107,6 +183,14 @@ pub fn with_declared(study: &Study, candidates: &[Effect]) -> Vec<(Effect, Strin
             crate::study::effects::DeclaredKind::DegradedBond { x_start_m, width_m } => {
                 Some((Effect::DegradedBond { x_start_m, width_m }, d.key.clone()))
             }
+            crate::study::effects::DeclaredKind::BaseSprings {
+                normal_over_tangential,
+            } => Some((
+                Effect::BaseSprings {
+                    normal_over_tangential,
+                },
+                d.key.clone(),
+            )),
             _ => None,
         })
         .collect();

@@ -4,7 +4,7 @@
 //!
 //! ```toml
 //! [[structure.effects]]
-//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | degraded_bond
+//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | degraded_bond | base_springs
 //! point = 4               # point id (point_mass); `channel = id` for gain and delay
 //! value = 0.012           # SI (kg, 1, s, 1, Pa)
 //! free = false            # true: a parameter to infer, with the default prior or prior = {...}
@@ -12,6 +12,8 @@
 //! # stinger_stiffness = 2e5  # N/m, a shaker's stinger (default 2e5); value = its moving mass (kg)
 //! # type = "degraded_bond" with x_start = 0.040 and width = 0.010 (m, inside the adhesive
 //! #   block; default width 10 mm): value = the loss fraction d in [0, 1), E* -> (1 - d) E* there
+//! # type = "base_springs": value = the compliance 1 / k_n (m^3/N) of springs under the adhesive's
+//! #   lower face (0: fixed base); normal_over_tangential = k_n / k_t (default 3.5)
 //!
 //! [closed_loop]
 //! enabled = true
@@ -28,7 +30,7 @@ use crate::inference::prior::Prior;
 use serde::Deserialize;
 
 /// Effect types a study may name (`type = ...`).
-pub const EFFECT_TYPES: [&str; 7] = [
+pub const EFFECT_TYPES: [&str; 8] = [
     "point_mass",
     "gain",
     "delay",
@@ -36,6 +38,7 @@ pub const EFFECT_TYPES: [&str; 7] = [
     "maxwell_branch",
     "shaker",
     "degraded_bond",
+    "base_springs",
 ];
 
 /// `[[structure.effects]]` as written.
@@ -53,6 +56,8 @@ pub struct RawEffect {
     pub x_start: Option<f64>,
     /// m, width of a degraded bond region.
     pub width: Option<f64>,
+    /// Base springs: ratio of normal to tangential stiffness (default 3.5).
+    pub normal_over_tangential: Option<f64>,
     #[serde(default)]
     pub free: bool,
     pub prior: Option<super::inference::RawPrior>,
@@ -96,6 +101,10 @@ pub enum DeclaredKind {
     DegradedBond {
         x_start_m: f64,
         width_m: f64,
+    },
+    /// Springs under the adhesive's lower face (value: the normal compliance 1 / k_n, m^3/N).
+    BaseSprings {
+        normal_over_tangential: f64,
     },
 }
 
@@ -191,6 +200,9 @@ pub(super) fn effects(
             not("x_start", r.x_start.is_some())?;
             not("width", r.width.is_some())?;
         }
+        if r.kind != "base_springs" {
+            not("normal_over_tangential", r.normal_over_tangential.is_some())?;
+        }
         let kind = match r.kind.as_str() {
             "point_mass" => {
                 not("channel", r.channel.is_some())?;
@@ -263,6 +275,21 @@ pub(super) fn effects(
                     width_m: ctx.positive(&format!("{key}.width"), w, "m")?,
                 }
             }
+            "base_springs" => {
+                not("point", r.point.is_some())?;
+                not("channel", r.channel.is_some())?;
+                not("tau", r.tau.is_some())?;
+                let q = r
+                    .normal_over_tangential
+                    .unwrap_or(crate::forward::effects::DEFAULT_BASE_NORMAL_OVER_TANGENTIAL);
+                DeclaredKind::BaseSprings {
+                    normal_over_tangential: ctx.positive(
+                        &format!("{key}.normal_over_tangential"),
+                        q,
+                        "(ratio)",
+                    )?,
+                }
+            }
             o => {
                 return Err(ctx.err(
                     format!("{key}.type"),
@@ -295,6 +322,7 @@ pub(super) fn effects(
             DeclaredKind::MaxwellBranch { .. } => ("Pa", 0.0, 1e11, true),
             DeclaredKind::Shaker { .. } => ("kg", 0.0, 10.0, true),
             DeclaredKind::DegradedBond { .. } => ("1 (loss fraction)", 0.0, 1.0, true),
+            DeclaredKind::BaseSprings { .. } => ("m^3/N (compliance 1 / k_n)", 0.0, 1e-6, true),
         };
         if !value.is_finite() || (nonneg && value < 0.0) {
             return Err(ctx.err(

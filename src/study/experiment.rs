@@ -23,7 +23,16 @@ struct RawExperimentFile {
     #[serde(default)]
     channels: Vec<RawChannel>,
     degraded_bond: Option<RawDegradedBond>,
+    base_springs: Option<RawBaseSprings>,
     levels: Vec<RawTruthLevel>,
+}
+
+/// Springs under the adhesive's lower face instead of a fixed face (N/m^3, per unit area).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBaseSprings {
+    normal: f64,
+    tangential: f64,
 }
 
 /// A region of the adhesive with a reduced modulus: `E* (S - loss S_region)` over
@@ -144,6 +153,9 @@ pub struct Experiment {
     /// A degraded bond region: (x_start, x_end) in m and the loss fraction d in [0, 1), the
     /// adhesive stiffness there scaled by (1 - d) (`degraded_bond` table).
     pub degraded_bond: Option<((f64, f64), f64)>,
+    /// Springs under the adhesive's lower face (`base_springs` table), instead of a fixed
+    /// face.
+    pub base_springs: Option<crate::fe::base::BaseSprings>,
 }
 
 /// Default width (m) of a degraded bond strip: 10 mm.
@@ -451,6 +463,24 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
             Some(((d.x_start, d.x_start + width), d.loss))
         }
     };
+    let base_springs = match &raw.base_springs {
+        None => None,
+        Some(b) => {
+            if !matches!(structure.source, super::StructureSource::Mesher(_)) {
+                return Err(ctx.err(
+                    "base_springs",
+                    "base springs need the mesher's structure (source = \"mesher\"): an imported model has no base face to free",
+                ));
+            }
+            let springs = crate::fe::base::BaseSprings {
+                normal_n_m3: b.normal,
+                tangential_n_m3: b.tangential,
+            };
+            crate::fe::base::check_springs(&springs, "base_springs")
+                .map_err(|e| ctx.err(e.key().to_string(), e.to_string()))?;
+            Some(springs)
+        }
+    };
     Ok(Experiment {
         file: path.to_path_buf(),
         name: e.name.clone(),
@@ -468,5 +498,6 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         levels,
         shaker_side_force,
         degraded_bond,
+        base_springs,
     })
 }

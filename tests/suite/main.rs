@@ -9,6 +9,7 @@ mod rom_model;
 mod runner_common;
 mod spring_model;
 
+mod base_springs;
 mod bayes_run;
 mod circle_fit;
 mod cli_errors;

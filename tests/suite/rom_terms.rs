@@ -48,6 +48,7 @@ fn terms(spec: &rfmlab::fe::joint::JointSpec, k_b: &rfmlab::fe::model::SpMat) ->
             per_modulus: -1.0,
             enrich_values: vec![0.95],
             cert_values: vec![0.0, 0.5, 0.95],
+            map: Default::default(),
         });
     }
     out.push(TermSpec {
@@ -57,6 +58,7 @@ fn terms(spec: &rfmlab::fe::joint::JointSpec, k_b: &rfmlab::fe::model::SpMat) ->
         per_modulus: 0.0,
         enrich_values: vec![],
         cert_values: vec![0.01],
+        map: Default::default(),
     });
     out
 }
@@ -283,6 +285,7 @@ fn degraded_bond_effect_equals_the_full_model_with_the_strip_degraded() {
         per_modulus: -1.0,
         enrich_values: vec![0.5, 0.95],
         cert_values: vec![0.95],
+        map: Default::default(),
     }];
     let (tr, cert) = build_term_rom(model, &inputs, &params(), &ts).unwrap();
     assert!(cert.passed);
