@@ -69,7 +69,8 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
     let mut model = if masses.is_empty() {
         base
     } else {
-        base.with_point_masses(&masses).map_err(anyhow::Error::msg)?
+        base.with_point_masses(&masses)
+            .map_err(anyhow::Error::msg)?
     };
     if let Some(((x0, x1), loss)) = ex.degraded_bond {
         let spec = rfmlab::study::build::joint_spec(&ex.structure)
@@ -79,12 +80,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
         } else {
             rfmlab::fe::region::adhesive_region_stiffness
         };
-        let region = region_of(
-            &spec,
-            x0,
-            x1,
-            &format!("{file}: degraded_bond.x_start"),
-        )?;
+        let region = region_of(&spec, x0, x1, &format!("{file}: degraded_bond.x_start"))?;
         model = model
             .with_degraded_region(&region.s_region, loss)
             .map_err(anyhow::Error::msg)?;

@@ -22,6 +22,7 @@
 //!    several candidates) and its size is plausible: at least `min_z` posterior sds from zero and
 //!    inside its prior range (not at an edge).
 
+pub mod confounding;
 pub mod signatures;
 
 use crate::common::C64;
@@ -133,6 +134,8 @@ pub struct Candidate {
     pub rank: usize,
     /// Filled when refitted.
     pub refit: Option<Refit>,
+    /// How much the model's parameters absorb the effect ([`confounding`]).
+    pub confounding: confounding::Confounding,
 }
 
 /// A refit with one candidate free.
@@ -167,8 +170,12 @@ pub struct ClosedLoopResult {
     /// Accepted effects in order, with size and sd.
     pub accepted: Vec<(Effect, f64, f64)>,
     pub candidates: Vec<Candidate>,
-    /// "no missing effect found" or the accepted effects in words.
+    /// "no missing effect found" or the accepted effects in words, then the confounded
+    /// candidates' sentences.
     pub conclusion: String,
+    /// Candidates of the last round that the model's parameters absorb (R^2 >= 0.99, law
+    /// candidates aside), not accepted: a sentence each ([`confounding::Confounding::sentence`]).
+    pub confounded: Vec<String>,
 }
 
 /// Residual analysis of `post` at physical parameters `phys` (law + free effects, then noise).
@@ -272,18 +279,23 @@ pub fn score_test(
     phys: &[f64],
     candidate: &Effect,
 ) -> Result<(f64, f64, f64, f64), ForwardError> {
-    score_test_step(post, phys, candidate).map(|(t, p, e, sd, _)| (t, p, e, sd))
+    score_test_step(post, phys, candidate).map(|(t, p, e, sd, _, _)| (t, p, e, sd))
 }
+
+/// What [`score_test_step`] returns: (T, p, one-step size, its sd, the refit's start of the
+/// model parameters, the confounding).
+pub type ScoreStep = (f64, f64, f64, f64, Vec<f64>, confounding::Confounding);
 
 /// [`score_test`] and the Gauss-Newton step of the model's parameters that goes with the
 /// one-step size: `dp = I_pp^-1 (S_p - I_pe de)` (halved until admissible), the refit's start
 /// (the law's parameters absorbed the effect; starting them where the effect's size would put
-/// them keeps the refit in the right basin). Returns (T, p, size, sd, model parameters).
+/// them keeps the refit in the right basin). Returns (T, p, size, sd, model parameters,
+/// confounding).
 pub fn score_test_step(
     post: &FrfPosterior<'_>,
     phys: &[f64],
     candidate: &Effect,
-) -> Result<(f64, f64, f64, f64, Vec<f64>), ForwardError> {
+) -> Result<ScoreStep, ForwardError> {
     let lik = &post.likelihood;
     let np = lik.forward.n_params();
     let fm = candidate_model(lik, candidate)?;
@@ -328,8 +340,17 @@ pub fn score_test_step(
     let a = chol_solve(&l, m, &iep);
     let s_eff = s[m] - a.iter().zip(&s[..m]).map(|(a, b)| a * b).sum::<f64>();
     let i_eff = fi[m * d + m] - a.iter().zip(&iep).map(|(a, b)| a * b).sum::<f64>();
+    let names = fm.param_names();
+    let conf = confounding::Confounding {
+        r2: if fi[m * d + m] > 0.0 {
+            (1.0 - i_eff / fi[m * d + m]).clamp(0.0, 1.0)
+        } else {
+            0.0
+        },
+        absorbed: names[..m].iter().cloned().zip(a.iter().copied()).collect(),
+    };
     if !(i_eff > 0.0) {
-        return Ok((0.0, 1.0, 0.0, f64::INFINITY, phys[..np].to_vec()));
+        return Ok((0.0, 1.0, 0.0, f64::INFINITY, phys[..np].to_vec(), conf));
     }
     let zs = s_eff / i_eff.sqrt();
     // One-sided (a mass): the statistic is max(0, z)^2 (Self and Liang 1987), so a score
@@ -359,7 +380,7 @@ pub fn score_test_step(
         }
         f *= 0.5;
     }
-    Ok((t, p_value, de, 1.0 / i_eff.sqrt(), start))
+    Ok((t, p_value, de, 1.0 / i_eff.sqrt(), start, conf))
 }
 
 /// A forward model sharing `lik`'s observation with its effects and `candidate` free (last).
@@ -470,7 +491,7 @@ pub fn run_closed_loop(
             {
                 continue;
             }
-            let (t, p, est, sd, st) = score_test_step(post, &phys, c)?;
+            let (t, p, est, sd, st, conf) = score_test_step(post, &phys, c)?;
             starts.push((c.name(), st));
             scored.push(Candidate {
                 round,
@@ -481,6 +502,7 @@ pub fn run_closed_loop(
                 one_step_sd: sd,
                 rank: 0,
                 refit: None,
+                confounding: conf,
             });
         }
         scored.sort_by(|a, b| b.score.total_cmp(&a.score));
@@ -639,7 +661,7 @@ pub fn run_closed_loop(
         }
     }
     let after = fit_of(post, &current)?;
-    let conclusion = if accepted.is_empty() {
+    let mut conclusion = if accepted.is_empty() {
         "no missing effect found".to_string()
     } else {
         accepted
@@ -648,12 +670,31 @@ pub fn run_closed_loop(
             .collect::<Vec<_>>()
             .join("; ")
     };
+    // Never silent: candidates the law absorbs are named with the bias they could carry.
+    let last = table.iter().map(|c| c.round).max().unwrap_or(0);
+    let confounded: Vec<String> = table
+        .iter()
+        .filter(|c| {
+            c.round == last
+                && c.confounding.confounded()
+                && !matches!(c.effect, Effect::MaxwellBranch { .. })
+                && !c.refit.as_ref().is_some_and(|r| r.accepted)
+        })
+        .map(|c| c.confounding.sentence(&c.effect, c.one_step, c.one_step_sd))
+        .collect();
+    if !confounded.is_empty() {
+        conclusion = format!(
+            "{conclusion}. Not identifiable from these data: {}",
+            confounded.join("; ")
+        );
+    }
     Ok(ClosedLoopResult {
         before,
         after,
         accepted,
         candidates: table,
         conclusion,
+        confounded,
     })
 }
 

@@ -401,8 +401,7 @@ impl TermRom {
                 }
             }
         };
-        let is_compliance =
-            |t: &TermCoef| matches!(self.maps[t.index], TermMap::Compliance { .. });
+        let is_compliance = |t: &TermCoef| matches!(self.maps[t.index], TermMap::Compliance { .. });
         let mut z = r.z_r(omega, e);
         for t in terms.iter().filter(|t| !is_compliance(t)) {
             add(&mut z, t);

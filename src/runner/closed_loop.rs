@@ -42,6 +42,8 @@ pub struct DiagnoseLevel {
     pub first_ranking: Vec<String>,
     /// The model's parameters (law, then accepted effects), before and after.
     pub parameters: Vec<ParameterChange>,
+    /// Candidates the law's parameters absorb (not identifiable), a sentence each.
+    pub confounded: Vec<String>,
 }
 
 /// One parameter before and after the loop (SI), with the truth when simulated.
@@ -223,15 +225,15 @@ pub fn diagnose_into(
         });
     }
     let bonds: Vec<crate::forward::Effect> = term_candidates
-            .into_iter()
-            .filter(|e| {
-                study.closed_loop.as_ref().is_some_and(|c| {
-                    c.candidates
-                        .as_ref()
-                        .is_some_and(|names| names.iter().any(|n| n == e.kind() || *n == e.name()))
-                })
+        .into_iter()
+        .filter(|e| {
+            study.closed_loop.as_ref().is_some_and(|c| {
+                c.candidates
+                    .as_ref()
+                    .is_some_and(|names| names.iter().any(|n| n == e.kind() || *n == e.name()))
             })
-            .collect();
+        })
+        .collect();
     let term_rom = super::terms::term_rom_for(
         study,
         &built,
@@ -314,6 +316,7 @@ pub fn diagnose_into(
                 .filter(|c| c.round == 0)
                 .map(|c| c.effect.name())
                 .collect(),
+            confounded: res.confounded.clone(),
             parameters: res
                 .after
                 .names
@@ -495,6 +498,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
     let mut num: [Vec<f64>; 4] = Default::default();
     let mut refit: [Vec<Option<f64>>; 4] = Default::default();
     let (mut acc, mut verdict, mut unit) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut r2, mut absorbed) = (Vec::new(), Vec::new());
     for (level, _, _, res, _) in results {
         for c in &res.candidates {
             c_level.push(level.clone());
@@ -514,6 +518,15 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
             refit[3].push(r.map(|r| r.sd));
             acc.push(r.is_some_and(|r| r.accepted));
             verdict.push(r.map_or("not refitted".to_string(), |r| r.verdict.clone()));
+            r2.push(c.confounding.r2);
+            absorbed.push(
+                c.confounding
+                    .absorbed
+                    .iter()
+                    .map(|(n, a)| format!("{n} {a:+.4e}"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            );
         }
     }
     let [score, p, est, est_sd] = num;
@@ -534,6 +547,8 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
         .and_then(|t| t.push_opt_f64("size_sd", "SI (see unit)", sd))
         .and_then(|t| t.push_bool("accepted", acc))
         .and_then(|t| t.push_str("verdict", verdict))
+        .and_then(|t| t.push_f64("law_r2", "1", r2))
+        .and_then(|t| t.push_str("absorbed_per_unit", absorbed))
         .map_err(out_err)?;
     Ok(t)
 }
@@ -631,6 +646,15 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
         }
         for (e, _, _) in &res.accepted {
             let _ = writeln!(s, "\n- {}: {}", e.name(), e.physics());
+        }
+        if !res.confounded.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n**Not identifiable from these data** (the law's parameters absorb them; R^2 of the effect's Jacobian column on the law's, src/closed_loop/confounding.rs):\n"
+            );
+            for c in &res.confounded {
+                let _ = writeln!(s, "- {c}");
+            }
         }
         let _ = writeln!(s, "\n| | before | after |\n|---|---|---|");
         let (b, a) = (&res.before.residuals, &res.after.residuals);

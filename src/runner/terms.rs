@@ -40,7 +40,8 @@ pub fn base_springs_term(
         .combined(normal_over_tangential)
         .map_err(|e| e.to_string())?;
     let mut m = b.free.clone();
-    m.k_b = crate::rom::terms::add_scaled(&m.k_b, &g, 1.0 / BASE_V_REF).map_err(|e| e.to_string())?;
+    m.k_b =
+        crate::rom::terms::add_scaled(&m.k_b, &g, 1.0 / BASE_V_REF).map_err(|e| e.to_string())?;
     m.description = format!(
         "{} on base springs of compliance {BASE_V_REF:e} m^3/N",
         m.description
@@ -169,7 +170,7 @@ pub fn term_rom_for(
         &params,
         &specs,
     )
-        .map_err(|e| RunError::Engine(e.to_string()))?;
+    .map_err(|e| RunError::Engine(e.to_string()))?;
     Ok(Some((rom, cert)))
 }
 

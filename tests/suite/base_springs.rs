@@ -162,7 +162,11 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
             .unwrap();
     eprintln!(
         "base term ROM: n_r {}, certificate {:.3e} {:?}, basis {:.1} s, certify {:.1} s",
-        cert.basis_size, cert.max_rel_error, cert.per_case, cert.seconds_basis, cert.seconds_certify
+        cert.basis_size,
+        cert.max_rel_error,
+        cert.per_case,
+        cert.seconds_basis,
+        cert.seconds_certify
     );
     assert!(cert.passed && cert.max_rel_error <= 1e-6);
     let w: Vec<f64> = (0..60).map(|k| TAU * (3.3 + 8.1 * k as f64)).collect();
@@ -223,7 +227,9 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
             .map(|i| ((p.h[i] - m.h[i]) / step - dt[0][i]).norm() * c_case)
             .fold(0.0, f64::max);
         let size = dt[0].iter().map(|z| z.norm()).fold(0.0, f64::max) * c_case;
-        eprintln!("dH/dc at {v:.3e}: |analytic - FD| c {err:.3e}, |dH/dc| c {size:.3e}, peak {peak:.3e}");
+        eprintln!(
+            "dH/dc at {v:.3e}: |analytic - FD| c {err:.3e}, |dH/dc| c {size:.3e}, peak {peak:.3e}"
+        );
         assert!(size > 1e-2 * peak);
         assert!(err <= tol * size, "{err:.3e} of {size:.3e}");
     }

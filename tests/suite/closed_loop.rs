@@ -206,3 +206,34 @@ fn null_data_accept_nothing() {
         "{false_alarms} of {n}"
     );
 }
+
+/// The confounding measure (src/closed_loop/confounding.rs) against known answers at the
+/// truth of null data: a Maxwell branch with its corner at 0.01 Hz, far below the 8-962 Hz
+/// band, adds an almost constant modulus `E_k` there (`j w tau / (1 + j w tau) = 1 - j f_c / f
+/// + ...`), which Model 3's `E0` reproduces exactly: `R^2` near 1 and the absorbed change of
+/// `E0` per unit `E_k` is `1 / E0` (relative), of the others about 0. A gain on one channel
+/// changes one FRF's level, which no law change reproduces (it moves all four): `R^2` well
+/// below the threshold.
+#[test]
+fn confounding_matches_known_answers() {
+    use rfmlab::closed_loop::score_test_step;
+    let eng = measured_engine();
+    let (x, v) = simulate(&eng, None, 3);
+    let post = posterior(&eng, x, v);
+    let mut phys = TRUTH.to_vec();
+    phys.extend(post.likelihood.noise_names().iter().map(|_| 1.0));
+    let phys = &phys[..post.names.len()];
+    let branch = Effect::MaxwellBranch {
+        tau_s: 1.0 / (TAU * 0.01),
+    };
+    let (.., c) = score_test_step(&post, phys, &branch).unwrap();
+    eprintln!("low branch: R^2 {:.8}, absorbed {:?}", c.r2, c.absorbed);
+    assert!(c.r2 > 0.999 && c.confounded(), "{c:?}");
+    let e0 = c.absorbed[0].1 * TRUTH[0];
+    assert_eq!(c.absorbed[0].0, "E0");
+    assert!((e0 - 1.0).abs() < 0.01, "E0 absorbs {e0} per unit relative");
+    assert!(c.absorbed[1].1.abs() * TRUTH[0] < 0.01 && c.absorbed[2].1.abs() * TRUTH[0] < 0.01);
+    let (.., g) = score_test_step(&post, phys, &Effect::Gain { channel: 2, id: 3 }).unwrap();
+    eprintln!("gain ch3: R^2 {:.4}, absorbed {:?}", g.r2, g.absorbed);
+    assert!(g.r2 < 0.9 && !g.confounded(), "{g:?}");
+}
