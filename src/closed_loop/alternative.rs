@@ -77,6 +77,17 @@ pub fn fit_modulus(
     target: &[C64],
     starts: &[Vec<f64>],
 ) -> Option<ModulusFit> {
+    fit_modulus_holding(law, omega_rad_s, target, starts, &[])
+}
+
+/// [`fit_modulus`] with the parameters at indices `held` kept at their start values.
+pub fn fit_modulus_holding(
+    law: &dyn ConstitutiveModel,
+    omega_rad_s: &[f64],
+    target: &[C64],
+    starts: &[Vec<f64>],
+    held: &[usize],
+) -> Option<ModulusFit> {
     let bounds = law.bounds();
     let n = law.n_params();
     let m = omega_rad_s.len();
@@ -131,6 +142,14 @@ pub fn fit_modulus(
                         a[k * n + l] += jr[k] * jr[l];
                     }
                 }
+            }
+            for &k in held {
+                g[k] = 0.0;
+                for l in 0..n {
+                    a[k * n + l] = 0.0;
+                    a[l * n + k] = 0.0;
+                }
+                a[k * n + k] = 1.0;
             }
             let mut moved = false;
             for _ in 0..12 {
@@ -211,11 +230,53 @@ pub fn fractional_zener_starts(omega_rad_s: &[f64], target: &[C64]) -> Vec<Vec<f
     s
 }
 
-/// The start of an alternative law's refit from the current law `current` at parameters
-/// `p_current`: the fit of `alt` to the current `E*(w)` at `omega_rad_s`. Starts: the
-/// fractional Zener's from [`fractional_zener_starts`]; any other law from the centre of a
-/// decade around one (admissible ranges permitting), which is crude, so only the fractional
-/// Zener is offered as a candidate.
+/// The fractional order's grid of [`law_starts`].
+pub const ALPHA_GRID: [f64; 6] = [0.2, 0.35, 0.5, 0.65, 0.8, 0.95];
+
+/// Starts of an alternative law's refit: [`law_start`], and for the fractional Zener also
+/// its fit to the current `E*(w)` with alpha held at each point of [`ALPHA_GRID`]. The
+/// current law's curve is biased where it lacks the alternative's shape; Model 3's curve, for
+/// one, is the fractional Zener's at alpha = 1 exactly, a degenerate start (the refit stays at
+/// the prior's edge), so the refit's start is chosen among these by the data
+/// ([`refit_law`]: a profile over alpha).
+pub fn law_starts(
+    alt: &dyn ConstitutiveModel,
+    current: &dyn ConstitutiveModel,
+    p_current: &[f64],
+    omega_rad_s: &[f64],
+) -> Vec<ModulusFit> {
+    let mut v: Vec<ModulusFit> = law_start(alt, current, p_current, omega_rad_s)
+        .into_iter()
+        .collect();
+    if alt.name() == FRACTIONAL_ZENER {
+        let target: Vec<C64> = omega_rad_s
+            .iter()
+            .map(|&w| current.modulus(p_current, w))
+            .collect();
+        let base = fractional_zener_starts(omega_rad_s, &target);
+        for a in ALPHA_GRID {
+            let starts: Vec<Vec<f64>> = base
+                .iter()
+                .filter(|s| s[3] == base[0][3])
+                .map(|s| vec![s[0], s[1], s[2], a])
+                .collect();
+            if let Some(f) = fit_modulus_holding(alt, omega_rad_s, &target, &starts, &[3]) {
+                v.push(f);
+            }
+        }
+    }
+    v
+}
+
+/// The index of the parameter [`refit_law`] holds in its profile (the fractional order).
+fn profiled_index(alt: &dyn ConstitutiveModel) -> Option<usize> {
+    (alt.name() == FRACTIONAL_ZENER).then_some(3)
+}
+
+/// The fit of `alt` to the current law's `E*(w)` (`current` at `p_current`) at `omega_rad_s`.
+/// Starts: the fractional Zener's from [`fractional_zener_starts`]; any other law from the
+/// centre of its admissible ranges (or 1 above a lower bound), which is crude, so only the
+/// fractional Zener is offered as a candidate.
 pub fn law_start(
     alt: &dyn ConstitutiveModel,
     current: &dyn ConstitutiveModel,
@@ -293,22 +354,41 @@ pub fn refit_law<'a>(
         },
     };
     let omega = post.likelihood.forward.obs.omega_rad_s.clone();
-    let Some(start) = law_start(alt, old, &phys[..n_old], &omega) else {
+    let n_model = post.likelihood.forward.n_params();
+    let starts = law_starts(alt, old, &phys[..n_old], &omega);
+    post.likelihood.forward.law = alt;
+    // The profile: each start's other parameters (effects too) follow by Gauss-Newton steps
+    // on the data with the profiled parameter held; the smallest weighted residual wins.
+    let v = post.likelihood.variances(&phys[n_model..]);
+    let held: Vec<usize> = profiled_index(alt).into_iter().collect();
+    let mut best: Option<(ModulusFit, Vec<f64>, f64)> = None;
+    for st in starts {
+        let mut p = st.params.clone();
+        p.extend_from_slice(&phys[n_old..n_model]);
+        let Ok(Some((p, q))) = profile_point(&post.likelihood, &v, p, &held) else {
+            continue;
+        };
+        if best.as_ref().is_none_or(|b| q < b.2) {
+            best = Some((st, p, q));
+        }
+    }
+    let Some((start, p_start, _)) = best else {
+        post.likelihood.forward.law = old;
         row.refit.verdict = format!(
             "no admissible start: {} does not fit the current E*(w)",
             alt.name()
         );
         return Ok((row, None));
     };
-    row.start = start.params.clone();
+    let n_new = alt.n_params();
+    row.start = p_start[..n_new].to_vec();
     row.start_rel_rms = start.rel_rms;
-    let priors = default_priors(alt, &start.params);
+    let priors = default_priors(alt, &p_start[..n_new]);
     let mut base: Vec<Prior> = priors.clone();
     base.extend_from_slice(&base_priors[n_old..]);
-    post.likelihood.forward.law = alt;
     install(post, &base, noise_priors, effects.clone())?;
-    let mut p0 = start.params.clone();
-    p0.extend_from_slice(&phys[n_old..]);
+    let mut p0 = p_start;
+    p0.extend_from_slice(&phys[n_model..]);
     let x0 = post.unconstrained(&p0);
     let fit = find_map(&*post, Some(&x0), refit_map, &|| {});
     let n_data = post.likelihood.data.values.len();
@@ -321,7 +401,6 @@ pub fn refit_law<'a>(
             return Ok((row, None));
         }
     };
-    let n_new = alt.n_params();
     let sd = r.laplace.sd_physical();
     row.params = r.map_physical[..n_new].to_vec();
     row.sd = sd[..n_new].to_vec();
@@ -348,6 +427,90 @@ pub fn refit_law<'a>(
     };
     let passes = row.refit.verdict == "passes";
     Ok((row, passes.then_some((priors, r))))
+}
+
+/// Gauss-Newton steps per start in [`refit_law`]'s profile.
+pub const PROFILE_STEPS: usize = 6;
+
+/// [`PROFILE_STEPS`] Gauss-Newton steps of the forward model's parameters `p` except `held`
+/// (columns scaled by `|p_i|`, step halved until the weighted residual sum of squares
+/// `sum |X - E[H1]|^2 / v` drops and the parameters stay admissible). Returns the end point
+/// and its sum, None when `p` itself is not admissible.
+fn profile_point(
+    lik: &crate::inference::likelihood::FrfLikelihood<'_>,
+    v: &[f64],
+    mut p: Vec<f64>,
+    held: &[usize],
+) -> Result<Option<(Vec<f64>, f64)>, ClosedLoopError> {
+    let fm = &lik.forward;
+    let np = p.len();
+    let wrss = |p: &[f64]| -> Option<f64> {
+        fm.check(p).ok()?;
+        let pred = fm.predict(p, false).ok()?;
+        let s: f64 = lik
+            .data
+            .values
+            .iter()
+            .zip(&pred.values)
+            .zip(v)
+            .map(|((x, h), v)| (x - h).norm_sqr() / v)
+            .sum();
+        s.is_finite().then_some(s)
+    };
+    let Some(mut q) = wrss(&p) else {
+        return Ok(None);
+    };
+    for _ in 0..PROFILE_STEPS {
+        let pred = fm.predict(&p, true)?;
+        let free: Vec<usize> = (0..np).filter(|i| !held.contains(i)).collect();
+        let k = free.len();
+        let scale: Vec<f64> = free
+            .iter()
+            .map(|&i| if p[i] != 0.0 { p[i].abs() } else { 1.0 })
+            .collect();
+        let mut g = vec![0.0; k];
+        let mut a = vec![0.0; k * k];
+        for (o, ((x, h), v)) in lik.data.values.iter().zip(&pred.values).zip(v).enumerate() {
+            let r = x - h;
+            for (ii, &i) in free.iter().enumerate() {
+                let ji = pred.jac[i][o] * scale[ii];
+                g[ii] += (r.conj() * ji).re / v;
+                for (jj, &j) in free.iter().enumerate().take(ii + 1) {
+                    a[ii * k + jj] += (ji.conj() * pred.jac[j][o] * scale[jj]).re / v;
+                }
+            }
+        }
+        for i in 0..k {
+            for j in 0..i {
+                a[j * k + i] = a[i * k + j];
+            }
+        }
+        let Some(l) = crate::inference::map::cholesky(&a, k) else {
+            break;
+        };
+        let d = crate::inference::map::chol_solve(&l, k, &g);
+        let mut f = 1.0;
+        let mut moved = false;
+        for _ in 0..8 {
+            let mut trial = p.clone();
+            for (ii, &i) in free.iter().enumerate() {
+                trial[i] += f * d[ii] * scale[ii];
+            }
+            if let Some(qt) = wrss(&trial) {
+                if qt < q {
+                    p = trial;
+                    q = qt;
+                    moved = true;
+                    break;
+                }
+            }
+            f *= 0.5;
+        }
+        if !moved {
+            break;
+        }
+    }
+    Ok(Some((p, q)))
 }
 
 #[cfg(test)]
