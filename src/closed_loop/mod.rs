@@ -21,6 +21,9 @@
 //!    "very strong" on the Kass and Raftery 1995 scale after the Bonferroni-like cost of trying
 //!    several candidates) and its size is plausible: at least `min_z` posterior sds from zero and
 //!    inside its prior range (not at an edge).
+//! 4. **Alternative laws** ([`alternative`], [`run_closed_loop_with_laws`]): a law not nested in
+//!    the current one has no score test; each round the whole model is refitted with it in
+//!    place of the current law and it competes with the round's effects by Laplace evidence.
 
 pub mod alternative;
 pub mod signatures;

@@ -2,8 +2,10 @@
 //! study's `[inference]` section, for its first model (or the one asked for), with the default
 //! candidates: a point mass at every measured point, a gain and a delay per channel, the beam
 //! modulus factor (left out when the adherend has viscous damping `C_b`, where its exact
-//! scaling does not hold). Writes the parquet tables `residuals`, `candidates`, `closed_loop` and a
-//! markdown summary `closed_loop.md` into `<output_dir>.diagnose/`.
+//! scaling does not hold), the Maxwell branches, and the fractional Zener law as an alternative
+//! law ([`crate::closed_loop::alternative`]; opt-out in `[closed_loop] candidates`). Writes the
+//! parquet tables `residuals`, `candidates`, `closed_loop` and a markdown summary
+//! `closed_loop.md` into `<output_dir>.diagnose/`.
 
 use super::{bayes, RunError};
 use crate::closed_loop::{
