@@ -132,3 +132,28 @@ fn model3_data_keep_their_law() {
     assert!(res.law_candidates.iter().all(|c| !c.refit.accepted));
     assert_eq!(res.conclusion, "no missing effect found");
 }
+
+#[test]
+fn the_alternative_law_is_on_by_default_and_can_be_left_out() {
+    use rfmlab::closed_loop::alternative::{ALTERNATIVE_LAW, FRACTIONAL_ZENER};
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let path = root.join("studies/closed_loop_td.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let admits = |line: &str| {
+        let t = text.replace("candidates = \"all\"", line);
+        let s = rfmlab::study::parse_str(&t, &path).unwrap();
+        s.closed_loop
+            .unwrap()
+            .admits(ALTERNATIVE_LAW, FRACTIONAL_ZENER)
+    };
+    assert!(admits("candidates = \"all\""));
+    assert!(admits("candidates = [\"mass_pt4\", \"fractional_zener\"]"));
+    assert!(admits("candidates = [\"alternative_law\"]"));
+    assert!(!admits("candidates = [\"point_mass\", \"maxwell_branch\"]"));
+    // An unknown name is still refused, naming the key.
+    let bad = text.replace("candidates = \"all\"", "candidates = [\"fractional\"]");
+    let e = rfmlab::study::parse_str(&bad, &path)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("closed_loop.candidates[0]"), "{e}");
+}
