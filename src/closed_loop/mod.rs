@@ -21,7 +21,11 @@
 //!    "very strong" on the Kass and Raftery 1995 scale after the Bonferroni-like cost of trying
 //!    several candidates) and its size is plausible: at least `min_z` posterior sds from zero and
 //!    inside its prior range (not at an edge).
+//! 4. **Alternative laws** ([`alternative`], [`run_closed_loop_with_laws`]): a law not nested in
+//!    the current one has no score test; each round the whole model is refitted with it in
+//!    place of the current law and it competes with the round's effects by Laplace evidence.
 
+pub mod alternative;
 pub mod confounding;
 pub mod signatures;
 
@@ -32,6 +36,7 @@ use crate::inference::likelihood::{FrfLikelihood, FrfPosterior};
 pub mod start;
 use crate::inference::map::{chol_solve, cholesky, find_map, MapError, MapParams, MapResult};
 use crate::inference::prior::{erfc, Prior};
+use crate::material::ConstitutiveModel;
 
 /// Settings of the loop.
 #[derive(Clone, Debug, PartialEq)]
@@ -155,11 +160,32 @@ pub struct Refit {
 /// A fit of the current model: physical parameters (law, free effects, noise) and names.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Fit {
+    /// Name of the constitutive law of the fit (changes when an alternative law is accepted).
+    pub law: String,
+    /// Number of the law's parameters (the first of `names`).
+    pub n_law: usize,
     pub names: Vec<String>,
     pub values: Vec<f64>,
     pub sd: Vec<f64>,
     pub log_evidence: f64,
     pub residuals: Residuals,
+}
+
+/// An alternative-law candidate in one round ([`alternative`]): the whole model refitted with
+/// the law swapped. Not nested, so no score test; decided by the Laplace evidence gain.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LawCandidate {
+    pub round: usize,
+    /// The alternative law's name (e.g. "fractional_zener").
+    pub law: String,
+    /// Its start: the fit to the current MAP's `E*(w)`, and that fit's RMS relative error.
+    pub start: Vec<f64>,
+    pub start_rel_rms: f64,
+    /// The refit's law parameters and their sds (empty when the refit failed).
+    pub params: Vec<f64>,
+    pub sd: Vec<f64>,
+    /// Evidence, gain and verdict (`size`, `sd` NaN: a law has no size).
+    pub refit: Refit,
 }
 
 /// What the loop found.
@@ -170,6 +196,8 @@ pub struct ClosedLoopResult {
     /// Accepted effects in order, with size and sd.
     pub accepted: Vec<(Effect, f64, f64)>,
     pub candidates: Vec<Candidate>,
+    /// Alternative-law candidates, every round.
+    pub law_candidates: Vec<LawCandidate>,
     /// "no missing effect found" or the accepted effects in words, then the confounded
     /// candidates' sentences.
     pub conclusion: String,
@@ -440,6 +468,8 @@ fn install(
 
 fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
     Ok(Fit {
+        law: post.likelihood.forward.law.name().to_string(),
+        n_law: post.likelihood.forward.law.n_params(),
         names: post.names.clone(),
         values: r.map_physical.clone(),
         sd: r.laplace.sd_physical(),
@@ -457,10 +487,25 @@ pub fn run_closed_loop(
     candidates: &[Effect],
     params: &ClosedLoopParams,
 ) -> Result<ClosedLoopResult, ClosedLoopError> {
+    run_closed_loop_with_laws(post, x0, candidates, &[], params)
+}
+
+/// [`run_closed_loop`] with alternative laws as candidates too ([`alternative`]): in each
+/// round, besides the effects, the whole model refitted with each law in `laws` (other than
+/// the current one) in place of the current law, accepted by the same evidence threshold when
+/// its Laplace Hessian is positive definite and no law parameter is at its prior's edge. The
+/// best passing candidate of a round (effect or law) by Laplace log evidence is accepted.
+pub fn run_closed_loop_with_laws<'a>(
+    post: &mut FrfPosterior<'a>,
+    x0: &[f64],
+    candidates: &[Effect],
+    laws: &[&'a dyn ConstitutiveModel],
+    params: &ClosedLoopParams,
+) -> Result<ClosedLoopResult, ClosedLoopError> {
     post.likelihood.forward.linear_bias = None;
     // The starting model's parameters: the law's and any declared free effects'.
     let nl = post.likelihood.forward.n_params();
-    let law_priors = post.priors[..nl].to_vec();
+    let mut law_priors = post.priors[..nl].to_vec();
     let noise_priors = post.priors[nl..].to_vec();
     let none = &|| {};
     let refit_map = if params.warm_refits {
@@ -475,6 +520,8 @@ pub fn run_closed_loop(
     let before = fit_of(post, &current)?;
     let mut accepted: Vec<(Effect, f64, f64)> = Vec::new();
     let mut table = Vec::new();
+    let mut law_table: Vec<LawCandidate> = Vec::new();
+    let mut law_changes: Vec<String> = Vec::new();
     for round in 0..params.max_rounds {
         let phys = current.map_physical.clone();
         let mut scored = Vec::new();
@@ -555,9 +602,17 @@ pub fn run_closed_loop(
             // that is not positive definite because of the edge, not because it stopped short:
             // the multistart search would end there too (the fractional-law case ran 17 CPU
             // min of such searches), so it is not run.
-            let warm_ok = warm.as_ref().is_ok_and(|r| {
-                r.laplace.positive_definite || start::at_prior_edge(&post.priors, &r.map_physical)
-            });
+            // Law candidates (a Maxwell branch) are not searched again either: their start is
+            // already the profile over the branch modulus, and a branch whose relaxation time
+            // the data do not resolve has a flat direction, so the multistart search ends with
+            // the same indefinite Hessian after many times the cost (the fractional-law case
+            // spent 13 CPU min there without finishing); the verdict says so.
+            let law_candidate = is_law_effect(&c.effect);
+            let warm_ok = law_candidate
+                || warm.as_ref().is_ok_and(|r| {
+                    r.laplace.positive_definite
+                        || start::at_prior_edge(&post.priors, &r.map_physical)
+                });
             let refit = if params.warm_refits && !warm_ok {
                 match (warm, find_map(&*post, Some(&x_start), &params.map, none)) {
                     (Ok(a), Ok(b)) => Ok(
@@ -605,7 +660,9 @@ pub fn run_closed_loop(
                     - 0.5 * (2.0 * post.likelihood.data.values.len() as f64).ln()
             };
             let at_edge = size < lo + 0.02 * span || size > hi - 0.02 * span;
-            let verdict = if !r.laplace.positive_definite {
+            let verdict = if !r.laplace.positive_definite && law_candidate {
+                "Laplace Hessian not positive definite after the warm refit (law candidate: no multistart search)".to_string()
+            } else if !r.laplace.positive_definite {
                 "Laplace Hessian not positive definite".to_string()
             } else if !(gain >= params.threshold_nats) {
                 format!("evidence gain {gain:.2} nats < {}", params.threshold_nats)
@@ -632,6 +689,56 @@ pub fn run_closed_loop(
             {
                 best = Some((ci, r));
             }
+        }
+        // Alternative laws: refitted every round (no score test; see [`alternative`]).
+        let mut best_law: Option<(usize, &'a dyn ConstitutiveModel, Vec<Prior>, MapResult)> = None;
+        for &alt in laws {
+            if alt.name() == post.likelihood.forward.law.name() {
+                continue;
+            }
+            install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
+            let outcome = alternative::refit_law(
+                post,
+                alt,
+                &current,
+                &law_priors,
+                &noise_priors,
+                &refit_map,
+                params.threshold_nats,
+            )?;
+            let (cand, fit) = outcome;
+            law_table.push(LawCandidate { round, ..cand });
+            let li = law_table.len() - 1;
+            if let Some((priors, r)) = fit {
+                let beats = best
+                    .as_ref()
+                    .is_none_or(|(_, b)| r.laplace.log_evidence > b.laplace.log_evidence)
+                    && best_law
+                        .as_ref()
+                        .is_none_or(|(_, _, _, b)| r.laplace.log_evidence > b.laplace.log_evidence);
+                if beats {
+                    best_law = Some((li, alt, priors, r));
+                }
+            }
+        }
+        if let Some((li, alt, priors, r)) = best_law {
+            // The law is replaced: the round's effects are not accepted.
+            let old = post.likelihood.forward.law;
+            let n_old = old.n_params();
+            law_table[li].refit.accepted = true;
+            law_table[li].refit.verdict = "accepted".into();
+            law_changes.push(format!(
+                "law {} replaced by {} (evidence gain {:.1} nats)",
+                old.name(),
+                alt.name(),
+                law_table[li].refit.evidence_gain
+            ));
+            post.likelihood.forward.law = alt;
+            law_priors.splice(..n_old, priors);
+            install(post, &law_priors, &noise_priors, base_effects_now)?;
+            current = r;
+            table.extend(scored);
+            continue;
         }
         match best {
             None => {
@@ -661,12 +768,16 @@ pub fn run_closed_loop(
         }
     }
     let after = fit_of(post, &current)?;
-    let mut conclusion = if accepted.is_empty() {
+    let mut conclusion = if accepted.is_empty() && law_changes.is_empty() {
         "no missing effect found".to_string()
     } else {
-        accepted
-            .iter()
-            .map(|(e, v, s)| format!("{} = {v:.4e} +- {s:.1e} {}", e.name(), e.unit()))
+        law_changes
+            .into_iter()
+            .chain(
+                accepted
+                    .iter()
+                    .map(|(e, v, s)| format!("{} = {v:.4e} +- {s:.1e} {}", e.name(), e.unit())),
+            )
             .collect::<Vec<_>>()
             .join("; ")
     };
@@ -693,9 +804,16 @@ pub fn run_closed_loop(
         after,
         accepted,
         candidates: table,
+        law_candidates: law_table,
         conclusion,
         confounded,
     })
+}
+
+/// Whether `e` changes the constitutive law (a Maxwell branch) rather than the structure or
+/// the measurement chain.
+pub fn is_law_effect(e: &Effect) -> bool {
+    matches!(e, Effect::MaxwellBranch { .. })
 }
 
 /// The default candidate list for an observation: a gain and a delay per channel, a point

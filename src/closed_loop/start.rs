@@ -32,8 +32,9 @@ pub struct ProfileStart {
 
 /// The refit's start for `candidate` added to `post`'s current model at physical parameters
 /// `phys` (model parameters then noise): the best of the profile at `one_step` (the model's
-/// parameters from `gn_start`) and at [`PROFILE_GRID`] cell centres of the effect's uniform
-/// prior (other priors: the one-step size only).
+/// parameters from `gn_start`, or from the current MAP's when `gn_start` lies outside their
+/// priors) and at [`PROFILE_GRID`] cell centres of the effect's uniform prior (other priors:
+/// the one-step size only). Every profile point lies inside the priors' support.
 pub fn profile_start(
     post: &FrfPosterior<'_>,
     phys: &[f64],
@@ -50,8 +51,17 @@ pub fn profile_start(
         let span = hi - lo;
         sizes.extend((0..PROFILE_GRID).map(|i| lo + span * (i as f64 + 0.5) / PROFILE_GRID as f64));
     }
+    // A start outside the priors' support has no finite posterior density (the refit could
+    // not begin there), so the profile's Gauss-Newton steps stay inside it.
+    let inside = |p: &[f64]| {
+        p[..np]
+            .iter()
+            .zip(&post.priors[..np])
+            .all(|(x, pr)| pr.contains(*x))
+    };
     let wrss = |p: &[f64]| -> Option<f64> {
         fm.check(p).ok()?;
+        inside(p).then_some(())?;
         let pred = fm.predict(p, false).ok()?;
         let s: f64 = lik
             .data
@@ -63,9 +73,16 @@ pub fn profile_start(
             .sum();
         s.is_finite().then_some(s)
     };
+    // The Gauss-Newton start of the model's parameters, else (outside the priors) the current
+    // MAP's.
+    let base = if inside(gn_start) {
+        &gn_start[..np]
+    } else {
+        &phys[..np]
+    };
     let mut best: Option<ProfileStart> = None;
     for &e in &sizes {
-        let mut p = gn_start[..np].to_vec();
+        let mut p = base.to_vec();
         p.push(e);
         let Some(mut q) = wrss(&p) else { continue };
         for _ in 0..PROFILE_STEPS {

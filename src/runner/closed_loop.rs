@@ -2,12 +2,14 @@
 //! study's `[inference]` section, for its first model (or the one asked for), with the default
 //! candidates: a point mass at every measured point, a gain and a delay per channel, the beam
 //! modulus factor (left out when the adherend has viscous damping `C_b`, where its exact
-//! scaling does not hold). Writes the parquet tables `residuals`, `candidates`, `closed_loop` and a
-//! markdown summary `closed_loop.md` into `<output_dir>.diagnose/`.
+//! scaling does not hold), the Maxwell branches, and the fractional Zener law as an alternative
+//! law ([`crate::closed_loop::alternative`]; opt-out in `[closed_loop] candidates`). Writes the
+//! parquet tables `residuals`, `candidates`, `closed_loop` and a markdown summary
+//! `closed_loop.md` into `<output_dir>.diagnose/`.
 
 use super::{bayes, RunError};
 use crate::closed_loop::{
-    default_candidates, run_closed_loop, ClosedLoopParams, ClosedLoopResult, Residuals,
+    default_candidates, run_closed_loop_with_laws, ClosedLoopParams, ClosedLoopResult, Residuals,
 };
 use crate::output::{ResultsDir, Table};
 use crate::study::Study;
@@ -252,6 +254,20 @@ pub fn diagnose_into(
         None => engine,
     };
     let mut dir = ResultsDir::create(parent, dir_name).map_err(out_err)?;
+    // The alternative law (issue 13): the fractional Zener, unless `[closed_loop] candidates`
+    // leaves it out (names "fractional_zener" / type "alternative_law").
+    let fractional = crate::material::FractionalZener;
+    let alt_laws: Vec<&dyn crate::material::ConstitutiveModel> =
+        if study.closed_loop.as_ref().is_none_or(|c| {
+            c.admits(
+                crate::closed_loop::alternative::ALTERNATIVE_LAW,
+                crate::closed_loop::alternative::FRACTIONAL_ZENER,
+            )
+        }) {
+            vec![&fractional]
+        } else {
+            Vec::new()
+        };
     let mut summary = Vec::new();
     let mut results = Vec::new();
     for level in levels.iter().filter(|l| inf.levels.contains(&l.name)) {
@@ -284,16 +300,16 @@ pub fn diagnose_into(
             }
             None => x0,
         };
-        let res = run_closed_loop(&mut post, &x0, &candidates, params).map_err(|e| {
-            RunError::Analysis {
+        let res = run_closed_loop_with_laws(&mut post, &x0, &candidates, &alt_laws, params)
+            .map_err(|e| RunError::Analysis {
                 analysis: format!("closed loop of {name} at {}", level.name),
                 message: e.to_string(),
-            }
-        })?;
+            })?;
+        // The truth of the final law (the study's, or the alternative that replaced it).
         let truth = level
             .truth
             .as_ref()
-            .filter(|t| t.model.param_names() == law.param_names())
+            .filter(|t| t.model.name() == res.after.law)
             .map(|t| t.params.clone());
         summary.push(DiagnoseLevel {
             level: level.name.clone(),
@@ -305,11 +321,7 @@ pub fn diagnose_into(
             frac_before: res.before.residuals.frac.clone(),
             frac_after: res.after.residuals.frac.clone(),
             loop_seconds: t_loop.elapsed().as_secs_f64(),
-            accepted: res
-                .accepted
-                .iter()
-                .map(|(e, v, sd)| (e.name(), e.kind().to_string(), *v, *sd))
-                .collect(),
+            accepted: accepted_in_order(&res),
             first_ranking: res
                 .candidates
                 .iter()
@@ -317,23 +329,7 @@ pub fn diagnose_into(
                 .map(|c| c.effect.name())
                 .collect(),
             confounded: res.confounded.clone(),
-            parameters: res
-                .after
-                .names
-                .iter()
-                .enumerate()
-                .map(|(i, n)| {
-                    let j = res.before.names.iter().position(|m| m == n);
-                    ParameterChange {
-                        name: n.clone(),
-                        before: j.map(|j| res.before.values[j]),
-                        before_sd: j.map(|j| res.before.sd[j]),
-                        after: res.after.values[i],
-                        after_sd: res.after.sd[i],
-                        truth: truth.as_ref().and_then(|t| t.get(i).copied()),
-                    }
-                })
-                .collect(),
+            parameters: parameter_changes(&res, truth.as_deref()),
         });
         results.push((
             level.name.clone(),
@@ -403,6 +399,83 @@ fn set_correlation(
         .set_channel_correlation(Some(c))
         .map_err(|e| fail(e.to_string()))?;
     Ok(r.map_x)
+}
+
+/// Accepted effects and laws in the order the loop accepted them: name, type, size and sd
+/// (NaN for a law, which has no size).
+fn accepted_in_order(res: &ClosedLoopResult) -> Vec<(String, String, f64, f64)> {
+    let mut v: Vec<(usize, String, String, f64, f64)> = res
+        .candidates
+        .iter()
+        .filter_map(|c| {
+            let r = c.refit.as_ref().filter(|r| r.accepted)?;
+            Some((
+                c.round,
+                c.effect.name(),
+                c.effect.kind().to_string(),
+                r.size,
+                r.sd,
+            ))
+        })
+        .chain(
+            res.law_candidates
+                .iter()
+                .filter(|c| c.refit.accepted)
+                .map(|c| {
+                    (
+                        c.round,
+                        c.law.clone(),
+                        crate::closed_loop::alternative::ALTERNATIVE_LAW.to_string(),
+                        f64::NAN,
+                        f64::NAN,
+                    )
+                }),
+        )
+        .collect();
+    v.sort_by_key(|x| x.0);
+    v.into_iter().map(|(_, n, k, a, b)| (n, k, a, b)).collect()
+}
+
+/// The parameters before and after: the final model's (matched by name to the starting
+/// model's; when the law was replaced, the new law's parameters have no "before"), then, when
+/// the law was replaced, the old law's parameters as `<law>.<name>` with no "after" (NaN).
+/// `truth` is the final law's true parameters.
+fn parameter_changes(res: &ClosedLoopResult, truth: Option<&[f64]>) -> Vec<ParameterChange> {
+    let (b, a) = (&res.before, &res.after);
+    let replaced = b.law != a.law;
+    let mut v: Vec<ParameterChange> = a
+        .names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let j = b
+                .names
+                .iter()
+                .enumerate()
+                .position(|(j, m)| m == n && !(replaced && (i < a.n_law || j < b.n_law)));
+            ParameterChange {
+                name: n.clone(),
+                before: j.map(|j| b.values[j]),
+                before_sd: j.map(|j| b.sd[j]),
+                after: a.values[i],
+                after_sd: a.sd[i],
+                truth: truth.and_then(|t| t.get(i).copied()),
+            }
+        })
+        .collect();
+    if replaced {
+        for j in 0..b.n_law {
+            v.push(ParameterChange {
+                name: format!("{}.{}", b.law, b.names[j]),
+                before: Some(b.values[j]),
+                before_sd: Some(b.sd[j]),
+                after: f64::NAN,
+                after_sd: f64::NAN,
+                truth: None,
+            });
+        }
+    }
+    v
 }
 
 type LevelResult = (
@@ -528,6 +601,25 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
                     .join(", "),
             );
         }
+        // Alternative laws: no score test (not nested), no size.
+        for c in &res.law_candidates {
+            c_level.push(level.clone());
+            c_round.push(c.round as i64);
+            c_rank.push(0);
+            c_effect.push(c.law.clone());
+            c_kind.push(crate::closed_loop::alternative::ALTERNATIVE_LAW.into());
+            unit.push(String::new());
+            for x in num.iter_mut() {
+                x.push(f64::NAN);
+            }
+            let r = &c.refit;
+            refit[0].push(Some(r.evidence_gain).filter(|x| x.is_finite()));
+            refit[1].push(Some(r.log_evidence).filter(|x| x.is_finite()));
+            refit[2].push(None);
+            refit[3].push(None);
+            acc.push(r.accepted);
+            verdict.push(r.verdict.clone());
+        }
     }
     let [score, p, est, est_sd] = num;
     let [gain, logz, size, sd] = refit;
@@ -560,15 +652,14 @@ fn closed_loop_table(results: &[LevelResult]) -> Result<Table, RunError> {
     let (mut b, mut bs, mut a, mut as_, mut tr) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for (level, _, ids, res, truth) in results {
-        for (i, name) in res.after.names.iter().enumerate() {
-            let j = res.before.names.iter().position(|n| n == name);
+        for pc in parameter_changes(res, truth.as_deref()) {
             lv.push(level.clone());
-            q.push(name.clone());
-            b.push(j.map(|j| res.before.values[j]));
-            bs.push(j.map(|j| res.before.sd[j]));
-            a.push(Some(res.after.values[i]));
-            as_.push(Some(res.after.sd[i]));
-            tr.push(truth.as_ref().and_then(|t| t.get(i).copied()));
+            q.push(pc.name);
+            b.push(pc.before);
+            bs.push(pc.before_sd);
+            a.push(Some(pc.after).filter(|x| !x.is_nan()));
+            as_.push(Some(pc.after_sd).filter(|x| !x.is_nan()));
+            tr.push(pc.truth);
         }
         let stat = |r: &Residuals| -> Vec<(String, f64)> {
             let mut v = vec![
@@ -644,6 +735,13 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
                 c.p_value
             );
         }
+        for c in &res.law_candidates {
+            let _ = writeln!(
+                s,
+                "| {} | - | {} (alternative law) | - | - | {:.1} | - | - | {} |",
+                c.round, c.law, c.refit.evidence_gain, c.refit.verdict
+            );
+        }
         for (e, _, _) in &res.accepted {
             let _ = writeln!(s, "\n- {}: {}", e.name(), e.physics());
         }
@@ -655,6 +753,13 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
             for c in &res.confounded {
                 let _ = writeln!(s, "- {c}");
             }
+        }
+        if res.before.law != res.after.law {
+            let _ = writeln!(
+                s,
+                "\n- the law {} was replaced by {}: not nested, so no score test; the whole model was refitted with the new law (started from its fit to the previous MAP's E*(w)) and won by the Laplace evidence gain above. Parameters below: the new law's after, the old law's (`{}.*`) before.",
+                res.before.law, res.after.law, res.before.law
+            );
         }
         let _ = writeln!(s, "\n| | before | after |\n|---|---|---|");
         let (b, a) = (&res.before.residuals, &res.after.residuals);
@@ -675,24 +780,18 @@ fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
             s,
             "\n| parameter | before +- sd | after +- sd | truth |\n|---|---|---|---|"
         );
-        for (i, n) in res.after.names.iter().enumerate() {
-            let before = res
-                .before
-                .names
-                .iter()
-                .position(|m| m == n)
-                .map_or(String::new(), |j| {
-                    format!("{:.5e} +- {:.2e}", res.before.values[j], res.before.sd[j])
-                });
-            let t = truth
-                .as_ref()
-                .and_then(|t| t.get(i))
-                .map_or(String::new(), |v| format!("{v:.5e}"));
-            let _ = writeln!(
-                s,
-                "| {n} | {before} | {:.5e} +- {:.2e} | {t} |",
-                res.after.values[i], res.after.sd[i]
-            );
+        for pc in parameter_changes(res, truth.as_deref()) {
+            let before = match (pc.before, pc.before_sd) {
+                (Some(v), Some(sd)) => format!("{v:.5e} +- {sd:.2e}"),
+                _ => String::new(),
+            };
+            let after = if pc.after.is_nan() {
+                String::new()
+            } else {
+                format!("{:.5e} +- {:.2e}", pc.after, pc.after_sd)
+            };
+            let t = pc.truth.map_or(String::new(), |v| format!("{v:.5e}"));
+            let _ = writeln!(s, "| {} | {before} | {after} | {t} |", pc.name);
         }
         let _ = writeln!(
             s,

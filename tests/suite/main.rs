@@ -18,6 +18,7 @@ mod cli_rom;
 mod cli_simulate;
 mod cli_structure_errors;
 mod closed_loop;
+mod closed_loop_alt;
 mod closed_loop_fast;
 mod closed_loop_td;
 mod correlation;
