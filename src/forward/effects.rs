@@ -19,6 +19,9 @@
 //!   degraded bond (x-range): E* S -> E* (S - d S_region), evaluated by an engine with the
 //!                          region's term (crate::rom::terms, certified against the full model
 //!                          with the strip degraded);  d/dd = -E* H_oG S_region,r H_Gi (reduced)
+//!   adherend damping (g):  D_b -> D_b + g K_b (structural loss factor of the beam), a term
+//!                          j g K_b of the same engine (offset j, no modulus part; with a beam
+//!                          factor, (1 + b) j g K_b = j g K_b,actual);  d/dg = -j H_oG K_b,r H_Gi
 //! ```
 //!
 //! Structural effects are exact algebraic transforms of the certified engine's receptances at
@@ -61,7 +64,13 @@ pub enum Effect {
     /// region keeps (1 - d) of its modulus). Needs an engine with the region's term
     /// ([`crate::rom::terms`]).
     DegradedBond { x_start_m: f64, width_m: f64 },
+    /// Structural damping of the adherends (beam): `D_b -> D_b + g K_b`, the parameter the
+    /// loss factor g (one-sided). Needs an engine with the term `K_b` ([`crate::rom::terms`]).
+    AdherendDamping,
 }
+
+/// Name of the adherend-damping term and parameter.
+pub const ADHEREND_DAMPING: &str = "adherend_damping";
 
 /// Default width of a degraded-bond candidate at each end of the block (m).
 pub const DEFAULT_BOND_STRIP_M: f64 = 0.010;
@@ -84,6 +93,7 @@ impl Effect {
             Effect::DegradedBond { x_start_m, width_m } => {
                 format!("bond_x{:.1}mm_w{:.1}mm", 1e3 * x_start_m, 1e3 * width_m)
             }
+            Effect::AdherendDamping => ADHEREND_DAMPING.into(),
         }
     }
     /// Type of the effect (a study's `type` key).
@@ -96,12 +106,16 @@ impl Effect {
             Effect::Shaker { .. } => "shaker",
             Effect::MaxwellBranch { .. } => "maxwell_branch",
             Effect::DegradedBond { .. } => "degraded_bond",
+            Effect::AdherendDamping => ADHEREND_DAMPING,
         }
     }
     /// SI unit of the parameter.
     pub fn unit(&self) -> &'static str {
         match self {
-            Effect::Gain { .. } | Effect::BeamModulus | Effect::DegradedBond { .. } => "1",
+            Effect::Gain { .. }
+            | Effect::BeamModulus
+            | Effect::DegradedBond { .. }
+            | Effect::AdherendDamping => "1",
             Effect::Delay { .. } => "s",
             Effect::PointMass { .. } | Effect::Shaker { .. } => "kg",
             Effect::MaxwellBranch { .. } => "Pa",
@@ -132,6 +146,7 @@ impl Effect {
                 1e3 * x_start_m,
                 1e3 * (x_start_m + width_m)
             ),
+            Effect::AdherendDamping => "the adherends (steel beam) dissipate energy: a structural loss factor g adds j g K_b to the beam's stiffness, widening the beam-dominated resonances by about g times the beam's share of the modal strain energy".into(),
         }
     }
     /// Value at which the effect is absent.
@@ -147,6 +162,7 @@ impl Effect {
                 | Effect::Shaker { .. }
                 | Effect::MaxwellBranch { .. }
                 | Effect::DegradedBond { .. }
+                | Effect::AdherendDamping
         )
     }
     /// Admissible range (open) of the parameter.
@@ -158,13 +174,15 @@ impl Effect {
             Effect::BeamModulus => (-0.9, 9.0),
             Effect::MaxwellBranch { .. } => (-1e-6, 1e11),
             Effect::DegradedBond { .. } => (-1e-9, 1.0),
+            Effect::AdherendDamping => (-1e-12, 1.0),
         }
     }
     /// Default prior when the effect is free: uniform over a stated plausible range (the
     /// evidence depends on it: a ten times wider range costs ln 10 = 2.3 nats).
     /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor or a shaker's moving mass), beam
     /// modulus +-20 %, Maxwell branch modulus 0-20 MPa (a few times the stiffness of the paper's adhesive, E0 about 5 MPa).
-    /// Degraded bond: loss fraction uniform on [0, 1).
+    /// Degraded bond: loss fraction uniform on [0, 1). Adherend damping: loss factor uniform on
+    /// [0, 0.01] (steel beams and bolted or clamped fixtures: 1e-4 to a few 1e-3).
     pub fn default_prior(&self) -> Prior {
         match self {
             Effect::Gain { .. } | Effect::BeamModulus => Prior::Uniform { lo: -0.2, hi: 0.2 },
@@ -175,6 +193,7 @@ impl Effect {
             Effect::PointMass { .. } | Effect::Shaker { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
             Effect::MaxwellBranch { .. } => Prior::Uniform { lo: 0.0, hi: 2e7 },
             Effect::DegradedBond { .. } => Prior::Uniform { lo: 0.0, hi: 1.0 },
+            Effect::AdherendDamping => Prior::Uniform { lo: 0.0, hi: 0.01 },
         }
     }
     /// The factor `dE*/dE_k = j w tau / (1 + j w tau)` of a Maxwell branch at `omega` (zero
@@ -195,6 +214,7 @@ impl Effect {
                 | Effect::BeamModulus
                 | Effect::Shaker { .. }
                 | Effect::DegradedBond { .. }
+                | Effect::AdherendDamping
         )
     }
 }
@@ -337,7 +357,9 @@ impl Effects {
                         "effect {name}: stinger stiffness {stiffness_n_m} N/m must be finite and > 0"
                     )));
                 }
-                Effect::DegradedBond { .. } if !engine.term_names().contains(&name) => {
+                Effect::DegradedBond { .. } | Effect::AdherendDamping
+                    if !engine.term_names().contains(&name) =>
+                {
                     return Err(super::ForwardError::Setup(format!(
                         "effect {name}: the engine has no term for this region (build it with rom::terms::build_term_rom; terms: {:?})",
                         engine.term_names()
@@ -422,11 +444,17 @@ impl Effects {
         let e_eng: Vec<C64> = modulus.iter().map(|e| e / scale).collect();
         // Degraded bond regions: extra terms -d E* S_region of the engine (c = -d E*_eng,
         // since (1 + b)(K_b + j D_b) + E* (S - d S_r) = (1 + b)(K_b + j D_b + E*_eng (S - d S_r))).
+        // Adherend damping: the term j g K_b (c = j g in the engine's coordinates too).
         let names = engine.term_names();
         let mut coefs = Vec::new();
         let mut term_of = Vec::new();
         for (t, (term, v)) in self.terms.iter().zip(values).enumerate() {
-            if let Effect::DegradedBond { .. } = term.effect {
+            let (offset, per_modulus) = match term.effect {
+                Effect::DegradedBond { .. } => (C64::new(0.0, 0.0), -1.0),
+                Effect::AdherendDamping => (C64::new(0.0, 1.0), 0.0),
+                _ => continue,
+            };
+            {
                 let name = term.effect.name();
                 let index = names.iter().position(|n| *n == name).ok_or_else(|| {
                     super::ForwardError::Setup(format!(
@@ -436,8 +464,8 @@ impl Effects {
                 coefs.push(crate::frf::TermCoef {
                     index,
                     value: *v,
-                    offset: C64::new(0.0, 0.0),
-                    per_modulus: -1.0,
+                    offset,
+                    per_modulus,
                 });
                 term_of.push(t);
             }

@@ -66,6 +66,7 @@ pub fn level_effects(
             DeclaredKind::DegradedBond { x_start_m, width_m } => {
                 Effect::DegradedBond { x_start_m, width_m }
             }
+            DeclaredKind::AdherendDamping => Effect::AdherendDamping,
         };
         let mut value = d.value;
         if d.free {

@@ -4,7 +4,7 @@
 //!
 //! ```toml
 //! [[structure.effects]]
-//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | degraded_bond
+//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | degraded_bond | adherend_damping
 //! point = 4               # point id (point_mass); `channel = id` for gain and delay
 //! value = 0.012           # SI (kg, 1, s, 1, Pa)
 //! free = false            # true: a parameter to infer, with the default prior or prior = {...}
@@ -12,6 +12,7 @@
 //! # stinger_stiffness = 2e5  # N/m, a shaker's stinger (default 2e5); value = its moving mass (kg)
 //! # type = "degraded_bond" with x_start = 0.040 and width = 0.010 (m, inside the adhesive
 //! #   block; default width 10 mm): value = the loss fraction d in [0, 1), E* -> (1 - d) E* there
+//! # type = "adherend_damping": value = the beam's structural loss factor g (D_b -> D_b + g K_b)
 //!
 //! [closed_loop]
 //! enabled = true
@@ -28,7 +29,7 @@ use crate::inference::prior::Prior;
 use serde::Deserialize;
 
 /// Effect types a study may name (`type = ...`).
-pub const EFFECT_TYPES: [&str; 7] = [
+pub const EFFECT_TYPES: [&str; 8] = [
     "point_mass",
     "gain",
     "delay",
@@ -36,6 +37,7 @@ pub const EFFECT_TYPES: [&str; 7] = [
     "maxwell_branch",
     "shaker",
     "degraded_bond",
+    "adherend_damping",
 ];
 
 /// `[[structure.effects]]` as written.
@@ -97,6 +99,8 @@ pub enum DeclaredKind {
         x_start_m: f64,
         width_m: f64,
     },
+    /// Structural loss factor g of the adherends: D_b -> D_b + g K_b.
+    AdherendDamping,
 }
 
 /// A validated declared effect.
@@ -215,6 +219,12 @@ pub(super) fn effects(
                 not("tau", r.tau.is_some())?;
                 DeclaredKind::BeamModulus
             }
+            "adherend_damping" => {
+                not("point", r.point.is_some())?;
+                not("channel", r.channel.is_some())?;
+                not("tau", r.tau.is_some())?;
+                DeclaredKind::AdherendDamping
+            }
             "maxwell_branch" => {
                 not("point", r.point.is_some())?;
                 not("channel", r.channel.is_some())?;
@@ -295,6 +305,7 @@ pub(super) fn effects(
             DeclaredKind::MaxwellBranch { .. } => ("Pa", 0.0, 1e11, true),
             DeclaredKind::Shaker { .. } => ("kg", 0.0, 10.0, true),
             DeclaredKind::DegradedBond { .. } => ("1 (loss fraction)", 0.0, 1.0, true),
+            DeclaredKind::AdherendDamping => ("1 (loss factor)", 0.0, 1.0, true),
         };
         if !value.is_finite() || (nonneg && value < 0.0) {
             return Err(ctx.err(
@@ -406,7 +417,7 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
                     ));
                 };
                 let known_type = EFFECT_TYPES.contains(&s);
-                let known_name = ["mass_pt", "gain_ch", "delay_ch", "maxwell_fc"]
+                let known_name = ["mass_pt", "gain_ch", "delay_ch", "maxwell_fc", "bond_x"]
                     .iter()
                     .any(|p| s.starts_with(p))
                     || s == "beam_modulus";
