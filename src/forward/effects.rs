@@ -19,6 +19,9 @@
 //!   degraded bond (x-range): E* S -> E* (S - d S_region), evaluated by an engine with the
 //!                          region's term (crate::rom::terms, certified against the full model
 //!                          with the strip degraded);  d/dd = -E* H_oG S_region,r H_Gi (reduced)
+//!   adherend damping (g):  D_b -> D_b + g K_b (structural loss factor of the beam), a term
+//!                          j g K_b of the same engine (offset j, no modulus part; with a beam
+//!                          factor, (1 + b) j g K_b = j g K_b,actual);  d/dg = -j H_oG K_b,r H_Gi
 //! ```
 //!
 //! Structural effects are exact algebraic transforms of the certified engine's receptances at
@@ -67,11 +70,17 @@ pub enum Effect {
     /// normal_over_tangential`. Needs an engine with the base's term ([`crate::rom::terms`],
     /// a compliance term over the joint with its base free).
     BaseSprings { normal_over_tangential: f64 },
+    /// Structural damping of the adherends (beam): `D_b -> D_b + g K_b`, the parameter the
+    /// loss factor g (one-sided). Needs an engine with the term `K_b` ([`crate::rom::terms`]).
+    AdherendDamping,
 }
 
 /// Default ratio of normal to tangential base stiffness: that of a thin elastic layer with
 /// Poisson's ratio 0.3 (`E_oed / G = 2 (1 - nu) / (1 - 2 nu) = 3.5`).
 pub const DEFAULT_BASE_NORMAL_OVER_TANGENTIAL: f64 = 3.5;
+
+/// Name of the adherend-damping term and parameter.
+pub const ADHEREND_DAMPING: &str = "adherend_damping";
 
 /// Default width of a degraded-bond candidate at each end of the block (m).
 pub const DEFAULT_BOND_STRIP_M: f64 = 0.010;
@@ -95,6 +104,7 @@ impl Effect {
                 format!("bond_x{:.1}mm_w{:.1}mm", 1e3 * x_start_m, 1e3 * width_m)
             }
             Effect::BaseSprings { .. } => "base_springs".into(),
+            Effect::AdherendDamping => ADHEREND_DAMPING.into(),
         }
     }
     /// Type of the effect (a study's `type` key).
@@ -108,12 +118,16 @@ impl Effect {
             Effect::MaxwellBranch { .. } => "maxwell_branch",
             Effect::DegradedBond { .. } => "degraded_bond",
             Effect::BaseSprings { .. } => "base_springs",
+            Effect::AdherendDamping => ADHEREND_DAMPING,
         }
     }
     /// SI unit of the parameter.
     pub fn unit(&self) -> &'static str {
         match self {
-            Effect::Gain { .. } | Effect::BeamModulus | Effect::DegradedBond { .. } => "1",
+            Effect::Gain { .. }
+            | Effect::BeamModulus
+            | Effect::DegradedBond { .. }
+            | Effect::AdherendDamping => "1",
             Effect::Delay { .. } => "s",
             Effect::PointMass { .. } | Effect::Shaker { .. } => "kg",
             Effect::MaxwellBranch { .. } => "Pa",
@@ -148,6 +162,7 @@ impl Effect {
             Effect::BaseSprings { normal_over_tangential } => format!(
                 "the base under the adhesive is not rigid: distributed springs of compliance c = 1 / k_n normal to it (and {normal_over_tangential} times softer in its plane) act in series with the adhesive layer, softening the joint much as a softer adhesive would (confounded with the adhesive's stiffness; the springs add no damping)"
             ),
+            Effect::AdherendDamping => "the adherends (steel beam) dissipate energy: a structural loss factor g adds j g K_b to the beam's stiffness, widening the beam-dominated resonances by about g times the beam's share of the modal strain energy".into(),
         }
     }
     /// Value at which the effect is absent.
@@ -164,6 +179,7 @@ impl Effect {
                 | Effect::MaxwellBranch { .. }
                 | Effect::DegradedBond { .. }
                 | Effect::BaseSprings { .. }
+                | Effect::AdherendDamping
         )
     }
     /// Admissible range (open) of the parameter.
@@ -176,6 +192,7 @@ impl Effect {
             Effect::MaxwellBranch { .. } => (-1e-6, 1e11),
             Effect::DegradedBond { .. } => (-1e-9, 1.0),
             Effect::BaseSprings { .. } => (-1e-18, 1e-6),
+            Effect::AdherendDamping => (-1e-12, 1.0),
         }
     }
     /// Default prior when the effect is free: uniform over a stated plausible range (the
@@ -183,6 +200,8 @@ impl Effect {
     /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor or a shaker's moving mass), beam
     /// modulus +-20 %, Maxwell branch modulus 0-20 MPa (a few times the stiffness of the paper's adhesive, E0 about 5 MPa).
     /// Degraded bond: loss fraction uniform on [0, 1). Base springs: compliance 0-1e-9 m^3/N.
+    /// Adherend damping: loss factor uniform on [0, 0.01] (steel beams and bolted or clamped
+    /// fixtures: 1e-4 to a few 1e-3).
     pub fn default_prior(&self) -> Prior {
         match self {
             Effect::Gain { .. } | Effect::BeamModulus => Prior::Uniform { lo: -0.2, hi: 0.2 },
@@ -196,6 +215,7 @@ impl Effect {
             // k_n >= 1e9 N/m^3: about the adhesive layer's own E_oed / t (2e9 for the paper's
             // 10 mm of Sikaflex); a base softer than that is not a base.
             Effect::BaseSprings { .. } => Prior::Uniform { lo: 0.0, hi: 1e-9 },
+            Effect::AdherendDamping => Prior::Uniform { lo: 0.0, hi: 0.01 },
         }
     }
     /// The factor `dE*/dE_k = j w tau / (1 + j w tau)` of a Maxwell branch at `omega` (zero
@@ -217,6 +237,7 @@ impl Effect {
                 | Effect::Shaker { .. }
                 | Effect::DegradedBond { .. }
                 | Effect::BaseSprings { .. }
+                | Effect::AdherendDamping
         )
     }
 }
@@ -359,7 +380,9 @@ impl Effects {
                         "effect {name}: stinger stiffness {stiffness_n_m} N/m must be finite and > 0"
                     )));
                 }
-                Effect::DegradedBond { .. } | Effect::BaseSprings { .. }
+                Effect::DegradedBond { .. }
+                | Effect::BaseSprings { .. }
+                | Effect::AdherendDamping
                     if !engine.term_names().contains(&name) =>
                 {
                     return Err(super::ForwardError::Setup(format!(
@@ -446,6 +469,7 @@ impl Effects {
         let e_eng: Vec<C64> = modulus.iter().map(|e| e / scale).collect();
         // Degraded bond regions: extra terms -d E* S_region of the engine (c = -d E*_eng,
         // since (1 + b)(K_b + j D_b) + E* (S - d S_r) = (1 + b)(K_b + j D_b + E*_eng (S - d S_r))).
+        // Adherend damping: the term j g K_b (c = j g in the engine's coordinates too).
         let names = engine.term_names();
         let mut coefs = Vec::new();
         let mut term_of = Vec::new();
@@ -454,8 +478,10 @@ impl Effects {
         // K_s / v included, so dH/dv = dH_eng/dv_eng (the transform divides by scale^2).
         for (t, (term, v)) in self.terms.iter().zip(values).enumerate() {
             let (value, offset, per_modulus, dscale) = match term.effect {
-                Effect::DegradedBond { .. } => (*v, 0.0, -1.0, scale),
-                Effect::BaseSprings { .. } => (*v * scale, 1.0, 0.0, scale * scale),
+                Effect::DegradedBond { .. } => (*v, C64::new(0.0, 0.0), -1.0, scale),
+                // (1 + b) j g K_b of the actual beam is j g K_b of the engine's.
+                Effect::AdherendDamping => (*v, C64::new(0.0, 1.0), 0.0, scale),
+                Effect::BaseSprings { .. } => (*v * scale, C64::new(1.0, 0.0), 0.0, scale * scale),
                 _ => continue,
             };
             let name = term.effect.name();
@@ -467,7 +493,7 @@ impl Effects {
             coefs.push(crate::frf::TermCoef {
                 index,
                 value,
-                offset: C64::new(offset, 0.0),
+                offset,
                 per_modulus,
             });
             term_of.push((t, dscale));

@@ -24,6 +24,9 @@ pub struct DiagnoseSummary {
     pub output_dir: PathBuf,
     pub levels: Vec<DiagnoseLevel>,
     pub seconds: f64,
+    /// The term ROM's certificate and modulus box, when a candidate or a declared effect
+    /// needed one (degraded bond, adherend damping; src/runner/terms.rs).
+    pub term_rom: Option<(crate::rom::TermCertificate, crate::rom::ModulusRange)>,
 }
 
 #[derive(Clone, Debug, serde::Serialize)]
@@ -46,6 +49,9 @@ pub struct DiagnoseLevel {
     pub parameters: Vec<ParameterChange>,
     /// Candidates the law's parameters absorb (not identifiable), a sentence each.
     pub confounded: Vec<String>,
+    /// With a term ROM: the factor by which the law's modulus at the final MAP leaves the term
+    /// ROM's certified box over the level's lines (1: inside).
+    pub term_box_factor: Option<f64>,
 }
 
 /// One parameter before and after the loop (SI), with the truth when simulated.
@@ -213,14 +219,15 @@ pub fn diagnose_into(
     let mut levels = super::load_levels(study, &built)?;
     let (engine, _, lik_engine) = super::build_engine(study, &built, &mut levels, &laws, None)?;
     let engine = lik_engine.as_deref().unwrap_or(engine.as_ref());
-    // Degraded-bond candidates and declared regions need a ROM with their terms (issue 13).
+    // Degraded-bond and adherend-damping candidates and declared ones need a ROM with their
+    // terms (issue 13).
     // Opt-in: only when `[closed_loop] candidates` names them ("degraded_bond" or a strip's
     // name). Each evaluation with a bond is a dense LU of the enriched ROM per line (56 ms per
     // forward evaluation against about 1 ms on the pencil), and the term ROM is built and
     // certified per run (about 7 s), so the default candidate set ("all") leaves them out.
     // Base springs (a compliance term over the free-base joint) likewise.
     let mut term_candidates =
-        super::terms::bond_candidates(study, crate::forward::effects::DEFAULT_BOND_STRIP_M);
+        super::terms::term_candidates(study, crate::forward::effects::DEFAULT_BOND_STRIP_M);
     if crate::study::build::joint_spec(&study.structure).is_some() {
         term_candidates.push(crate::forward::Effect::BaseSprings {
             normal_over_tangential: crate::forward::effects::DEFAULT_BASE_NORMAL_OVER_TANGENTIAL,
@@ -330,6 +337,15 @@ pub fn diagnose_into(
                 .collect(),
             confounded: res.confounded.clone(),
             parameters: parameter_changes(&res, truth.as_deref()),
+            term_box_factor: term_rom.as_ref().map(|_| {
+                let n = law.param_names().len();
+                super::terms::outside_box(
+                    law.as_ref(),
+                    &res.after.values[..n.min(res.after.values.len())],
+                    &level.freq_hz,
+                    &super::terms::term_modulus_range(study, super::terms::band_of(&levels)),
+                )
+            }),
         });
         results.push((
             level.name.clone(),
@@ -371,6 +387,12 @@ pub fn diagnose_into(
         output_dir: dir.path().to_path_buf(),
         levels: summary,
         seconds: t0.elapsed().as_secs_f64(),
+        term_rom: term_rom.map(|(_, c)| {
+            (
+                c,
+                super::terms::term_modulus_range(study, super::terms::band_of(&levels)),
+            )
+        }),
     })
 }
 

@@ -71,6 +71,7 @@ pub fn level_effects(
             } => Effect::BaseSprings {
                 normal_over_tangential,
             },
+            DeclaredKind::AdherendDamping => Effect::AdherendDamping,
         };
         let mut value = d.value;
         if d.free {

@@ -1,5 +1,6 @@
 //! Engines for effects that need new matrices (issue 13, item 1): the degraded-bond regions
 //! and base springs among a run's effects become the extra terms of a certified ROM
+//! and the adherend damping among a run's effects become the extra terms of a certified ROM
 //! ([`crate::rom::terms`]) that wraps the run's effect-free engine
 //! ([`crate::rom::terms::WithTerms`]), so the effect-free forward model keeps its engine and
 //! its numbers.
@@ -9,6 +10,14 @@
 //! compliance ([`crate::rom::terms::TermMap::Compliance`]): at compliance 0 (floored at
 //! `BASE_V_FLOOR`, springs 1e10 times stiffer than the prior's stiffest) it is the fixed base,
 //! certified against the full model like every other value.
+//! The term ROM's modulus box ([`term_modulus_range`]) is that of the study's inference
+//! models: E*(w) of each model's initial values over the band, widened by 2 either way (the
+//! rule of the effect-free ROM's box, [`super::modulus_range`], without its floor at the
+//! default box E' 0.5-50 MPa, E'' 0.01-20 MPa). Over the default box the enriched basis stalls
+//! near 1.4e-6 of the peak (above the 1e-6 target): the soft corner (E' 0.5 MPa, a 10 times
+//! softer adhesive than the paper's) needs the Krylov vectors of its own. The loop only
+//! evaluates moduli near its MAPs, and [`outside_box`] tells when a MAP's modulus leaves the
+//! certified box.
 
 use super::{RunError, Study};
 use crate::common::C64;
@@ -64,6 +73,98 @@ pub fn base_springs_term(
     Ok((m, t))
 }
 
+/// Adherend loss factors the certificate checks (the default prior's upper edge, 0.01, and
+/// twice it); the damping term needs no enrichment: j g K_b is a small perturbation of the
+/// beam's stiffness, whose response the basis spans (tests/suite/rom_terms.rs).
+const DAMPING_CERT: [f64; 2] = [0.01, 0.02];
+
+/// The adherend damping's term of `model`: `G = K_b`, `c = j g` (offset j, no modulus part),
+/// certified at g = 0.01 and 0.02, no enrichment.
+pub fn adherend_damping_term(model: &crate::fe::model::StructuralModel) -> TermSpec {
+    TermSpec {
+        name: Effect::AdherendDamping.name(),
+        matrix: model.k_b.clone(),
+        offset: C64::new(0.0, 1.0),
+        per_modulus: 0.0,
+        enrich_values: Vec::new(),
+        cert_values: DAMPING_CERT.to_vec(),
+        map: TermMap::Linear,
+    }
+}
+
+/// The candidates that need the term ROM: a degraded-bond strip of `width_m` at each end of
+/// the block ([`bond_candidates`]) and the adherend damping.
+pub fn term_candidates(study: &Study, width_m: f64) -> Vec<Effect> {
+    let mut out = bond_candidates(study, width_m);
+    out.push(Effect::AdherendDamping);
+    out
+}
+
+/// The term ROM's modulus box (see the module doc): E*(w) of the initial values of the
+/// inference models (every model when the study has no `[inference]`) over `band_hz`, widened
+/// by 2 either way. Falls back to the effect-free ROM's box when no model gives a modulus.
+pub fn term_modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange {
+    let names: Option<&Vec<String>> = study.inference.as_ref().map(|i| &i.models);
+    let mut r = crate::rom::ModulusRange {
+        e_storage_pa: (f64::INFINITY, 0.0),
+        e_loss_pa: (f64::INFINITY, 0.0),
+    };
+    for m in study
+        .models
+        .iter()
+        .filter(|m| names.is_none_or(|n| n.iter().any(|x| x.eq_ignore_ascii_case(&m.name))))
+    {
+        let Ok(law) = crate::material::model_from_name(&m.name, m.branches) else {
+            continue;
+        };
+        for k in 0..=50 {
+            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / 50.0;
+            let e = law.modulus(&m.initial, std::f64::consts::TAU * f.max(1e-3));
+            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 && e.im >= 0.0 {
+                r.e_storage_pa.0 = r.e_storage_pa.0.min(e.re / 2.0);
+                r.e_storage_pa.1 = r.e_storage_pa.1.max(e.re * 2.0);
+                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im / 2.0);
+                r.e_loss_pa.1 = r.e_loss_pa.1.max(e.im * 2.0);
+            }
+        }
+    }
+    if r.e_storage_pa.0 < r.e_storage_pa.1 && r.e_loss_pa.0 < r.e_loss_pa.1 {
+        r
+    } else {
+        super::modulus_range(study, band_hz)
+    }
+}
+
+/// The largest factor by which `law` at `params` leaves `range` on `freq_hz` (1: inside; 2:
+/// somewhere twice above the top or half below the bottom of E' or E'').
+pub fn outside_box(
+    law: &dyn crate::material::ConstitutiveModel,
+    params: &[f64],
+    freq_hz: &[f64],
+    range: &crate::rom::ModulusRange,
+) -> f64 {
+    let ratio = |x: f64, (lo, hi): (f64, f64)| {
+        if x < lo {
+            if x > 0.0 {
+                lo / x
+            } else {
+                f64::INFINITY
+            }
+        } else if x > hi {
+            x / hi
+        } else {
+            1.0
+        }
+    };
+    freq_hz
+        .iter()
+        .map(|&f| {
+            let e = law.modulus(params, std::f64::consts::TAU * f);
+            ratio(e.re, range.e_storage_pa).max(ratio(e.im, range.e_loss_pa))
+        })
+        .fold(1.0, f64::max)
+}
+
 /// The degraded-bond candidates of the loop: a strip of `width_m` at each end of the block.
 pub fn bond_candidates(study: &Study, width_m: f64) -> Vec<Effect> {
     let Some(spec) = crate::study::build::joint_spec(&study.structure) else {
@@ -89,9 +190,10 @@ pub fn bond_candidates(study: &Study, width_m: f64) -> Vec<Effect> {
     ]
 }
 
-/// A certified term ROM for the degraded-bond regions among `effects` (None when there are
-/// none), for the points and inputs of `engine`, over `band_hz` and the ROM modulus range of
-/// the study. A region outside the adhesive block is an error naming `key_of(effect)`.
+/// A certified term ROM for the degraded-bond regions and the adherend damping among
+/// `effects` (None when there are none), for the points and inputs of `engine`, over `band_hz`
+/// and [`term_modulus_range`]. A region outside the adhesive block is an error naming the
+/// effect's key.
 pub fn term_rom_for(
     study: &Study,
     built: &BuiltModel,
@@ -129,12 +231,23 @@ pub fn term_rom_for(
         model = Some(m);
     }
     for (e, key) in effects {
-        let Effect::DegradedBond { x_start_m, width_m } = *e else {
-            continue;
-        };
         if specs.iter().any(|s| s.name == e.name()) {
             continue;
         }
+        if let Effect::AdherendDamping = e {
+            if model.is_some() {
+                return Err(super::study_err(
+                    study,
+                    key.clone(),
+                    "adherend damping together with base springs is not supported (the damping term would be assembled on the free-base DOFs with the springs in K_b): try them in separate runs",
+                ));
+            }
+            specs.push(adherend_damping_term(&built.model));
+            continue;
+        }
+        let Effect::DegradedBond { x_start_m, width_m } = *e else {
+            continue;
+        };
         let spec = joint(key, "a degraded bond")?;
         let region = if model.is_some() {
             crate::fe::region::adhesive_region_stiffness_free_base
@@ -158,7 +271,7 @@ pub fn term_rom_for(
     }
     let params = crate::rom::RomParams {
         band_hz,
-        range: super::modulus_range(study, band_hz),
+        range: term_modulus_range(study, band_hz),
         tolerance: study.solver.rom_tolerance,
         allow_uncertified: true,
         n_cert_moduli_per_axis: 2,
@@ -174,8 +287,8 @@ pub fn term_rom_for(
     Ok(Some((rom, cert)))
 }
 
-/// `candidates` (keyed "closed_loop.candidates") and the study's declared degraded bonds
-/// (keyed by their `structure.effects[i]`).
+/// `candidates` (keyed "closed_loop.candidates") and the study's declared degraded bonds and
+/// adherend damping (keyed by their `structure.effects[i]`).
 pub fn with_declared(study: &Study, candidates: &[Effect]) -> Vec<(Effect, String)> {
     let mut out: Vec<(Effect, String)> = study
         .declared_effects
@@ -192,6 +305,9 @@ pub fn with_declared(study: &Study, candidates: &[Effect]) -> Vec<(Effect, Strin
                 },
                 d.key.clone(),
             )),
+            crate::study::effects::DeclaredKind::AdherendDamping => {
+                Some((Effect::AdherendDamping, d.key.clone()))
+            }
             _ => None,
         })
         .collect();

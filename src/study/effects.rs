@@ -4,7 +4,7 @@
 //!
 //! ```toml
 //! [[structure.effects]]
-//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | degraded_bond | base_springs
+//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | degraded_bond | adherend_damping | base_springs
 //! point = 4               # point id (point_mass); `channel = id` for gain and delay
 //! value = 0.012           # SI (kg, 1, s, 1, Pa)
 //! free = false            # true: a parameter to infer, with the default prior or prior = {...}
@@ -14,6 +14,7 @@
 //! #   block; default width 10 mm): value = the loss fraction d in [0, 1), E* -> (1 - d) E* there
 //! # type = "base_springs": value = the compliance 1 / k_n (m^3/N) of springs under the adhesive's
 //! #   lower face (0: fixed base); normal_over_tangential = k_n / k_t (default 3.5)
+//! # type = "adherend_damping": value = the beam's structural loss factor g (D_b -> D_b + g K_b)
 //!
 //! [closed_loop]
 //! enabled = true
@@ -30,7 +31,7 @@ use crate::inference::prior::Prior;
 use serde::Deserialize;
 
 /// Effect types a study may name (`type = ...`).
-pub const EFFECT_TYPES: [&str; 8] = [
+pub const EFFECT_TYPES: [&str; 9] = [
     "point_mass",
     "gain",
     "delay",
@@ -39,6 +40,7 @@ pub const EFFECT_TYPES: [&str; 8] = [
     "shaker",
     "degraded_bond",
     "base_springs",
+    "adherend_damping",
 ];
 
 /// `[[structure.effects]]` as written.
@@ -106,6 +108,8 @@ pub enum DeclaredKind {
     BaseSprings {
         normal_over_tangential: f64,
     },
+    /// Structural loss factor g of the adherends: D_b -> D_b + g K_b.
+    AdherendDamping,
 }
 
 /// A validated declared effect.
@@ -227,6 +231,12 @@ pub(super) fn effects(
                 not("tau", r.tau.is_some())?;
                 DeclaredKind::BeamModulus
             }
+            "adherend_damping" => {
+                not("point", r.point.is_some())?;
+                not("channel", r.channel.is_some())?;
+                not("tau", r.tau.is_some())?;
+                DeclaredKind::AdherendDamping
+            }
             "maxwell_branch" => {
                 not("point", r.point.is_some())?;
                 not("channel", r.channel.is_some())?;
@@ -323,6 +333,7 @@ pub(super) fn effects(
             DeclaredKind::Shaker { .. } => ("kg", 0.0, 10.0, true),
             DeclaredKind::DegradedBond { .. } => ("1 (loss fraction)", 0.0, 1.0, true),
             DeclaredKind::BaseSprings { .. } => ("m^3/N (compliance 1 / k_n)", 0.0, 1e-6, true),
+            DeclaredKind::AdherendDamping => ("1 (loss factor)", 0.0, 1.0, true),
         };
         if !value.is_finite() || (nonneg && value < 0.0) {
             return Err(ctx.err(
@@ -435,7 +446,7 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
                 };
                 // (An alternative law, the fractional Zener, is a candidate of the loop too.)
                 let known_type = EFFECT_TYPES.contains(&s) || s == "alternative_law";
-                let known_name = ["mass_pt", "gain_ch", "delay_ch", "maxwell_fc"]
+                let known_name = ["mass_pt", "gain_ch", "delay_ch", "maxwell_fc", "bond_x"]
                     .iter()
                     .any(|p| s.starts_with(p))
                     || s == "beam_modulus"

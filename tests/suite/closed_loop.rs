@@ -209,8 +209,8 @@ fn null_data_accept_nothing() {
 
 /// The confounding measure (src/closed_loop/confounding.rs) against known answers at the
 /// truth of null data: a Maxwell branch with its corner at 0.01 Hz, far below the 8-962 Hz
-/// band, adds an almost constant modulus `E_k` there (`j w tau / (1 + j w tau) = 1 - j f_c / f
-/// + ...`), which Model 3's `E0` reproduces exactly: `R^2` near 1 and the absorbed change of
+/// band, adds an almost constant modulus `E_k` there (`j w tau / (1 + j w tau)` is
+/// `1 - j f_c / f` to first order), which Model 3's `E0` reproduces exactly: `R^2` near 1 and the absorbed change of
 /// `E0` per unit `E_k` is `1 / E0` (relative), of the others about 0. A gain on one channel
 /// changes one FRF's level, which no law change reproduces (it moves all four): `R^2` well
 /// below the threshold.

@@ -15,7 +15,9 @@
 //! Null data (no effect): nothing accepted in at least 95 % of 20 seeds.
 //!
 //! By default one case (12 g at point 4) and one null seed run; RFMLAB_LONG=1 runs every case
-//! and 20 null seeds (about an hour on 2 busy cores).
+//! and 20 null seeds (about an hour on 2 busy cores), and the cases whose candidates need the
+//! term ROM (opt-in in `[closed_loop] candidates`: a degraded bond strip at the block's inner
+//! end, an adherend structural loss factor), with every candidate type named.
 
 use rfmlab::runner::closed_loop::{diagnose_study, params_of, DiagnoseLevel};
 use std::path::{Path, PathBuf};
@@ -33,6 +35,16 @@ fn long() -> bool {
 
 /// Simulate case `name` (seed replaced by `seed` when given) in `dir` and diagnose it.
 fn run_case(dir: &Path, name: &str, seed: Option<u64>) -> DiagnoseLevel {
+    run_case_with(dir, name, seed, None)
+}
+
+/// [`run_case`] with the study's `[closed_loop] candidates` replaced by `candidates` (TOML).
+fn run_case_with(
+    dir: &Path,
+    name: &str,
+    seed: Option<u64>,
+    candidates: Option<&str>,
+) -> DiagnoseLevel {
     let src = root().join(format!("studies/data/closed_loop/cases/td_{name}.toml"));
     let mut exp = std::fs::read_to_string(&src).unwrap();
     if let Some(s) = seed {
@@ -72,6 +84,17 @@ fn run_case(dir: &Path, name: &str, seed: Option<u64>) -> DiagnoseLevel {
             "data/closed_loop/td_mass_pt4.truth.json",
             &dir.join(format!("{tag}.truth.json")).display().to_string(),
         );
+    let study_text = match candidates {
+        Some(c) => {
+            let line = study_text
+                .lines()
+                .find(|l| l.starts_with("candidates = "))
+                .unwrap()
+                .to_string();
+            study_text.replacen(&line, &format!("candidates = {c}"), 1)
+        }
+        None => study_text,
+    };
     let study_path = dir.join(format!("{tag}_study.toml"));
     std::fs::write(&study_path, &study_text).unwrap();
     let mut study = rfmlab::study::parse_str(&study_text, &study_path).unwrap();
@@ -186,4 +209,40 @@ fn time_domain_null_data_accept_nothing() {
         "effects accepted on {accepted} of {} null seeds",
         seeds.len()
     );
+}
+
+/// The cases whose candidates need the term ROM (src/runner/terms.rs): a 10 mm strip at the
+/// block's inner end (x = 40-50 mm) at 5 % modulus, and an adherend structural loss factor
+/// g = 0.002, each with the default candidate types and its own opt-in type named (each
+/// evaluation with a term is a dense LU of the term ROM per fine line). Only with RFMLAB_LONG=1; the chi-square limit is 1.2 (the clean case's 0.669 x 1.1
+/// is below it).
+#[test]
+fn time_domain_term_cases_name_the_injected_effect() {
+    if !long() {
+        eprintln!("skipped: set RFMLAB_LONG=1");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let defaults =
+        "\"point_mass\", \"gain\", \"delay\", \"beam_modulus\", \"shaker\", \"maxwell_branch\"";
+    let mut failures = Vec::new();
+    for (case, extra, expected, size) in [
+        ("bond_end", "degraded_bond", "bond_x40.0mm_w10.0mm", 0.95),
+        (
+            "beam_damping",
+            "adherend_damping",
+            "adherend_damping",
+            0.002,
+        ),
+    ] {
+        let candidates = format!("[{defaults}, \"{extra}\"]");
+        let l = run_case_with(dir.path(), case, None, Some(&candidates));
+        if let Some(f) = l.term_box_factor {
+            eprintln!("{case}: MAP modulus vs the term ROM's box: factor {f:.3}");
+        }
+        for m in judge(&l, expected, false, Some(size), 1.2) {
+            failures.push(format!("{case}: {m}"));
+        }
+    }
+    assert!(failures.is_empty(), "failures:\n{}", failures.join("\n"));
 }

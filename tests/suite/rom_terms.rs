@@ -418,3 +418,168 @@ fn declared_degraded_bond_is_validated() {
         .to_string();
     assert!(msg.contains("structure.effects[0].x_start"), "{msg}");
 }
+
+/// The adherend-damping effect of the forward model (the runner's term `j g K_b` on the term
+/// ROM wrapping the certified ROM) equals the full sparse model whose beam damping
+/// `D_b = g K_b` is assembled by the mesher (`[structure.beam.damping] structural = g`), also
+/// with a beam modulus factor on (the mesher's beam at (1 + b) E, D_b = g K_b of that beam);
+/// its Jacobian column matches a central difference of the forward model.
+#[test]
+fn adherend_damping_effect_equals_the_full_model_with_beam_damping() {
+    use rfmlab::forward::{Effect, EffectTerm, Effects, ForwardModel};
+    let (_, built) = joint();
+    let model = &built.model;
+    assert!(model.d_b.is_none());
+    let inputs = [0, 1, 2, 3];
+    let (plain, _) = build_rom(model, &inputs, &params()).unwrap();
+    let ts = vec![rfmlab::runner::terms::adherend_damping_term(model)];
+    let (tr, cert) = build_term_rom(model, &inputs, &params(), &ts).unwrap();
+    eprintln!(
+        "adherend damping term ROM: n_r {}, certificate {:.3e} ({:?})",
+        cert.basis_size, cert.max_rel_error, cert.per_case
+    );
+    assert!(cert.passed && cert.max_rel_error <= 1e-6);
+    let eng = WithTerms::new(&plain, &tr).unwrap();
+    let law = rfmlab::material::Model3;
+    let p = [4.7121e6, 5.5573e6, 6.0491e3];
+    let w: Vec<f64> = (0..80).map(|k| TAU * (2.1 + 6.2 * k as f64)).collect();
+    let outs = [0, 1, 2, 3];
+    let g = 0.004;
+    // The mesher's model with the beam at (1 + b) E and D_b = g K_b (independent assembly).
+    let mesher = |b: f64| {
+        let text = format!(
+            "{}[structure.beam.damping]\nstructural = {g}\n",
+            crate::runner_common::structure()
+                .replace("E = 198e9", &format!("E = {:e}", 198e9 * (1.0 + b)))
+        );
+        let study = rfmlab::study::parse_str(
+            &format!("[study]\nname = \"gen\"\n{text}"),
+            std::path::Path::new("gen.toml"),
+        )
+        .unwrap();
+        rfmlab::study::build::build_model(&study.structure, "gen.toml").unwrap()
+    };
+    for b in [0.0, 0.03] {
+        let mut fm = ForwardModel::new(&eng, &law, &w, built.excitation, &outs, None).unwrap();
+        fm.set_effects(Effects {
+            terms: vec![
+                EffectTerm {
+                    effect: Effect::AdherendDamping,
+                    value: g,
+                    free: true,
+                },
+                EffectTerm {
+                    effect: Effect::BeamModulus,
+                    value: b,
+                    free: false,
+                },
+            ],
+        })
+        .unwrap();
+        let mut pp = p.to_vec();
+        pp.push(g);
+        let got = fm.exact(&pp, true).unwrap();
+        let truth = mesher(b);
+        assert!(truth.model.d_b.is_some());
+        let full =
+            FullModel::new(&truth.model, &[built.excitation], FullParams::default()).unwrap();
+        let reference = ForwardModel::new(&full, &law, &w, built.excitation, &outs, None)
+            .unwrap()
+            .exact(&p, false)
+            .unwrap()
+            .values;
+        let peak_err = |x: &[C64]| {
+            (0..4)
+                .map(|k| {
+                    let peak = reference
+                        .iter()
+                        .skip(k)
+                        .step_by(4)
+                        .map(|z| z.norm())
+                        .fold(0.0, f64::max);
+                    x.iter()
+                        .zip(&reference)
+                        .skip(k)
+                        .step_by(4)
+                        .map(|(a, r)| (a - r).norm() / peak)
+                        .fold(0.0, f64::max)
+                })
+                .fold(0.0, f64::max)
+        };
+        let err = peak_err(&got.values);
+        // Without the damping the model is far from the reference: the check can fail.
+        let mut p0 = pp.clone();
+        p0[3] = 0.0;
+        let undamped = peak_err(&fm.exact(&p0, false).unwrap().values);
+        eprintln!("adherend damping g = {g}, beam factor {b}: forward model vs full {err:.3e} (undamped {undamped:.3e})");
+        assert!(err <= 1e-6, "b = {b}: {err:.3e}");
+        assert!(
+            undamped > 1e-2,
+            "b = {b}: damping changes the FRFs by {undamped:.3e} only"
+        );
+        // Jacobian column of g against a central difference
+        let h = 1e-6;
+        let mut a = pp.clone();
+        a[3] += h;
+        let up = fm.exact(&a, false).unwrap().values;
+        a[3] -= 2.0 * h;
+        let dn = fm.exact(&a, false).unwrap().values;
+        let col = &got.jac[3];
+        let scale = col.iter().map(|z| z.norm()).fold(0.0, f64::max);
+        let dev = col
+            .iter()
+            .zip(up.iter().zip(&dn))
+            .map(|(c, (u, d))| (c - (u - d) / (2.0 * h)).norm())
+            .fold(0.0, f64::max);
+        eprintln!("dH/dg: analytic vs FD {dev:.3e} of {scale:.3e}");
+        assert!(
+            scale > 0.0 && dev <= 1e-5 * scale,
+            "{dev:.3e} of {scale:.3e}"
+        );
+    }
+}
+
+/// `[[structure.effects]]` of type "adherend_damping": a loss factor >= 0, no point, channel or
+/// region keys; errors name the key. Its default prior is U(0, 0.01), one-sided, unit "1".
+#[test]
+fn declared_adherend_damping_is_validated() {
+    use rfmlab::forward::Effect;
+    let parse = |eff: &str| {
+        rfmlab::study::parse_str(
+            &format!(
+                "[study]\nname = \"gen\"\n{}\n[[structure.effects]]\ntype = \"adherend_damping\"\n{eff}\n",
+                crate::runner_common::structure()
+            ),
+            std::path::Path::new("gen.toml"),
+        )
+    };
+    let ok = parse("value = 0.002").unwrap();
+    assert_eq!(
+        ok.declared_effects[0].kind,
+        rfmlab::study::effects::DeclaredKind::AdherendDamping
+    );
+    for (text, key) in [
+        ("value = -0.001", "structure.effects[0].value"),
+        ("value = 0.001\npoint = 2", "structure.effects[0].point"),
+        (
+            "value = 0.001\nx_start = 0.0",
+            "structure.effects[0].x_start",
+        ),
+    ] {
+        let msg = parse(text).unwrap_err().to_string();
+        assert!(
+            msg.contains(key) && msg.contains("gen.toml"),
+            "{text}: {msg}"
+        );
+    }
+    let e = Effect::AdherendDamping;
+    assert_eq!(
+        (e.name().as_str(), e.kind(), e.unit()),
+        ("adherend_damping", "adherend_damping", "1")
+    );
+    assert!(e.one_sided());
+    assert_eq!(
+        e.default_prior(),
+        rfmlab::inference::prior::Prior::Uniform { lo: 0.0, hi: 0.01 }
+    );
+}
