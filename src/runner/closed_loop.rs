@@ -641,6 +641,9 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
             refit[3].push(None);
             acc.push(r.accepted);
             verdict.push(r.verdict.clone());
+            // A whole law is not a column beside the law's own: no confounding measure.
+            r2.push(f64::NAN);
+            absorbed.push(String::new());
         }
     }
     let [score, p, est, est_sd] = num;
