@@ -40,8 +40,22 @@ pub fn run(a: &DiagnoseArgs, g: &Global) -> anyhow::Result<()> {
     let study = super::common::load_study(&a.study)?;
     let sp = super::common::spinner(g, "closing the loop");
     let from_study = rfmlab::runner::closed_loop::params_of(&study);
+    let shown = sp.clone();
     let params = ClosedLoopParams {
         threshold_nats: a.threshold_nats.unwrap_or(from_study.threshold_nats),
+        // On a terminal the spinner shows the step; in a log, a line per step with its time.
+        progress: if g.quiet {
+            rfmlab::closed_loop::Progress::default()
+        } else if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+            rfmlab::closed_loop::Progress::new(move |m| {
+                shown.set_message(format!("closing the loop: {m}"))
+            })
+        } else {
+            let t0 = std::time::Instant::now();
+            rfmlab::closed_loop::Progress::new(move |m| {
+                eprintln!("[{:8.1} s] {m}", t0.elapsed().as_secs_f64())
+            })
+        },
         ..from_study
     };
     let summary = rfmlab::runner::closed_loop::diagnose_study(&study, a.model.as_deref(), &params)

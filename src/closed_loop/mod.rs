@@ -60,6 +60,45 @@ pub struct ClosedLoopParams {
     /// Only candidates whose score test has a p-value below this are refitted. Default 0.01
     /// (1: the top candidates whatever their p).
     pub p_threshold: f64,
+    /// Where the loop reports each step (the CLI shows it on its spinner). Default: nowhere.
+    pub progress: Progress,
+}
+
+/// A sink for one-line messages on the loop's steps (a long loop is minutes of score tests
+/// and refits). It does not change any result, so every two compare equal.
+#[derive(Clone, Default)]
+pub struct Progress(Option<std::sync::Arc<ProgressSink>>);
+
+/// The function behind [`Progress`].
+pub type ProgressSink = dyn Fn(&str) + Send + Sync;
+
+impl Progress {
+    pub fn new(f: impl Fn(&str) + Send + Sync + 'static) -> Self {
+        Progress(Some(std::sync::Arc::new(f)))
+    }
+
+    /// Report `msg` (nothing when no sink was given).
+    pub fn say(&self, msg: &str) {
+        if let Some(f) = &self.0 {
+            f(msg);
+        }
+    }
+}
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(if self.0.is_some() {
+            "Progress(sink)"
+        } else {
+            "Progress(none)"
+        })
+    }
+}
+
+impl PartialEq for Progress {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
 }
 
 impl Default for ClosedLoopParams {
@@ -75,6 +114,7 @@ impl Default for ClosedLoopParams {
             },
             warm_refits: true,
             p_threshold: 0.01,
+            progress: Progress::default(),
         }
     }
 }
@@ -516,6 +556,8 @@ pub fn run_closed_loop_with_laws<'a>(
     } else {
         params.map.clone()
     };
+    let say = |m: String| params.progress.say(&m);
+    say("MAP of the starting model".into());
     let mut current = find_map(&*post, Some(x0), &params.map, none)?;
     let before = fit_of(post, &current)?;
     let mut accepted: Vec<(Effect, f64, f64)> = Vec::new();
@@ -538,6 +580,7 @@ pub fn run_closed_loop_with_laws<'a>(
             {
                 continue;
             }
+            say(format!("round {}: score test of {}", round + 1, c.name()));
             let (t, p, est, sd, st, conf) = score_test_step(post, &phys, c)?;
             starts.push((c.name(), st));
             scored.push(Candidate {
@@ -564,6 +607,13 @@ pub fn run_closed_loop_with_laws<'a>(
             if !(c.p_value < params.p_threshold) {
                 continue;
             }
+            say(format!(
+                "round {}: refit {} of {} ({})",
+                round + 1,
+                ci + 1,
+                params.top.min(scored.len()),
+                c.effect.name()
+            ));
             let prior = c.effect.default_prior();
             let (lo, hi) = match prior {
                 Prior::Uniform { lo, hi } => (lo, hi),
@@ -696,6 +746,11 @@ pub fn run_closed_loop_with_laws<'a>(
             if alt.name() == post.likelihood.forward.law.name() {
                 continue;
             }
+            say(format!(
+                "round {}: refit with the law {}",
+                round + 1,
+                alt.name()
+            ));
             install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
             let outcome = alternative::refit_law(
                 post,

@@ -1,73 +1,65 @@
-//! Small dense complex kernels (row-major n x n), written out so that results are
-//! bit-identical whatever the thread count.
+//! Dense complex LU of the reduced systems: faer's blocked kernel with partial pivoting, run
+//! sequentially (`Par::Seq`) so that results are bit-identical whatever the thread count (the
+//! lines of a sweep are what runs in parallel).
 
 use crate::common::C64;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::lu::partial_pivoting::{factor, solve};
+use faer::{Conj, Mat, MatMut, Par};
 
-/// LU with partial pivoting, P A = L U, stored in place (row-major).
+/// P A = L U of an n x n complex matrix.
 pub(crate) struct DenseLu {
-    n: usize,
-    a: Vec<C64>,
-    piv: Vec<usize>,
+    lu: Mat<C64>,
+    fwd: Vec<usize>,
+    bwd: Vec<usize>,
 }
 
 impl DenseLu {
-    /// Factor; None when a pivot is exactly zero or not finite.
-    pub fn factor(n: usize, mut a: Vec<C64>) -> Option<DenseLu> {
-        let mut piv: Vec<usize> = (0..n).collect();
-        for k in 0..n {
-            let mut p = k;
-            let mut best = a[k * n + k].norm_sqr();
-            for i in k + 1..n {
-                let v = a[i * n + k].norm_sqr();
-                if v > best {
-                    best = v;
-                    p = i;
-                }
-            }
-            if best == 0.0 || !best.is_finite() {
-                return None;
-            }
-            if p != k {
-                for j in 0..n {
-                    a.swap(k * n + j, p * n + j);
-                }
-                piv.swap(k, p);
-            }
-            let inv = C64::new(1.0, 0.0) / a[k * n + k];
-            let (top, bottom) = a.split_at_mut((k + 1) * n);
-            let rowk = &top[k * n..];
-            for i in 0..n - k - 1 {
-                let row = &mut bottom[i * n..(i + 1) * n];
-                let l = row[k] * inv;
-                row[k] = l;
-                if l != C64::new(0.0, 0.0) {
-                    for j in k + 1..n {
-                        row[j] -= l * rowk[j];
-                    }
-                }
-            }
-        }
-        Some(DenseLu { n, a, piv })
+    /// Factor a row-major n x n matrix; None when a pivot is zero or not finite.
+    pub fn factor(n: usize, a: Vec<C64>) -> Option<DenseLu> {
+        debug_assert_eq!(a.len(), n * n);
+        DenseLu::from_mat(Mat::from_fn(n, n, |i, j| a[i * n + j]))
+    }
+
+    /// Factor a square matrix; None when a pivot is zero or not finite.
+    pub fn from_mat(mut a: Mat<C64>) -> Option<DenseLu> {
+        let n = a.nrows();
+        let mut fwd = vec![0usize; n];
+        let mut bwd = vec![0usize; n];
+        let mut mem = MemBuffer::new(factor::lu_in_place_scratch::<usize, C64>(
+            n,
+            n,
+            Par::Seq,
+            Default::default(),
+        ));
+        factor::lu_in_place(
+            a.as_mut(),
+            &mut fwd,
+            &mut bwd,
+            Par::Seq,
+            MemStack::new(&mut mem),
+            Default::default(),
+        );
+        let ok = (0..n).all(|i| {
+            let d = a[(i, i)];
+            d.norm() > 0.0 && d.re.is_finite() && d.im.is_finite()
+        });
+        ok.then_some(DenseLu { lu: a, fwd, bwd })
     }
 
     /// Solve A x = b in place.
     pub fn solve(&self, b: &mut [C64]) {
-        let n = self.n;
-        let mut x: Vec<C64> = self.piv.iter().map(|&p| b[p]).collect();
-        for i in 0..n {
-            let mut s = x[i];
-            for j in 0..i {
-                s -= self.a[i * n + j] * x[j];
-            }
-            x[i] = s;
-        }
-        for i in (0..n).rev() {
-            let mut s = x[i];
-            for j in i + 1..n {
-                s -= self.a[i * n + j] * x[j];
-            }
-            x[i] = s / self.a[i * n + i];
-        }
-        b.copy_from_slice(&x);
+        let n = self.lu.nrows();
+        let mut mem = MemBuffer::new(solve::solve_in_place_scratch::<usize, C64>(n, 1, Par::Seq));
+        let perm = faer::perm::PermRef::new_checked(&self.fwd, &self.bwd, n);
+        solve::solve_in_place_with_conj(
+            self.lu.as_ref(),
+            self.lu.as_ref(),
+            perm,
+            Conj::No,
+            MatMut::from_column_major_slice_mut(b, n, 1),
+            Par::Seq,
+            MemStack::new(&mut mem),
+        );
     }
 }

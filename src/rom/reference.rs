@@ -39,14 +39,13 @@
 //! energy norm the 2.5 mm reference moved by up to 1e-7 of a peak, hence the default 1e-9.
 
 use super::basis::BasisBuilder;
+use super::dense::DenseLu;
 use super::reduced::ReducedModel;
 use super::sparse::SpdSolver;
 use super::RomError;
 use crate::common::C64;
 use crate::linalg::blocked::{combine_mul, from_row_major, nn_acc, tn};
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::lu::partial_pivoting::{factor, solve};
-use faer::{Conj, Mat, MatMut, MatRef, Par};
+use faer::{Mat, MatMut, MatRef};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -66,60 +65,6 @@ pub(crate) type Receptances = Vec<Vec<Vec<C64>>>;
 
 /// Systems solved together (columns of the blocked kernels; bounds the Arnoldi memory).
 const SYSTEMS_PER_BATCH: usize = 32;
-
-/// Dense complex LU with partial pivoting (faer's blocked kernel, sequential). Not
-/// [`super::dense::DenseLu`]: the reduced systems at lightly damped, near-resonant validation
-/// points are ill-conditioned enough that the two LUs' rounding moves the 10 mm joint's worst
-/// certificate error by about 2e-8; the stated numbers and the LU comparison test were
-/// measured with this one.
-struct DenseLu {
-    lu: Mat<C64>,
-    fwd: Vec<usize>,
-    bwd: Vec<usize>,
-}
-
-impl DenseLu {
-    fn new(mut a: Mat<C64>) -> Option<DenseLu> {
-        let n = a.nrows();
-        let mut fwd = vec![0usize; n];
-        let mut bwd = vec![0usize; n];
-        let mut mem = MemBuffer::new(factor::lu_in_place_scratch::<usize, C64>(
-            n,
-            n,
-            Par::Seq,
-            Default::default(),
-        ));
-        factor::lu_in_place(
-            a.as_mut(),
-            &mut fwd,
-            &mut bwd,
-            Par::Seq,
-            MemStack::new(&mut mem),
-            Default::default(),
-        );
-        let ok = (0..n).all(|i| {
-            let d = a[(i, i)];
-            d.norm() > 0.0 && d.re.is_finite() && d.im.is_finite()
-        });
-        ok.then_some(DenseLu { lu: a, fwd, bwd })
-    }
-
-    /// Solve A x = b in place.
-    fn solve(&self, b: &mut [C64]) {
-        let n = self.lu.nrows();
-        let mut mem = MemBuffer::new(solve::solve_in_place_scratch::<usize, C64>(n, 1, Par::Seq));
-        let perm = faer::perm::PermRef::new_checked(&self.fwd, &self.bwd, n);
-        solve::solve_in_place_with_conj(
-            self.lu.as_ref(),
-            self.lu.as_ref(),
-            perm,
-            Conj::No,
-            faer::MatMut::from_column_major_slice_mut(b, n, 1),
-            Par::Seq,
-            MemStack::new(&mut mem),
-        );
-    }
-}
 
 /// Complex column `s` of a block stored as (re, im) column pairs of a real column-major matrix.
 fn get(m: MatRef<'_, f64>, s: usize) -> Vec<C64> {
@@ -353,7 +298,7 @@ pub(crate) fn reference(
                 .par_iter()
                 .map(|&w| {
                     let z = rom.z_r(w, e);
-                    DenseLu::new(Mat::from_fn(d, d, |i, j| z[i * d + j])).ok_or_else(|| {
+                    DenseLu::from_mat(Mat::from_fn(d, d, |i, j| z[i * d + j])).ok_or_else(|| {
                         RomError::Factorization(format!(
                             "the reduced system is singular at {:.3} Hz, E* = {e} Pa",
                             w / (2.0 * std::f64::consts::PI)

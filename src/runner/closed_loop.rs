@@ -243,6 +243,13 @@ pub fn diagnose_into(
             })
         })
         .collect();
+    if !bonds.is_empty() {
+        let names: Vec<String> = bonds.iter().map(|e| e.name()).collect();
+        params.progress.say(&format!(
+            "building and certifying the term ROM ({})",
+            names.join(", ")
+        ));
+    }
     let term_rom = super::terms::term_rom_for(
         study,
         &built,
@@ -301,6 +308,9 @@ pub fn diagnose_into(
         }
         let candidates = super::declared::admitted(candidates, study.closed_loop.as_ref());
         let t_loop = std::time::Instant::now();
+        params
+            .progress
+            .say(&format!("{}: {} candidates", level.name, candidates.len()));
         let x0 = match inf.channel_correlation {
             Some((kind, window)) => {
                 set_correlation(&mut post, &x0, &params.map, kind, window, level)?

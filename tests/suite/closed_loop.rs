@@ -103,14 +103,35 @@ fn the_loop_finds_each_injected_effect() {
         let (x, v) = simulate(&eng, Some((effect.clone(), value)), 7);
         let mut post = posterior(&eng, x, v);
         let start = x0(&post);
-        let res = run_closed_loop(
-            &mut post,
-            &start,
-            &candidates(),
-            &ClosedLoopParams::default(),
-        )
-        .unwrap();
+        let said = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+        let sink = said.clone();
+        let params = ClosedLoopParams {
+            progress: rfmlab::closed_loop::Progress::new(move |m| {
+                sink.lock().unwrap().push(m.to_string())
+            }),
+            ..ClosedLoopParams::default()
+        };
+        let res = run_closed_loop(&mut post, &start, &candidates(), &params).unwrap();
         let name = effect.name();
+        // The loop reports its steps: the starting MAP, a score test per candidate and
+        // round, and each refit by name.
+        let said = said.lock().unwrap();
+        assert_eq!(said[0], "MAP of the starting model");
+        let scored = said
+            .iter()
+            .filter(|m| m.contains(": score test of "))
+            .count();
+        assert_eq!(scored, res.candidates.len(), "{said:?}");
+        for c in res.candidates.iter().filter(|c| c.refit.is_some()) {
+            let tag = format!("round {}: refit", c.round + 1);
+            assert!(
+                said.iter()
+                    .any(|m| m.starts_with(&tag) && m.ends_with(&format!("({})", c.effect.name()))),
+                "no progress line for the refit of {}: {said:?}",
+                c.effect.name()
+            );
+        }
+        drop(said);
         for c in &res.candidates {
             eprintln!(
                 "{name}: round {} rank {} {} T {:.1} p {:.2e} est {:.4e} +- {:.1e} refit {:?}",
