@@ -33,6 +33,14 @@ use faer::Mat;
 use rayon::prelude::*;
 use std::time::Instant;
 
+/// Column `p` of a dense matrix as a slice (faer stores columns contiguously).
+fn column(a: &Mat<f64>, p: usize) -> &[f64] {
+    a.col(p)
+        .try_as_col_major()
+        .expect("a dense matrix's columns are contiguous")
+        .as_slice()
+}
+
 /// A compliance term's derivative is a forward difference below this fraction of `v_ref`
 /// (see [`TermRom`]'s line solve) ...
 pub const COMPLIANCE_FD_BELOW: f64 = 1e-2;
@@ -401,9 +409,11 @@ impl TermRom {
         let add = |z: &mut [C64], t: &TermCoef| {
             let c = self.maps[t.index].f(t.value) * (t.offset + t.per_modulus * e);
             let g = &self.g_r[t.index];
+            // (G symmetric: its column i, contiguous, is its row i.)
             for i in 0..n {
+                let col = column(g, i);
                 for j in 0..n {
-                    z[i * n + j] += c * g[(i, j)];
+                    z[i * n + j] += c * col[j];
                 }
             }
         };
@@ -444,10 +454,13 @@ impl TermRom {
         if !derivs {
             return Ok((h, Vec::new(), Vec::new(), Vec::new()));
         }
-        // A x_j for a real symmetric A (n_r x n_r).
+        // A x_j for a real symmetric A (n_r x n_r), by A's contiguous columns.
         let apply = |a: &Mat<f64>, xj: &[C64]| -> Vec<C64> {
             (0..n)
-                .map(|p| (0..n).map(|q| xj[q] * a[(p, q)]).sum())
+                .map(|p| {
+                    let col = column(a, p);
+                    (0..n).map(|q| xj[q] * col[q]).sum()
+                })
                 .collect()
         };
         // S_eff = S_r + sum v_k q_k G_k,r
@@ -455,8 +468,8 @@ impl TermRom {
         for t in terms.iter().filter(|t| t.per_modulus != 0.0) {
             let g = &self.g_r[t.index];
             let c = self.maps[t.index].f(t.value) * t.per_modulus;
-            for i in 0..n {
-                for j in 0..n {
+            for j in 0..n {
+                for i in 0..n {
                     s_eff[(i, j)] += c * g[(i, j)];
                 }
             }
@@ -526,11 +539,11 @@ impl TermRom {
             let oc = tc.offset + tc.per_modulus * e;
             for &c in &cols {
                 let xc = &x[slot[c]];
+                let gx = apply(g, xc);
                 let yc: Vec<C64> = (0..n)
                     .map(|p| {
                         let zx: C64 = (0..n).map(|q| zo[p * n + q] * xc[q]).sum();
-                        let gx: C64 = (0..n).map(|q| xc[q] * g[(p, q)]).sum();
-                        C64::new(r.b_r[(p, c)], 0.0) - zx + gx * oc / v_ref
+                        C64::new(r.b_r[(p, c)], 0.0) - zx + gx[p] * oc / v_ref
                     })
                     .collect();
                 y.push(yc);
@@ -546,6 +559,16 @@ impl TermRom {
                 .iter()
                 .map(|t| apply(&self.g_r[t.index], xj))
                 .collect();
+            // G^+ y_j of a compliance term, once per input.
+            let gpy: Vec<Option<Vec<C64>>> = terms
+                .iter()
+                .map(
+                    |t| match (is_compliance(t), &fd_plus, &self.g_pinv[t.index]) {
+                        (true, None, Some(gp)) => Some(apply(gp, &y[slot[j]])),
+                        _ => None,
+                    },
+                )
+                .collect();
             for i in 0..no {
                 let xi = &x[slot[i]];
                 dh[i * ni + jj] = -(0..n).map(|k| xi[k] * sx[k]).sum::<C64>();
@@ -555,12 +578,10 @@ impl TermRom {
                         dt[k][i * ni + jj] = d[i * ni + jj];
                         continue;
                     }
-                    if let (true, Some(gp)) = (is_compliance(t), &self.g_pinv[t.index]) {
+                    if let Some(gy_j) = &gpy[k] {
                         // y_i^T G^+ y_j (times the offset: c = f(v) offset)
-                        let (yi, yj) = (&y[slot[i]], &y[slot[j]]);
-                        let gy: C64 = (0..n)
-                            .map(|p| yi[p] * (0..n).map(|q| gp[(p, q)] * yj[q]).sum::<C64>())
-                            .sum();
+                        let yi = &y[slot[i]];
+                        let gy: C64 = (0..n).map(|p| yi[p] * gy_j[p]).sum();
                         dt[k][i * ni + jj] = gy / (t.offset + t.per_modulus * e);
                         continue;
                     }

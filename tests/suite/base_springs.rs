@@ -21,6 +21,19 @@ fn spec() -> rfmlab::fe::joint::JointSpec {
     rfmlab::study::build::joint_spec(&study.structure).unwrap()
 }
 
+/// The term ROMs' settings: the modulus range a study of the paper's adhesive covers (as in
+/// tests/suite/rom_terms.rs), two certificate moduli per axis.
+fn rom_params() -> rfmlab::rom::RomParams {
+    rfmlab::rom::RomParams {
+        n_cert_moduli_per_axis: 2,
+        range: rfmlab::rom::ModulusRange {
+            e_storage_pa: (2e6, 2e7),
+            e_loss_pa: (0.3e6, 8e6),
+        },
+        ..rfmlab::rom::RomParams::default()
+    }
+}
+
 /// Model 4 at the first mode of level 1 (method.md).
 const E_STAR: C64 = C64::new(6.974e6, 1.4827e6);
 
@@ -149,14 +162,7 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
     let built = crate::runner_common::built_structure();
     let inputs = [built.excitation];
     let (model, term) = rfmlab::runner::terms::base_springs_term(&spec, 3.5).unwrap();
-    let params = rfmlab::rom::RomParams {
-        n_cert_moduli_per_axis: 2,
-        range: rfmlab::rom::ModulusRange {
-            e_storage_pa: (2e6, 2e7),
-            e_loss_pa: (0.3e6, 8e6),
-        },
-        ..rfmlab::rom::RomParams::default()
-    };
+    let params = rom_params();
     let (rom, cert) =
         rfmlab::rom::terms::build_term_rom(&model, &inputs, &params, std::slice::from_ref(&term))
             .unwrap();
@@ -250,14 +256,7 @@ fn forward_model_column_of_the_base_springs_matches_differences() {
     let spec = spec();
     let built = crate::runner_common::built_structure();
     let inputs = [0, 1, 2, 3];
-    let params = rfmlab::rom::RomParams {
-        n_cert_moduli_per_axis: 2,
-        range: rfmlab::rom::ModulusRange {
-            e_storage_pa: (2e6, 2e7),
-            e_loss_pa: (0.3e6, 8e6),
-        },
-        ..rfmlab::rom::RomParams::default()
-    };
+    let params = rom_params();
     let (plain, _) = rfmlab::rom::build_rom(&built.model, &inputs, &params).unwrap();
     let (model, term) = rfmlab::runner::terms::base_springs_term(&spec, 3.5).unwrap();
     let (tr, cert) = build_term_rom(&model, &inputs, &params, std::slice::from_ref(&term)).unwrap();
