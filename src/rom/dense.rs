@@ -21,6 +21,14 @@ impl DenseLu {
         DenseLu::from_mat(Mat::from_fn(n, n, |i, j| a[i * n + j]))
     }
 
+    /// Factor a complex symmetric (A = A^T, not Hermitian) n x n matrix, whose row-major
+    /// storage is its column-major storage (read contiguously); None when a pivot is zero or
+    /// not finite.
+    pub fn factor_symmetric(n: usize, a: Vec<C64>) -> Option<DenseLu> {
+        debug_assert_eq!(a.len(), n * n);
+        DenseLu::from_mat(Mat::from_fn(n, n, |i, j| a[j * n + i]))
+    }
+
     /// Factor a square matrix; None when a pivot is zero or not finite.
     pub fn from_mat(mut a: Mat<C64>) -> Option<DenseLu> {
         let n = a.nrows();

@@ -272,7 +272,7 @@ impl ReducedModel {
         let no = self.n_out;
         let ni = self.inputs.len();
         let blk = no * ni;
-        let Some(flu) = DenseLu::factor(n, self.z_r(omega, e0)) else {
+        let Some(flu) = DenseLu::factor_symmetric(n, self.z_r(omega, e0)) else {
             return fallback;
         };
         // G = F^-1 S_r

@@ -169,22 +169,24 @@ impl ReducedModel {
         Ok(out)
     }
 
-    /// A(w) + e S_r as a row-major complex matrix.
+    /// A(w) + e S_r as a row-major complex matrix. Every reduced matrix is symmetric, so
+    /// row i is read from column i (contiguous in faer's storage), and the result is
+    /// complex symmetric (row- and column-major storage coincide).
     pub(crate) fn z_r(&self, omega: f64, e: C64) -> Vec<C64> {
         let n = self.n_r;
         let mut z = vec![C64::new(0.0, 0.0); n * n];
         let w2 = omega * omega;
         for i in 0..n {
             for j in 0..n {
-                let mut re = -w2 * self.m_r[(i, j)] + self.k_r[(i, j)];
+                let mut re = -w2 * self.m_r[(j, i)] + self.k_r[(j, i)];
                 let mut im = 0.0;
                 if let Some(c) = &self.c_r {
-                    im += omega * c[(i, j)];
+                    im += omega * c[(j, i)];
                 }
                 if let Some(d) = &self.d_r {
-                    im += d[(i, j)];
+                    im += d[(j, i)];
                 }
-                let s = self.s_r[(i, j)];
+                let s = self.s_r[(j, i)];
                 re += e.re * s;
                 im += e.im * s;
                 z[i * n + j] = C64::new(re, im);
@@ -203,7 +205,7 @@ impl ReducedModel {
         let n = self.n_r;
         let no = self.n_out;
         let ni = self.inputs.len();
-        let lu = DenseLu::factor(n, self.z_r(omega, e)).ok_or(FrfError::Singular {
+        let lu = DenseLu::factor_symmetric(n, self.z_r(omega, e)).ok_or(FrfError::Singular {
             freq_hz: omega / (2.0 * std::f64::consts::PI),
             modulus: e,
         })?;

@@ -298,7 +298,7 @@ pub(crate) fn reference(
                 .par_iter()
                 .map(|&w| {
                     let z = rom.z_r(w, e);
-                    DenseLu::from_mat(Mat::from_fn(d, d, |i, j| z[i * d + j])).ok_or_else(|| {
+                    DenseLu::factor_symmetric(d, z).ok_or_else(|| {
                         RomError::Factorization(format!(
                             "the reduced system is singular at {:.3} Hz, E* = {e} Pa",
                             w / (2.0 * std::f64::consts::PI)

@@ -426,7 +426,7 @@ impl TermRom {
         for t in terms.iter().filter(|t| is_compliance(t)) {
             add(&mut z, t);
         }
-        let lu = DenseLu::factor(n, z).ok_or(FrfError::Singular {
+        let lu = DenseLu::factor_symmetric(n, z).ok_or(FrfError::Singular {
             freq_hz: omega / std::f64::consts::TAU,
             modulus: e,
         })?;
