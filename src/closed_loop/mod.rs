@@ -788,6 +788,11 @@ pub fn run_closed_loop_with_laws<'a>(
                 alt.name(),
                 law_table[li].refit.evidence_gain
             ));
+            say(format!(
+                "round {}: {}",
+                round + 1,
+                law_changes[law_changes.len() - 1]
+            ));
             post.likelihood.forward.law = alt;
             law_priors.splice(..n_old, priors);
             install(post, &law_priors, &noise_priors, base_effects_now)?;
@@ -797,6 +802,7 @@ pub fn run_closed_loop_with_laws<'a>(
         }
         match best {
             None => {
+                say(format!("round {}: nothing passes", round + 1));
                 install(post, &law_priors, &noise_priors, base_effects_now)?;
                 table.extend(scored);
                 break;
@@ -809,6 +815,12 @@ pub fn run_closed_loop_with_laws<'a>(
                 }
                 let size = r.map_physical[np_now];
                 let sd = r.laplace.sd_physical()[np_now];
+                say(format!(
+                    "round {}: accepted {} = {size:.4e} +- {sd:.1e} {}",
+                    round + 1,
+                    c.effect.name(),
+                    c.effect.unit()
+                ));
                 accepted.push((c.effect.clone(), size, sd));
                 let mut eff = base_effects_now.clone();
                 eff.terms.push(EffectTerm {

@@ -131,6 +131,16 @@ fn the_loop_finds_each_injected_effect() {
                 c.effect.name()
             );
         }
+        // Each accepted effect is announced with its size, and the last round says so.
+        for (e, _, _) in &res.accepted {
+            let tag = format!("accepted {} = ", e.name());
+            assert!(said.iter().any(|m| m.contains(&tag)), "{said:?}");
+        }
+        assert!(
+            said.last().is_some_and(|m| m.ends_with("nothing passes"))
+                || res.candidates.iter().map(|c| c.round).max() == Some(params.max_rounds - 1),
+            "{said:?}"
+        );
         drop(said);
         for c in &res.candidates {
             eprintln!(
