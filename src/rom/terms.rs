@@ -422,7 +422,14 @@ impl TermRom {
         for t in terms.iter().filter(|t| !is_compliance(t)) {
             add(&mut z, t);
         }
-        let z_other = (derivs && terms.iter().any(is_compliance)).then(|| z.clone());
+        // Near the rigid limit (v below COMPLIANCE_FD_BELOW v_ref) a compliance term's
+        // derivative is a forward difference (below), which needs no `z_other`.
+        let near_rigid = |t: &TermCoef| match self.maps[t.index] {
+            TermMap::Compliance { v_ref, .. } => t.value < COMPLIANCE_FD_BELOW * v_ref,
+            TermMap::Linear => false,
+        };
+        let z_other =
+            (derivs && terms.iter().any(|t| is_compliance(t) && !near_rigid(t))).then(|| z.clone());
         for t in terms.iter().filter(|t| is_compliance(t)) {
             add(&mut z, t);
         }
@@ -485,53 +492,36 @@ impl TermRom {
                 "at most one compliance term per sweep".into(),
             ));
         }
-        // Near the rigid limit (v below COMPLIANCE_FD_BELOW v_ref) the derivative is the
-        // forward difference over COMPLIANCE_FD_STEP v_ref: there y^T G^+ y weighs the spring
-        // matrix's small reduced eigenvalues by their inverse, and the error of y (b - Z x,
-        // amplified by the norm of Z) along them swamped the column on the 5 mm joint with all
-        // points as inputs (4x the difference quotient; tests/suite/base_springs.rs).
-        let fd_plus: Option<(f64, Vec<C64>)> = match terms.iter().find(|t| is_compliance(t)) {
-            Some(tc) => match self.maps[tc.index] {
-                TermMap::Compliance { v_ref, .. } if tc.value < COMPLIANCE_FD_BELOW * v_ref => {
-                    let step = COMPLIANCE_FD_STEP * v_ref;
-                    let shifted: Vec<TermCoef> = terms
-                        .iter()
-                        .map(|t| TermCoef {
-                            value: if std::ptr::eq(t, tc) {
-                                t.value.max(0.0) + step
-                            } else {
-                                t.value
-                            },
-                            ..*t
-                        })
-                        .collect();
-                    let (hp, _, _, _) = self.line(omega, e, &shifted, false)?;
-                    // The difference from the value actually used (below 0 the floor acts).
-                    let (h0, _, _, _) = if tc.value < 0.0 {
-                        let at0: Vec<TermCoef> = terms
-                            .iter()
-                            .map(|t| TermCoef {
-                                value: if std::ptr::eq(t, tc) { 0.0 } else { t.value },
-                                ..*t
-                            })
-                            .collect();
-                        self.line(omega, e, &at0, false)?
-                    } else {
-                        (h.clone(), Vec::new(), Vec::new(), Vec::new())
-                    };
-                    Some((
-                        step,
-                        hp.iter().zip(&h0).map(|(a, b)| (a - b) / step).collect(),
-                    ))
-                }
-                _ => None,
-            },
+        // Near the rigid limit the derivative is the forward difference over
+        // COMPLIANCE_FD_STEP v_ref from v = 0 (below 0 the floor makes H that of 0): there
+        // y^T G^+ y weighs the spring matrix's small reduced eigenvalues by their inverse, and
+        // the error of y (b - Z x, amplified by the norm of Z) along them swamped the column on
+        // the 5 mm joint with all points as inputs (4x the difference quotient;
+        // tests/suite/base_springs.rs).
+        let fd: Option<Vec<C64>> = match terms.iter().find(|t| near_rigid(t)) {
+            Some(tc) => {
+                let TermMap::Compliance { v_ref, .. } = self.maps[tc.index] else {
+                    unreachable!("near_rigid holds only for compliance terms")
+                };
+                let step = COMPLIANCE_FD_STEP * v_ref;
+                let shifted: Vec<TermCoef> = terms
+                    .iter()
+                    .map(|t| TermCoef {
+                        value: if std::ptr::eq(t, tc) {
+                            t.value.max(0.0) + step
+                        } else {
+                            t.value
+                        },
+                        ..*t
+                    })
+                    .collect();
+                let (hp, _, _, _) = self.line(omega, e, &shifted, false)?;
+                Some(hp.iter().zip(&h).map(|(a, b)| (a - b) / step).collect())
+            }
             None => None,
         };
         let mut y: Vec<Vec<C64>> = Vec::new();
-        if let (Some(zo), Some(tc), None) =
-            (&z_other, terms.iter().find(|t| is_compliance(t)), &fd_plus)
-        {
+        if let (Some(zo), Some(tc)) = (&z_other, terms.iter().find(|t| is_compliance(t))) {
             let TermMap::Compliance { v_ref, .. } = self.maps[tc.index] else {
                 unreachable!("filtered above")
             };
@@ -562,19 +552,17 @@ impl TermRom {
             // G^+ y_j of a compliance term, once per input.
             let gpy: Vec<Option<Vec<C64>>> = terms
                 .iter()
-                .map(
-                    |t| match (is_compliance(t), &fd_plus, &self.g_pinv[t.index]) {
-                        (true, None, Some(gp)) => Some(apply(gp, &y[slot[j]])),
-                        _ => None,
-                    },
-                )
+                .map(|t| match (is_compliance(t), &fd, &self.g_pinv[t.index]) {
+                    (true, None, Some(gp)) => Some(apply(gp, &y[slot[j]])),
+                    _ => None,
+                })
                 .collect();
             for i in 0..no {
                 let xi = &x[slot[i]];
                 dh[i * ni + jj] = -(0..n).map(|k| xi[k] * sx[k]).sum::<C64>();
                 sh[i * ni + jj] = (0..n).map(|k| xj[k] * r.sb_r[(k, i)]).sum();
                 for (k, t) in terms.iter().enumerate() {
-                    if let (true, Some((_, d))) = (is_compliance(t), &fd_plus) {
+                    if let (true, Some(d)) = (is_compliance(t), &fd) {
                         dt[k][i * ni + jj] = d[i * ni + jj];
                         continue;
                     }
