@@ -9,31 +9,6 @@ use rfmlab::common::C64;
 use rfmlab::fe::base::{base_spring_model, BaseSprings};
 use rfmlab::modes::{complex_modes, ModesParams};
 
-fn spec() -> rfmlab::fe::joint::JointSpec {
-    let study = rfmlab::study::parse_str(
-        &format!(
-            "[study]\nname = \"gen\"\n{}",
-            crate::runner_common::structure()
-        ),
-        std::path::Path::new("gen.toml"),
-    )
-    .unwrap();
-    rfmlab::study::build::joint_spec(&study.structure).unwrap()
-}
-
-/// The term ROMs' settings: the modulus range a study of the paper's adhesive covers (as in
-/// tests/suite/rom_terms.rs), two certificate moduli per axis.
-fn rom_params() -> rfmlab::rom::RomParams {
-    rfmlab::rom::RomParams {
-        n_cert_moduli_per_axis: 2,
-        range: rfmlab::rom::ModulusRange {
-            e_storage_pa: (2e6, 2e7),
-            e_loss_pa: (0.3e6, 8e6),
-        },
-        ..rfmlab::rom::RomParams::default()
-    }
-}
-
 /// Model 4 at the first mode of level 1 (method.md).
 const E_STAR: C64 = C64::new(6.974e6, 1.4827e6);
 
@@ -54,7 +29,7 @@ fn lambdas(model: &rfmlab::fe::StructuralModel) -> Vec<C64> {
 
 #[test]
 fn unit_spring_matrices_integrate_the_base_area() {
-    let b = base_spring_model(&spec()).unwrap();
+    let b = base_spring_model(&crate::runner_common::joint_spec()).unwrap();
     assert!((b.area_m2 - 0.050 * 0.020).abs() < 1e-15, "{}", b.area_m2);
     let n = b.free.n_dof();
     let sum_comp = |k: &rfmlab::fe::model::SpMat, comp: usize| -> f64 {
@@ -77,7 +52,7 @@ fn unit_spring_matrices_integrate_the_base_area() {
 
 #[test]
 fn stiff_springs_tend_to_the_fixed_base_and_softer_ones_lower_the_first_mode() {
-    let spec = spec();
+    let spec = crate::runner_common::joint_spec();
     let fixed = lambdas(&rfmlab::fe::joint::build_joint_model(&spec).unwrap().0);
     let b = base_spring_model(&spec).unwrap();
     let mut gaps = Vec::new();
@@ -134,21 +109,6 @@ fn the_acceptance_case_lowers_the_first_mode_by_3_percent() {
     );
 }
 
-/// Largest error relative to each FRF's peak.
-fn rel_err(a: &rfmlab::frf::Sweep, b: &rfmlab::frf::Sweep) -> f64 {
-    let blk = a.n_out * a.n_in;
-    (0..blk)
-        .map(|k| {
-            let peak = (0..a.n_lines)
-                .map(|l| b.h[l * blk + k].norm())
-                .fold(0.0, f64::max);
-            (0..a.n_lines)
-                .map(|l| (a.h[l * blk + k] - b.h[l * blk + k]).norm() / peak)
-                .fold(0.0, f64::max)
-        })
-        .fold(0.0, f64::max)
-}
-
 /// The loop's base-springs engine (rfmlab::runner::terms::base_springs_term: a term ROM over
 /// the free-base joint with a compliance term) against independent full models: the joint on
 /// springs as `rfmlab simulate` builds it (fe::base::joint_model_on_springs) at the
@@ -158,11 +118,11 @@ fn rel_err(a: &rfmlab::frf::Sweep, b: &rfmlab::frf::Sweep) -> f64 {
 fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
     use rfmlab::frf::{FrfEngine, FullModel, FullParams, TermCoef};
     use std::f64::consts::TAU;
-    let spec = spec();
+    let spec = crate::runner_common::joint_spec();
     let built = crate::runner_common::built_structure();
     let inputs = [built.excitation];
     let (model, term) = rfmlab::runner::terms::base_springs_term(&spec, 3.5).unwrap();
-    let params = rom_params();
+    let params = crate::rom_terms::params();
     let (rom, cert) =
         rfmlab::rom::terms::build_term_rom(&model, &inputs, &params, std::slice::from_ref(&term))
             .unwrap();
@@ -202,7 +162,7 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
         let full = FullModel::new(full_model, &inputs, FullParams::default()).unwrap();
         let reference = full.sweep(&w, &e, false).unwrap();
         let (got, _) = rom.sweep_terms(&w, &e, &coef(v), false).unwrap();
-        let err = rel_err(&got, &reference);
+        let err = crate::rom_terms::rel_err(&got, &reference);
         eprintln!("{name} (c = {v:.3e}): error {err:.3e}");
         assert!(err <= 1e-6, "{name}: {err:.3e}");
     }
@@ -212,7 +172,7 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
         .sweep(&w, &e, false)
         .unwrap();
     let (at_case, _) = rom.sweep_terms(&w, &e, &coef(c_case), false).unwrap();
-    assert!(rel_err(&at_case, &fixed) > 1e-2);
+    assert!(crate::rom_terms::rel_err(&at_case, &fixed) > 1e-2);
     // dH/dc: central difference at the case's size, forward difference at 0.
     let blk = at_case.n_out * at_case.n_in;
     let peak = at_case.h.iter().map(|z| z.norm()).fold(0.0, f64::max);
@@ -253,10 +213,10 @@ fn forward_model_column_of_the_base_springs_matches_differences() {
     use rfmlab::forward::{Effect, EffectTerm, Effects, ForwardModel};
     use rfmlab::rom::terms::{build_term_rom, WithTerms};
     use std::f64::consts::TAU;
-    let spec = spec();
+    let spec = crate::runner_common::joint_spec();
     let built = crate::runner_common::built_structure();
     let inputs = [0, 1, 2, 3];
-    let params = rom_params();
+    let params = crate::rom_terms::params();
     let (plain, _) = rfmlab::rom::build_rom(&built.model, &inputs, &params).unwrap();
     let (model, term) = rfmlab::runner::terms::base_springs_term(&spec, 3.5).unwrap();
     let (tr, cert) = build_term_rom(&model, &inputs, &params, std::slice::from_ref(&term)).unwrap();

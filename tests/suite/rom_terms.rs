@@ -22,18 +22,9 @@ fn joint() -> (
     rfmlab::fe::joint::JointSpec,
     rfmlab::study::build::BuiltModel,
 ) {
-    let built = crate::runner_common::built_structure();
-    let study = rfmlab::study::parse_str(
-        &format!(
-            "[study]\nname = \"gen\"\n{}",
-            crate::runner_common::structure()
-        ),
-        std::path::Path::new("gen.toml"),
-    )
-    .unwrap();
     (
-        rfmlab::study::build::joint_spec(&study.structure).unwrap(),
-        built,
+        crate::runner_common::joint_spec(),
+        crate::runner_common::built_structure(),
     )
 }
 
@@ -63,7 +54,8 @@ fn terms(spec: &rfmlab::fe::joint::JointSpec, k_b: &rfmlab::fe::model::SpMat) ->
     out
 }
 
-fn params() -> RomParams {
+/// The term ROMs' settings (also tests/suite/base_springs.rs).
+pub(crate) fn params() -> RomParams {
     RomParams {
         n_cert_moduli_per_axis: 2,
         // the range a study's ROM covers: the paper's adhesive (E0 about 5 MPa) widened 2x
@@ -77,7 +69,7 @@ fn params() -> RomParams {
 }
 
 /// Largest error relative to each FRF's peak, sweeps of the same layout.
-fn rel_err(a: &rfmlab::frf::Sweep, b: &rfmlab::frf::Sweep) -> f64 {
+pub(crate) fn rel_err(a: &rfmlab::frf::Sweep, b: &rfmlab::frf::Sweep) -> f64 {
     let blk = a.n_out * a.n_in;
     (0..blk)
         .map(|k| {
@@ -89,6 +81,29 @@ fn rel_err(a: &rfmlab::frf::Sweep, b: &rfmlab::frf::Sweep) -> f64 {
                 .fold(0.0, f64::max)
         })
         .fold(0.0, f64::max)
+}
+
+/// Largest |column - central difference over +-h of parameter k| of the forward model's
+/// exact values at `pp`, and the largest |column| entry.
+fn column_against_difference(
+    fm: &rfmlab::forward::ForwardModel<'_>,
+    pp: &[f64],
+    col: &[C64],
+    k: usize,
+    h: f64,
+) -> (f64, f64) {
+    let mut a = pp.to_vec();
+    a[k] += h;
+    let up = fm.exact(&a, false).unwrap().values;
+    a[k] -= 2.0 * h;
+    let dn = fm.exact(&a, false).unwrap().values;
+    let scale = col.iter().map(|z| z.norm()).fold(0.0, f64::max);
+    let dev = col
+        .iter()
+        .zip(up.iter().zip(&dn))
+        .map(|(c, (u, d))| (c - (u - d) / (2.0 * h)).norm())
+        .fold(0.0, f64::max);
+    (dev, scale)
 }
 
 #[test]
@@ -325,39 +340,11 @@ fn degraded_bond_effect_equals_the_full_model_with_the_strip_degraded() {
         .exact(&p, false)
         .unwrap()
         .values;
-    let err = (0..4)
-        .map(|k| {
-            let peak = reference
-                .iter()
-                .skip(k)
-                .step_by(4)
-                .map(|z| z.norm())
-                .fold(0.0, f64::max);
-            got.values
-                .iter()
-                .zip(&reference)
-                .skip(k)
-                .step_by(4)
-                .map(|(a, b)| (a - b).norm() / peak)
-                .fold(0.0, f64::max)
-        })
-        .fold(0.0, f64::max);
+    let err = crate::structural_effects::rel_err_per_channel(&got.values, &reference, 4);
     eprintln!("degraded bond + 12 g mass, forward model vs full: {err:.3e}");
     assert!(err <= 1e-6, "{err:.3e}");
     // Jacobian column of d against a central difference
-    let h = 1e-5;
-    let mut a = pp.clone();
-    a[3] += h;
-    let up = fm.exact(&a, false).unwrap().values;
-    a[3] -= 2.0 * h;
-    let dn = fm.exact(&a, false).unwrap().values;
-    let col = &got.jac[3];
-    let scale = col.iter().map(|z| z.norm()).fold(0.0, f64::max);
-    let dev = col
-        .iter()
-        .zip(up.iter().zip(&dn))
-        .map(|(c, (u, d))| (c - (u - d) / (2.0 * h)).norm())
-        .fold(0.0, f64::max);
+    let (dev, scale) = column_against_difference(&fm, &pp, &got.jac[3], 3, 1e-5);
     eprintln!("dH/dd: analytic vs FD {dev:.3e} of {scale:.3e}");
     assert!(
         scale > 0.0 && dev <= 1e-5 * scale,
@@ -488,24 +475,7 @@ fn adherend_damping_effect_equals_the_full_model_with_beam_damping() {
             .exact(&p, false)
             .unwrap()
             .values;
-        let peak_err = |x: &[C64]| {
-            (0..4)
-                .map(|k| {
-                    let peak = reference
-                        .iter()
-                        .skip(k)
-                        .step_by(4)
-                        .map(|z| z.norm())
-                        .fold(0.0, f64::max);
-                    x.iter()
-                        .zip(&reference)
-                        .skip(k)
-                        .step_by(4)
-                        .map(|(a, r)| (a - r).norm() / peak)
-                        .fold(0.0, f64::max)
-                })
-                .fold(0.0, f64::max)
-        };
+        let peak_err = |x: &[C64]| crate::structural_effects::rel_err_per_channel(x, &reference, 4);
         let err = peak_err(&got.values);
         // Without the damping the model is far from the reference: the check can fail.
         let mut p0 = pp.clone();
@@ -518,19 +488,7 @@ fn adherend_damping_effect_equals_the_full_model_with_beam_damping() {
             "b = {b}: damping changes the FRFs by {undamped:.3e} only"
         );
         // Jacobian column of g against a central difference
-        let h = 1e-6;
-        let mut a = pp.clone();
-        a[3] += h;
-        let up = fm.exact(&a, false).unwrap().values;
-        a[3] -= 2.0 * h;
-        let dn = fm.exact(&a, false).unwrap().values;
-        let col = &got.jac[3];
-        let scale = col.iter().map(|z| z.norm()).fold(0.0, f64::max);
-        let dev = col
-            .iter()
-            .zip(up.iter().zip(&dn))
-            .map(|(c, (u, d))| (c - (u - d) / (2.0 * h)).norm())
-            .fold(0.0, f64::max);
+        let (dev, scale) = column_against_difference(&fm, &pp, &got.jac[3], 3, 1e-6);
         eprintln!("dH/dg: analytic vs FD {dev:.3e} of {scale:.3e}");
         assert!(
             scale > 0.0 && dev <= 1e-5 * scale,

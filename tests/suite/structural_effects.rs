@@ -22,8 +22,9 @@ fn rel_err(a: &[C64], b: &[C64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// Worst over channels of the error relative to each channel's peak (`[line * 4 + k]`).
-fn rel_err_per_channel(a: &[C64], b: &[C64], n: usize) -> f64 {
+/// Worst over channels of the error relative to each channel's peak (`[line * n + k]`; also
+/// tests/suite/rom_terms.rs).
+pub(crate) fn rel_err_per_channel(a: &[C64], b: &[C64], n: usize) -> f64 {
     (0..n)
         .map(|k| {
             let x: Vec<C64> = a.iter().skip(k).step_by(n).copied().collect();
@@ -320,18 +321,9 @@ fn joint() -> (
     rfmlab::fe::joint::JointSpec,
     rfmlab::study::build::BuiltModel,
 ) {
-    let built = crate::runner_common::built_structure();
-    let study = rfmlab::study::parse_str(
-        &format!(
-            "[study]\nname = \"gen\"\n{}",
-            crate::runner_common::structure()
-        ),
-        std::path::Path::new("gen.toml"),
-    )
-    .unwrap();
     (
-        rfmlab::study::build::joint_spec(&study.structure).unwrap(),
-        built,
+        crate::runner_common::joint_spec(),
+        crate::runner_common::built_structure(),
     )
 }
 

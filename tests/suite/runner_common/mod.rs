@@ -57,6 +57,16 @@ pub fn built_structure() -> rfmlab::study::build::BuiltModel {
     rfmlab::study::build::build_model(&study.structure, "gen.toml").expect("model builds")
 }
 
+/// The joint specification of [`structure`] (what the mesher meshes: regions, the base face).
+pub fn joint_spec() -> rfmlab::fe::joint::JointSpec {
+    let study = rfmlab::study::parse_str(
+        &format!("[study]\nname = \"gen\"\n{}", structure()),
+        Path::new("gen.toml"),
+    )
+    .expect("structure parses");
+    rfmlab::study::build::joint_spec(&study.structure).expect("a mesher structure")
+}
+
 /// Frequency lines of the test data (Hz).
 pub fn lines_hz(lo: f64, hi: f64, step: f64) -> Vec<f64> {
     let n = ((hi - lo) / step).round() as usize;
