@@ -19,6 +19,7 @@
 pub mod basis;
 pub mod cache;
 pub mod certify;
+pub mod compress;
 pub(crate) mod dense;
 pub mod pencil;
 pub mod reduced;
@@ -103,6 +104,10 @@ pub struct RomParams {
     pub n_cert_lines: usize,
     /// How the certificate's full-model FRFs are computed. Default [`Reference::default`].
     pub reference: Reference,
+    /// ROMs with terms only ([`terms::build_term_rom`]): the second-stage compression of the
+    /// certified basis ([`compress`]); None keeps the enriched basis. Default
+    /// [`compress::CompressParams::default`].
+    pub compress: Option<compress::CompressParams>,
 }
 
 /// The certificate's full-model solver.
@@ -148,6 +153,7 @@ impl Default for RomParams {
             n_cert_moduli_per_axis: 3,
             n_cert_lines: 25,
             reference: Reference::default(),
+            compress: Some(compress::CompressParams::default()),
         }
     }
 }

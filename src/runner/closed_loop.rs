@@ -257,6 +257,16 @@ pub fn diagnose_into(
         &super::terms::with_declared(study, &bonds),
         super::terms::band_of(&levels),
     )?;
+    if let Some((_, c)) = &term_rom {
+        params.progress.say(&format!(
+            "term ROM: n_r {} (enriched {}), certificate {:.2e} of the peak{}, {:.0} s",
+            c.basis_size,
+            c.enriched_basis_size,
+            c.max_rel_error,
+            if c.passed { "" } else { " (NOT certified)" },
+            c.seconds_basis + c.seconds_certify + c.seconds_compress
+        ));
+    }
     let wrapped = match &term_rom {
         Some((t, _)) => Some(
             crate::rom::WithTerms::new(engine, t).map_err(|e| RunError::Engine(e.to_string()))?,
@@ -388,7 +398,12 @@ pub fn diagnose_into(
             )?;
         }
     }
-    let md = markdown(&study.name, &name, &results);
+    let md = markdown(
+        &study.name,
+        &name,
+        &results,
+        term_rom.as_ref().map(|(_, c)| c),
+    );
     dir.write_bytes("closed_loop.md", md.as_bytes())
         .map_err(out_err)?;
     Ok(DiagnoseSummary {
@@ -733,9 +748,33 @@ fn closed_loop_table(results: &[LevelResult]) -> Result<Table, RunError> {
     Ok(t)
 }
 
-fn markdown(study: &str, model: &str, results: &[LevelResult]) -> String {
+fn markdown(
+    study: &str,
+    model: &str,
+    results: &[LevelResult],
+    term: Option<&crate::rom::TermCertificate>,
+) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Closed loop: {study}, {model}\n");
+    if let Some(c) = term {
+        let _ = writeln!(
+            s,
+            "Effects with matrices of their own ({}) are evaluated by a reduced model with their terms: {} basis vectors ({} before the POD compression), {} against the full model with each term on to {:.2e} of each FRF's peak ({} moduli x {} lines per case).\n",
+            c.per_case
+                .iter()
+                .map(|(n, _, _)| n.as_str())
+                .collect::<std::collections::BTreeSet<_>>()
+                .into_iter()
+                .collect::<Vec<_>>()
+                .join(", "),
+            c.basis_size,
+            c.enriched_basis_size,
+            if c.passed { "certified" } else { "NOT certified" },
+            c.max_rel_error,
+            c.n_moduli,
+            c.n_lines
+        );
+    }
     for (level, _, ids, res, truth) in results {
         let _ = writeln!(s, "## Level {level}\n\n**{}**\n", res.conclusion);
         let _ = writeln!(

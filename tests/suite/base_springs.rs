@@ -127,8 +127,10 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
         rfmlab::rom::terms::build_term_rom(&model, &inputs, &params, std::slice::from_ref(&term))
             .unwrap();
     eprintln!(
-        "base term ROM: n_r {}, certificate {:.3e} {:?}, basis {:.1} s, certify {:.1} s",
+        "base term ROM: n_r {} (enriched {}, compression error {:?}), certificate {:.3e} {:?}, basis {:.1} s, certify {:.1} s",
         cert.basis_size,
+        cert.enriched_basis_size,
+        cert.compression_error,
         cert.max_rel_error,
         cert.per_case,
         cert.seconds_basis,

@@ -115,8 +115,10 @@ fn term_rom_is_certified_against_the_full_model_with_the_term_on() {
     let t0 = std::time::Instant::now();
     let (rom, cert) = build_term_rom(model, &inputs, &params(), &ts).unwrap();
     eprintln!(
-        "term ROM: n_r {} (levels {}), certificate {:.3e} ({:?}), basis {:.1} s, certify {:.1} s, total {:.1} s",
+        "term ROM: n_r {} (enriched {}, compression error {:?}; levels {}), certificate {:.3e} ({:?}), basis {:.1} s, certify {:.1} s, total {:.1} s",
         cert.basis_size,
+        cert.enriched_basis_size,
+        cert.compression_error,
         cert.levels,
         cert.max_rel_error,
         cert.per_case,
@@ -126,6 +128,12 @@ fn term_rom_is_certified_against_the_full_model_with_the_term_on() {
     );
     assert!(cert.passed && cert.max_rel_error <= 1e-6);
     assert_eq!(cert.per_case.len(), 7);
+    // The POD compression (src/rom/compress.rs) was kept: the sweeps and the checks below
+    // are the compressed ROM's.
+    assert!(
+        cert.basis_size < cert.enriched_basis_size
+            && cert.compression_error.is_some_and(|e| e <= 1e-6)
+    );
     // Independent check off the certificate's grid, full model with the term on.
     let w: Vec<f64> = (0..60).map(|k| TAU * (3.3 + 8.1 * k as f64)).collect();
     let e = vec![C64::new(4.1e6, 1.3e6); w.len()];
