@@ -697,6 +697,15 @@ pub fn run_closed_loop_with_laws<'a>(
             let k = np_now;
             let size = r.map_physical[k];
             let sd = r.laplace.sd_physical()[k];
+            say(format!(
+                "round {}: {} refitted to {size:.4e} +- {sd:.1e} {} ({} L-BFGS iterations, {} Newton steps, {} gradient evaluations in the search)",
+                round + 1,
+                c.effect.name(),
+                c.effect.unit(),
+                r.starts[r.best].iterations,
+                r.polish_steps,
+                r.evaluations
+            ));
             // Laplace evidences when both Hessians are positive definite; otherwise (a fit at
             // a prior bound) the log-posterior gain at the MAPs less the BIC cost of one
             // parameter, (1/2) ln(2 N).

@@ -206,31 +206,27 @@ pub(crate) fn pod_basis(
                 cols[j - k0][i]
             }
         });
-        let svd = w
-            .thin_svd()
-            .map_err(|e| RomError::Factorization(format!("SVD of the snapshots: {e:?}")))?;
-        let sig: Vec<f64> = svd.S().column_vector().iter().copied().collect();
-        let smax = sig.first().copied().unwrap_or(0.0);
         // Keep well below the final tolerance while accumulating.
-        let keep = sig
-            .iter()
-            .take_while(|&&s| s > 1e-3 * sv_tol * smax)
-            .count();
-        let u = svd.U();
-        acc = Mat::from_fn(n, keep, |i, j| u[(i, j)] * sig[j]);
+        let (u, sig) = leading(&w, 1e-3 * sv_tol)?;
+        acc = Mat::from_fn(n, u.ncols(), |i, j| u[(i, j)] * sig[j]);
     }
-    let svd = acc
+    Ok(leading(&acc, sv_tol)?.0)
+}
+
+/// The left singular vectors of `w` (and their singular values) above `rel` times the
+/// largest (at least one).
+fn leading(w: &Mat<f64>, rel: f64) -> Result<(Mat<f64>, Vec<f64>), RomError> {
+    let svd = w
         .thin_svd()
         .map_err(|e| RomError::Factorization(format!("SVD of the snapshots: {e:?}")))?;
     let sig: Vec<f64> = svd.S().column_vector().iter().copied().collect();
     let smax = sig.first().copied().unwrap_or(0.0);
-    let k = sig
-        .iter()
-        .take_while(|&&s| s > sv_tol * smax)
-        .count()
-        .max(1);
+    let k = sig.iter().take_while(|&&s| s > rel * smax).count().max(1);
     let u = svd.U();
-    Ok(Mat::from_fn(n, k, |i, j| u[(i, j)]))
+    Ok((
+        Mat::from_fn(w.nrows(), k, |i, j| u[(i, j)]),
+        sig[..k].to_vec(),
+    ))
 }
 
 /// Largest |H_a - H_b| at `check` relative to the largest |H_b| of each FRF over them.

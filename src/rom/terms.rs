@@ -310,14 +310,7 @@ pub fn build_term_rom(
         };
         seconds_basis += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let mut worst = 0.0f64;
-        let mut per_case = Vec::new();
-        for (k, v, refh) in &cases {
-            let coef = [terms[*k].coef(*k, *v)];
-            let err = case_error(&rom, &coef, &moduli, &lines, refh)?;
-            worst = worst.max(err);
-            per_case.push((terms[*k].name.clone(), *v, err));
-        }
+        let (worst, per_case) = certify_cases(&rom, terms, &cases, &moduli, &lines)?;
         seconds_certify += t.elapsed().as_secs_f64();
         best = Some((rom, worst, per_case));
         if worst <= params.tolerance {
@@ -355,14 +348,7 @@ pub fn build_term_rom(
             let e_check = compress::check_error(&small, &rom, &check)?;
             compression_error = Some(e_check);
             if e_check <= params.tolerance {
-                let mut worst = 0.0f64;
-                let mut cases_small = Vec::new();
-                for (k, v, refh) in &cases {
-                    let coef = [terms[*k].coef(*k, *v)];
-                    let e = case_error(&small, &coef, &moduli, &lines, refh)?;
-                    worst = worst.max(e);
-                    cases_small.push((terms[*k].name.clone(), *v, e));
-                }
+                let (worst, cases_small) = certify_cases(&small, terms, &cases, &moduli, &lines)?;
                 if worst <= params.tolerance {
                     rom = small;
                     err = worst;
@@ -395,6 +381,25 @@ pub fn build_term_rom(
         });
     }
     Ok((rom, cert))
+}
+
+/// The certificate of `rom` over every (term, value) case: the largest error and each case's.
+fn certify_cases(
+    rom: &TermRom,
+    terms: &[TermSpec],
+    cases: &[(usize, f64, CaseReference)],
+    moduli: &[C64],
+    lines: &[f64],
+) -> Result<(f64, CaseErrors), RomError> {
+    let mut worst = 0.0f64;
+    let mut per_case = Vec::new();
+    for (k, v, refh) in cases {
+        let coef = [terms[*k].coef(*k, *v)];
+        let err = case_error(rom, &coef, moduli, lines, refh)?;
+        worst = worst.max(err);
+        per_case.push((terms[*k].name.clone(), *v, err));
+    }
+    Ok((worst, per_case))
 }
 
 /// Largest error relative to the peak of each FRF of one (term, value) case.
