@@ -387,13 +387,18 @@ impl<'a> BasisBuilder<'a> {
     /// V^T A V for a sparse A that is not one of the model matrices (symmetrised).
     pub(crate) fn project(&self, a: &crate::fe::model::SpMat) -> Mat<f64> {
         let av = Csr::from_csc(a).mul(self.v.as_ref());
-        let out = tn(self.v.as_ref(), av.as_ref());
-        let r = out.nrows();
-        Mat::from_fn(r, r, |i, j| 0.5 * (out[(i, j)] + out[(j, i)]))
+        symmetric_part(&tn(self.v.as_ref(), av.as_ref()))
     }
 
     /// V^T X for a dense X (n x k).
     pub(crate) fn project_vecs(&self, x: &Mat<f64>) -> Mat<f64> {
         tn(self.v.as_ref(), x.as_ref())
     }
+}
+
+/// `(A + A^T) / 2` of a square matrix (projections that must be exactly symmetric: the
+/// line solves read rows from columns).
+pub(crate) fn symmetric_part(a: &Mat<f64>) -> Mat<f64> {
+    let n = a.nrows();
+    Mat::from_fn(n, n, |i, j| 0.5 * (a[(i, j)] + a[(j, i)]))
 }

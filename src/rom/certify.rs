@@ -194,24 +194,32 @@ pub(crate) fn certificate_error(
     lines: &[f64],
     reference: &[Vec<Vec<C64>>],
 ) -> Result<f64, RomError> {
-    let blk = rom.n_out * rom.inputs.len();
     let mut worst = 0.0f64;
     for (m, &e) in moduli.iter().enumerate() {
         let sw = rom
             .lu_sweep(lines, &vec![e; lines.len()], false)
             .map_err(|x| RomError::Factorization(x.to_string()))?;
-        for k in 0..blk {
-            let peak = (0..lines.len())
-                .map(|l| reference[m][l][k].norm())
-                .fold(0.0, f64::max);
-            let err = (0..lines.len())
-                .map(|l| (sw.h[l * blk + k] - reference[m][l][k]).norm())
-                .fold(0.0, f64::max);
-            let rel = if peak > 0.0 { err / peak } else { err };
-            worst = worst.max(if rel.is_nan() { f64::INFINITY } else { rel });
-        }
+        worst = worst.max(worst_rel_to_peak(&sw.h, &reference[m]));
     }
     Ok(worst)
+}
+
+/// Largest |got - want| of each FRF relative to its largest |want| over the lines, the worst
+/// FRF's: `got` flat `[line * blk + k]`, `want` `[line][k]` (a NaN counts as infinite).
+pub(crate) fn worst_rel_to_peak(got: &[C64], want: &[Vec<C64>]) -> f64 {
+    let blk = want.first().map_or(0, |w| w.len());
+    let mut worst = 0.0f64;
+    for k in 0..blk {
+        let peak = want.iter().map(|w| w[k].norm()).fold(0.0, f64::max);
+        let err = want
+            .iter()
+            .enumerate()
+            .map(|(l, w)| (got[l * blk + k] - w[k]).norm())
+            .fold(0.0, f64::max);
+        let rel = if peak > 0.0 { err / peak } else { err };
+        worst = worst.max(if rel.is_nan() { f64::INFINITY } else { rel });
+    }
+    worst
 }
 
 /// Enrichment level `level` (0 first): 2^level (n0 - 1) + 1 log-spaced E_ref over the range,

@@ -24,7 +24,6 @@
 //! re-certified against the full model like the enriched one ([`super::terms::build_term_rom`]);
 //! when either check fails, the enriched ROM is kept.
 
-use super::dense::DenseLu;
 use super::terms::{TermRom, TermSpec};
 use super::{ModulusRange, RomError};
 use crate::common::C64;
@@ -152,22 +151,13 @@ pub(crate) fn samples(
 
 /// The reduced solutions `Z_r^-1 b_o` of every output `o` at one sample.
 fn solutions(rom: &TermRom, s: &Sample) -> Result<Vec<Vec<C64>>, RomError> {
-    let n = rom.rom.n_r;
     let z = rom.assemble(s.omega, s.modulus, &s.terms, false).0;
-    let lu = DenseLu::factor_symmetric(n, z).ok_or_else(|| {
-        RomError::Factorization(format!(
-            "reduced system singular at {:.3} Hz, E* {}",
-            s.omega / std::f64::consts::TAU,
-            s.modulus
-        ))
-    })?;
-    Ok((0..rom.rom.n_out)
-        .map(|c| {
-            let mut b: Vec<C64> = (0..n).map(|k| C64::new(rom.rom.b_r[(k, c)], 0.0)).collect();
-            lu.solve(&mut b);
-            b
-        })
-        .collect())
+    // (all outputs, solved in output order)
+    let (x, _, _) = rom
+        .rom
+        .solve_line(z, s.omega, s.modulus, true)
+        .map_err(|e| RomError::Factorization(e.to_string()))?;
+    Ok(x)
 }
 
 /// The orthonormal basis `U_k` (n_r x k) of the normalised solutions at `train`.
@@ -240,36 +230,12 @@ pub(crate) fn check_error(a: &TermRom, b: &TermRom, check: &[Sample]) -> Result<
             })
             .collect()
     };
-    let (ha, hb) = (hs(a)?, hs(b)?);
-    let blk = ha.first().map_or(0, |h| h.len());
-    let mut worst = 0.0f64;
-    for k in 0..blk {
-        let peak = hb.iter().map(|h| h[k].norm()).fold(0.0, f64::max);
-        let err = ha
-            .iter()
-            .zip(&hb)
-            .map(|(x, y)| (x[k] - y[k]).norm())
-            .fold(0.0, f64::max);
-        let rel = if peak > 0.0 { err / peak } else { err };
-        worst = worst.max(if rel.is_nan() { f64::INFINITY } else { rel });
-    }
-    Ok(worst)
+    Ok(super::certify::worst_rel_to_peak(&hs(a)?.concat(), &hs(b)?))
 }
 
 /// `U^T A U` of a dense symmetric matrix.
 fn congruence(a: &Mat<f64>, u: &Mat<f64>) -> Mat<f64> {
-    let au = a * u;
-    let mut r = u.transpose() * &au;
-    // exact symmetry (the line solve reads rows from columns)
-    let k = r.nrows();
-    for i in 0..k {
-        for j in 0..i {
-            let s = 0.5 * (r[(i, j)] + r[(j, i)]);
-            r[(i, j)] = s;
-            r[(j, i)] = s;
-        }
-    }
-    r
+    super::basis::symmetric_part(&(u.transpose() * (a * u)))
 }
 
 impl TermRom {

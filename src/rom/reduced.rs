@@ -32,6 +32,10 @@ pub struct ReducedModel {
     pub(crate) m_axes_r: Option<Box<[Mat<f64>; 3]>>,
 }
 
+/// A line's solved loads, each output's slot among them and `H = B_r^T X`
+/// ([`ReducedModel::solve_line`]).
+pub(crate) type LineSolution = (Vec<Vec<C64>>, Vec<usize>, Vec<C64>);
+
 impl ReducedModel {
     /// The same reduced model with fewer inputs (`inputs` must be among its inputs): the basis
     /// and certificate are unchanged, a sweep then computes only those columns (the
@@ -195,6 +199,47 @@ impl ReducedModel {
         z
     }
 
+    /// Factor `z` (the reduced system of line `omega` at modulus `e`, complex symmetric,
+    /// row-major) and solve for the loads the line needs: the inputs' columns of B_r, and every
+    /// output's when `all_outputs` (derivatives). Returns the solutions, each output's slot
+    /// among them (`usize::MAX` when not solved) and `H = B_r^T X` (n_out x n_in row-major).
+    pub(crate) fn solve_line(
+        &self,
+        z: Vec<C64>,
+        omega: f64,
+        e: C64,
+        all_outputs: bool,
+    ) -> Result<LineSolution, FrfError> {
+        let n = self.n_r;
+        let no = self.n_out;
+        let ni = self.inputs.len();
+        let lu = DenseLu::factor_symmetric(n, z).ok_or(FrfError::Singular {
+            freq_hz: omega / std::f64::consts::TAU,
+            modulus: e,
+        })?;
+        let cols: Vec<usize> = if all_outputs {
+            (0..no).collect()
+        } else {
+            self.inputs.clone()
+        };
+        let mut x: Vec<Vec<C64>> = Vec::with_capacity(cols.len());
+        let mut slot = vec![usize::MAX; no];
+        for &c in &cols {
+            let mut b: Vec<C64> = (0..n).map(|k| C64::new(self.b_r[(k, c)], 0.0)).collect();
+            lu.solve(&mut b);
+            slot[c] = x.len();
+            x.push(b);
+        }
+        let mut h = vec![C64::new(0.0, 0.0); no * ni];
+        for i in 0..no {
+            for (jj, &j) in self.inputs.iter().enumerate() {
+                let xj = &x[slot[j]];
+                h[i * ni + jj] = (0..n).map(|k| xj[k] * self.b_r[(k, i)]).sum();
+            }
+        }
+        Ok((x, slot, h))
+    }
+
     /// Per-line results (h, dh, sh), each n_out x n_in row-major.
     pub(crate) fn lu_line(
         &self,
@@ -205,33 +250,9 @@ impl ReducedModel {
         let n = self.n_r;
         let no = self.n_out;
         let ni = self.inputs.len();
-        let lu = DenseLu::factor_symmetric(n, self.z_r(omega, e)).ok_or(FrfError::Singular {
-            freq_hz: omega / (2.0 * std::f64::consts::PI),
-            modulus: e,
-        })?;
-        // columns needed: the inputs, and all outputs when derivatives are requested
-        let cols: Vec<usize> = if with_derivatives {
-            (0..no).collect()
-        } else {
-            self.inputs.clone()
-        };
-        let mut x: Vec<Vec<C64>> = Vec::with_capacity(no);
-        let mut slot = vec![usize::MAX; no];
-        for &c in &cols {
-            let mut b: Vec<C64> = (0..n).map(|k| C64::new(self.b_r[(k, c)], 0.0)).collect();
-            lu.solve(&mut b);
-            slot[c] = x.len();
-            x.push(b);
-        }
-        let mut h = vec![C64::new(0.0, 0.0); no * ni];
+        let (x, slot, h) = self.solve_line(self.z_r(omega, e), omega, e, with_derivatives)?;
         let mut dh = Vec::new();
         let mut sh = Vec::new();
-        for i in 0..no {
-            for (jj, &j) in self.inputs.iter().enumerate() {
-                let xj = &x[slot[j]];
-                h[i * ni + jj] = (0..n).map(|k| xj[k] * self.b_r[(k, i)]).sum();
-            }
-        }
         if with_derivatives {
             dh = vec![C64::new(0.0, 0.0); no * ni];
             sh = vec![C64::new(0.0, 0.0); no * ni];

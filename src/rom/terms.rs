@@ -21,9 +21,10 @@
 //! `sh` (b_i^T S x_j, the RFM fill) is that of the effect-free S.
 
 use super::basis::BasisBuilder;
-use super::certify::{enrich, reduce, reference, validate, validation_lines, validation_moduli};
+use super::certify::{
+    enrich, reduce, reference, validate, validation_lines, validation_moduli, worst_rel_to_peak,
+};
 use super::compress;
-use super::dense::DenseLu;
 use super::reduced::ReducedModel;
 use super::sparse::ModelPattern;
 use super::{RomError, RomParams};
@@ -160,7 +161,7 @@ pub struct TermRom {
 /// within 0.3 % of a difference quotient, at 1e-11 m^3/N within 1e-7).
 fn psd_pinv(g: &Mat<f64>) -> Option<Mat<f64>> {
     let n = g.nrows();
-    let sym = Mat::from_fn(n, n, |i, j| 0.5 * (g[(i, j)] + g[(j, i)]));
+    let sym = super::basis::symmetric_part(g);
     let evd = sym.self_adjoint_eigen(faer::Side::Lower).ok()?;
     let lmax = (0..n).map(|i| evd.S()[i].abs()).fold(0.0, f64::max);
     let u = evd.U();
@@ -330,7 +331,7 @@ pub fn build_term_rom(
     // before).
     let compliance = terms
         .iter()
-        .any(|t| matches!(t.map, TermMap::Compliance { .. }));
+        .any(|s| matches!(s.map, TermMap::Compliance { .. }));
     if let (Some(cp), true, false) = (params.compress, err <= params.tolerance, compliance) {
         // See super::compress: kept only when it agrees with the enriched ROM on samples of
         // its own and passes the same certificate.
@@ -410,22 +411,12 @@ fn case_error(
     lines: &[f64],
     refh: &[Vec<Vec<C64>>],
 ) -> Result<f64, RomError> {
-    let blk = rom.rom.n_out * rom.rom.inputs.len();
     let mut worst = 0.0f64;
     for (m, &e) in moduli.iter().enumerate() {
         let (sw, _) = rom
             .sweep_terms_impl(lines, &vec![e; lines.len()], coef, false)
             .map_err(|x| RomError::Factorization(x.to_string()))?;
-        for k in 0..blk {
-            let peak = (0..lines.len())
-                .map(|l| refh[m][l][k].norm())
-                .fold(0.0, f64::max);
-            let err = (0..lines.len())
-                .map(|l| (sw.h[l * blk + k] - refh[m][l][k]).norm())
-                .fold(0.0, f64::max);
-            let rel = if peak > 0.0 { err / peak } else { err };
-            worst = worst.max(if rel.is_nan() { f64::INFINITY } else { rel });
-        }
+        worst = worst.max(worst_rel_to_peak(&sw.h, &refh[m]));
     }
     Ok(worst)
 }
@@ -458,6 +449,11 @@ impl TermRom {
         Ok(())
     }
 
+    /// Whether `t` is a compliance term ([`TermMap::Compliance`]).
+    fn is_compliance(&self, t: &TermCoef) -> bool {
+        matches!(self.maps[t.index], TermMap::Compliance { .. })
+    }
+
     /// `Z_r(w, E*) + sum_k c_k G_k,r` (row-major, complex symmetric) and, when `other`, the
     /// same without the compliance terms (`z_other`, for their derivative). Linear terms are
     /// added first.
@@ -480,7 +476,7 @@ impl TermRom {
                 }
             }
         };
-        let is_compliance = |t: &TermCoef| matches!(self.maps[t.index], TermMap::Compliance { .. });
+        let is_compliance = |t: &TermCoef| self.is_compliance(t);
         let mut z = self.rom.z_r(omega, e);
         for t in terms.iter().filter(|t| !is_compliance(t)) {
             add(&mut z, t);
@@ -515,7 +511,7 @@ impl TermRom {
         let n = r.n_r;
         let no = r.n_out;
         let ni = r.inputs.len();
-        let is_compliance = |t: &TermCoef| matches!(self.maps[t.index], TermMap::Compliance { .. });
+        let is_compliance = |t: &TermCoef| self.is_compliance(t);
         // Near the rigid limit (v below COMPLIANCE_FD_BELOW v_ref) a compliance term's
         // derivative is a forward difference (below), which needs no `z_other`.
         let near_rigid = |t: &TermCoef| match self.maps[t.index] {
@@ -528,31 +524,8 @@ impl TermRom {
             terms,
             derivs && terms.iter().any(|t| is_compliance(t) && !near_rigid(t)),
         );
-        let lu = DenseLu::factor_symmetric(n, z).ok_or(FrfError::Singular {
-            freq_hz: omega / std::f64::consts::TAU,
-            modulus: e,
-        })?;
-        let cols: Vec<usize> = if derivs {
-            (0..no).collect()
-        } else {
-            r.inputs.clone()
-        };
-        let mut x: Vec<Vec<C64>> = Vec::with_capacity(cols.len());
-        let mut slot = vec![usize::MAX; no];
-        for &c in &cols {
-            let mut b: Vec<C64> = (0..n).map(|k| C64::new(r.b_r[(k, c)], 0.0)).collect();
-            lu.solve(&mut b);
-            slot[c] = x.len();
-            x.push(b);
-        }
+        let (x, slot, h) = r.solve_line(z, omega, e, derivs)?;
         let zero = C64::new(0.0, 0.0);
-        let mut h = vec![zero; no * ni];
-        for i in 0..no {
-            for (jj, &j) in r.inputs.iter().enumerate() {
-                let xj = &x[slot[j]];
-                h[i * ni + jj] = (0..n).map(|k| xj[k] * r.b_r[(k, i)]).sum();
-            }
-        }
         if !derivs {
             return Ok((h, Vec::new(), Vec::new(), Vec::new()));
         }
@@ -622,7 +595,8 @@ impl TermRom {
             };
             let g = &self.g_r[tc.index];
             let oc = tc.offset + tc.per_modulus * e;
-            for &c in &cols {
+            // (with derivatives every output is solved, in order: slot[c] = c)
+            for c in 0..no {
                 let xc = &x[slot[c]];
                 let gx = apply(g, xc);
                 let yc: Vec<C64> = (0..n)

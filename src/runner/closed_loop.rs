@@ -404,7 +404,7 @@ pub fn diagnose_into(
         &study.name,
         &name,
         &results,
-        term_rom.as_ref().map(|(_, c)| c),
+        term_rom.as_ref().map(|(t, c)| (t.names.as_slice(), c)),
     );
     dir.write_bytes("closed_loop.md", md.as_bytes())
         .map_err(out_err)?;
@@ -754,21 +754,15 @@ fn markdown(
     study: &str,
     model: &str,
     results: &[LevelResult],
-    term: Option<&crate::rom::TermCertificate>,
+    term: Option<(&[String], &crate::rom::TermCertificate)>,
 ) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Closed loop: {study}, {model}\n");
-    if let Some(c) = term {
+    if let Some((names, c)) = term {
         let _ = writeln!(
             s,
             "Effects with matrices of their own ({}) are evaluated by a reduced model with their terms: {} basis vectors ({} before the POD compression), {} against the full model with each term on to {:.2e} of each FRF's peak ({} moduli x {} lines per case).\n",
-            c.per_case
-                .iter()
-                .map(|(n, _, _)| n.as_str())
-                .collect::<std::collections::BTreeSet<_>>()
-                .into_iter()
-                .collect::<Vec<_>>()
-                .join(", "),
+            names.join(", "),
             c.basis_size,
             c.enriched_basis_size,
             if c.passed { "certified" } else { "NOT certified" },
