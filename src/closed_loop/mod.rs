@@ -34,7 +34,9 @@ use crate::forward::{Effect, EffectTerm, Effects, ForwardError};
 use crate::inference::likelihood::{FrfLikelihood, FrfPosterior};
 
 pub mod start;
-use crate::inference::map::{chol_solve, cholesky, find_map, MapError, MapParams, MapResult};
+use crate::inference::map::{
+    chol_solve, cholesky, find_map, MapError, MapParams, MapResult, SearchMethod,
+};
 use crate::inference::prior::{erfc, Prior};
 use crate::material::ConstitutiveModel;
 
@@ -548,13 +550,17 @@ pub fn run_closed_loop_with_laws<'a>(
     let mut law_priors = post.priors[..nl].to_vec();
     let noise_priors = post.priors[nl..].to_vec();
     let none = &|| {};
-    let refit_map = if params.warm_refits {
-        MapParams {
-            n_starts: 0,
-            ..params.map.clone()
-        }
-    } else {
-        params.map.clone()
+    // Refits search by Gauss-Newton: the effect's data fit is a least-squares valley, narrow
+    // and correlated with the law, where L-BFGS spent hundreds of evaluations (the degraded
+    // bond's refit ran for most of an hour).
+    let refit_map = MapParams {
+        n_starts: if params.warm_refits {
+            0
+        } else {
+            params.map.n_starts
+        },
+        search: SearchMethod::GaussNewton,
+        ..params.map.clone()
     };
     let say = |m: String| params.progress.say(&m);
     say("MAP of the starting model".into());

@@ -43,7 +43,7 @@
 //! [`super::prior`]).
 
 use super::prior::{log_density_all, log_jacobian_all, quantile_all, to_physical_all, Prior};
-use super::{DensityError, Posterior};
+use super::{Curvature, DensityError, Posterior};
 use crate::common::C64;
 use crate::forward::{ForwardError, ForwardModel};
 use rand::rngs::StdRng;
@@ -371,6 +371,17 @@ pub struct FrfLikelihood<'a> {
     noise_names: Vec<String>,
     /// Correlation of the channels' errors per line (`None`: independent channels).
     correlation: Option<ChannelCorrelation>,
+}
+
+/// What [`FrfLikelihood::information`] returns.
+#[derive(Clone, Debug, Default)]
+pub struct Information {
+    /// `log L`.
+    pub value: f64,
+    /// Its gradient in (law parameters, noise coordinates).
+    pub grad: Vec<f64>,
+    /// The Gauss-Newton curvature of `-log L` (row-major, same order).
+    pub hess: Vec<f64>,
 }
 
 /// What one evaluation returns.
@@ -707,6 +718,113 @@ impl<'a> FrfLikelihood<'a> {
         (LogLik { value, grad: g }, cot)
     }
 
+    /// The log likelihood at `(p, noise)`, its gradient in `(p, noise)` and a Gauss-Newton
+    /// curvature: an approximation of the Hessian of `-log L`, row-major over `(p, noise)`.
+    ///
+    /// The law's block is the expected information of the residuals through the forward
+    /// model's Jacobian `J = dE[H1]/dp`: `sum_o w_o Re(conj(J_io) J_jo)` with the weight
+    /// `w_o = -2 (d log p / d q_o) / v_o` (`1 / v_o` for Gaussian errors, the IRLS weight for
+    /// Student-t); with correlated channels the columns are whitened line by line,
+    /// `Re((L_l^-1 D_l^-1/2 J_i)^H (L_l^-1 D_l^-1/2 J_j))`. The noise block is a central
+    /// difference of the whole gradient in the noise coordinates with the prediction held (no
+    /// forward solve), so the noise rows are exact. The law's block is the Hessian where the
+    /// residuals are noise (it drops the residuals' second-order term), and positive
+    /// semi-definite everywhere, which is what a Gauss-Newton search needs.
+    pub fn information(&self, p: &[f64], noise: &[f64]) -> Result<Information, ForwardError> {
+        let pred = self.forward.predict(p, true)?;
+        let (ll, cot) = self.eval_values(&pred.values, noise, true);
+        let np = p.len();
+        let nn = self.n_noise();
+        let d = np + nn;
+        let mut grad: Vec<f64> = pred
+            .jac
+            .iter()
+            .map(|col| col.iter().zip(&cot).map(|(j, c)| (c.conj() * j).re).sum())
+            .collect();
+        grad.extend_from_slice(&ll.grad);
+        let mut hess = vec![0.0; d * d];
+        let v = self.variances(noise);
+        let n = self.data.n_out;
+        let mut add = |cols: &[C64]| {
+            // cols: the np whitened columns of one observation (or one line's channel).
+            for i in 0..np {
+                for j in 0..=i {
+                    hess[i * d + j] += (cols[i].conj() * cols[j]).re;
+                }
+            }
+        };
+        match &self.correlation {
+            Some(c) => {
+                let mut cols = vec![vec![C64::new(0.0, 0.0); np]; n];
+                for l in 0..self.data.freq_hz.len() {
+                    for (i, col) in pred.jac.iter().enumerate() {
+                        let s: Vec<C64> = (0..n)
+                            .map(|k| col[l * n + k] / v[l * n + k].sqrt())
+                            .collect();
+                        let (w, _) = c.solve(l, &s);
+                        for k in 0..n {
+                            cols[k][i] = w[k];
+                        }
+                    }
+                    cols.iter().for_each(|c| add(c));
+                }
+            }
+            None => {
+                let nu = self.nu_of(noise);
+                let mut cols = vec![C64::new(0.0, 0.0); np];
+                for (o, (h, x)) in pred.values.iter().zip(&self.data.values).enumerate() {
+                    let (_, dq, _) = self.terms(nu, h - x, v[o]);
+                    let w = (-2.0 * dq / v[o]).max(0.0).sqrt();
+                    for (i, col) in pred.jac.iter().enumerate() {
+                        cols[i] = col[o] * w;
+                    }
+                    add(&cols);
+                }
+            }
+        }
+        // The noise coordinates' rows: central differences of the whole gradient in noise
+        // coordinate t with the prediction held (the law's part through the cotangent).
+        let law_grad = |cot: &[C64]| -> Vec<f64> {
+            pred.jac
+                .iter()
+                .map(|col| col.iter().zip(cot).map(|(j, c)| (c.conj() * j).re).sum())
+                .collect()
+        };
+        for t in 0..nn {
+            let e = 1e-6 * (1.0 + noise[t].abs());
+            let mut z = noise.to_vec();
+            z[t] = noise[t] + e;
+            let (lp, cp) = self.eval_values(&pred.values, &z, true);
+            z[t] = noise[t] - e;
+            let (lm, cm) = self.eval_values(&pred.values, &z, true);
+            let (gp, gm) = (law_grad(&cp), law_grad(&cm));
+            for i in 0..np {
+                let h = -(gp[i] - gm[i]) / (2.0 * e);
+                hess[i * d + np + t] = h;
+                hess[(np + t) * d + i] = h;
+            }
+            for u in 0..nn {
+                hess[(np + u) * d + np + t] = -(lp.grad[u] - lm.grad[u]) / (2.0 * e);
+            }
+        }
+        for i in 0..d {
+            for j in 0..i {
+                let s = if i < np {
+                    hess[i * d + j]
+                } else {
+                    0.5 * (hess[i * d + j] + hess[j * d + i])
+                };
+                hess[i * d + j] = s;
+                hess[j * d + i] = s;
+            }
+        }
+        Ok(Information {
+            value: ll.value,
+            grad,
+            hess,
+        })
+    }
+
     /// Pointwise log likelihood per line (summed over channels), for LOO and WAIC.
     pub fn pointwise(&self, p: &[f64], noise: &[f64]) -> Result<Vec<f64>, ForwardError> {
         let pred = self.forward.predict(p, false)?;
@@ -831,5 +949,45 @@ impl Posterior for FrfPosterior<'_> {
     }
     fn prior_quantile(&self, u: &[f64]) -> Vec<f64> {
         quantile_all(&self.priors, u)
+    }
+    /// The likelihood's Gauss-Newton curvature ([`FrfLikelihood::information`]) through the
+    /// transform, `D I D - diag(dL/dp d2p/dx2)` (`D = diag dp/dx`; the second term is exact),
+    /// plus the prior's Hessian in `x` (diagonal: the priors are independent), by central
+    /// differences of its closed-form derivative.
+    fn curvature(&self, x: &[f64]) -> Option<Result<Curvature, DensityError>> {
+        let phys = self.physical(x);
+        let nl = self.n_law();
+        let info = match self.likelihood.information(&phys[..nl], &phys[nl..]) {
+            Ok(i) => i,
+            Err(ForwardError::Setup(m)) => return Some(Err(DensityError::Fatal(m))),
+            Err(e) => return Some(Err(DensityError::Recoverable(e.to_string()))),
+        };
+        if !info.value.is_finite() {
+            return Some(Err(DensityError::Recoverable(format!(
+                "log likelihood {} at {phys:?}",
+                info.value
+            ))));
+        }
+        let d = x.len();
+        let mut grad = vec![0.0; d];
+        let lp = log_density_all(&self.priors, x, Some(&mut grad));
+        let mut hess = vec![0.0; d * d];
+        for i in 0..d {
+            let pr = &self.priors[i];
+            let dp = pr.dp_dx(x[i]);
+            grad[i] += info.grad[i] * dp;
+            for j in 0..d {
+                hess[i * d + j] = dp * info.hess[i * d + j] * self.priors[j].dp_dx(x[j]);
+            }
+            let e = 1e-5 * (1.0 + x[i].abs());
+            let d2p = (pr.dp_dx(x[i] + e) - pr.dp_dx(x[i] - e)) / (2.0 * e);
+            let d2prior = (pr.log_density_x(x[i] + e).1 - pr.log_density_x(x[i] - e).1) / (2.0 * e);
+            hess[i * d + i] -= info.grad[i] * d2p + d2prior;
+        }
+        Some(Ok(Curvature {
+            value: lp + info.value,
+            grad,
+            hess,
+        }))
     }
 }

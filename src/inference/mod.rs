@@ -95,6 +95,14 @@ pub trait Posterior: Sync {
             .collect()
     }
 
+    /// `log p(x | data)` up to `log Z`, its gradient, and a Gauss-Newton curvature of
+    /// `-log p` in `x` (positive semi-definite where the residuals are noise), for a
+    /// Gauss-Newton search ([`map::SearchMethod::GaussNewton`]). Default `None`: the
+    /// posterior has no least-squares structure to offer, and searches use L-BFGS.
+    fn curvature(&self, _x: &[f64]) -> Option<Result<Curvature, DensityError>> {
+        None
+    }
+
     /// Log posterior density up to `log Z`, with its gradient when `grad` is given.
     fn log_posterior(&self, x: &[f64], grad: Option<&mut [f64]>) -> Result<f64, DensityError> {
         match grad {
@@ -114,6 +122,17 @@ pub trait Posterior: Sync {
             }
         }
     }
+}
+
+/// What [`Posterior::curvature`] returns.
+#[derive(Clone, Debug, Default)]
+pub struct Curvature {
+    /// `log p(x | data)` up to `log Z` (as [`Posterior::log_posterior`]).
+    pub value: f64,
+    /// Its gradient in `x`.
+    pub grad: Vec<f64>,
+    /// An approximation of the Hessian of `-log p` in `x` (row-major d x d).
+    pub hess: Vec<f64>,
 }
 
 /// A reproducible RNG for independent unit `unit` (a chain, a start, a stage) of a run with
