@@ -16,8 +16,9 @@
 //!    (chi-square 1; for a mass, one-sided: `p = 1 - Phi(S* / sqrt(I*))`, Self and Liang 1987).
 //!    `S* / I*` is the one-step estimate of the effect's size.
 //! 3. **Refit** the `top` candidates by `T` with the effect free ([`crate::inference::map::find_map`],
-//!    its default prior [`crate::forward::Effect::default_prior`]) and compare Laplace log
-//!    evidences. The best is accepted when its gain is at least `threshold_nats` (default 5 nats,
+//!    its default prior [`crate::forward::Effect::default_prior`]; a Levenberg-Marquardt search
+//!    on the likelihood's Gauss-Newton curvature, [`crate::inference::map::SearchMethod`], from
+//!    the profiled start of [`start`]) and compare Laplace log evidences. The best is accepted when its gain is at least `threshold_nats` (default 5 nats,
 //!    "very strong" on the Kass and Raftery 1995 scale after the Bonferroni-like cost of trying
 //!    several candidates) and its size is plausible: at least `min_z` posterior sds from zero and
 //!    inside its prior range (not at an edge).
@@ -635,11 +636,25 @@ pub fn run_closed_loop_with_laws<'a>(
             install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
             // The start: the best point of the profile over the effect's prior (the one-step
             // size among them), see [`start::profile_start`].
-            let (start, model_start) =
-                match start::profile_start(post, &phys, &c.effect, one_step, &gn) {
-                    Ok(ps) => (ps.size, ps.params),
-                    Err(_) => (one_step, gn),
-                };
+            let t_profile = std::time::Instant::now();
+            let (start, model_start) = match start::profile_start(
+                post, &phys, &c.effect, one_step, &gn,
+            ) {
+                Ok(ps) => {
+                    say(format!(
+                            "round {}: {} starts at {:.4e} {} (profile: {} forward evaluations, {:.1} s)",
+                            round + 1,
+                            c.effect.name(),
+                            ps.size,
+                            c.effect.unit(),
+                            ps.evaluations,
+                            t_profile.elapsed().as_secs_f64()
+                        ));
+                    (ps.size, ps.params)
+                }
+                Err(_) => (one_step, gn),
+            };
+            let t_refit = std::time::Instant::now();
             let mut eff = base_effects_now.clone();
             eff.terms.push(EffectTerm {
                 effect: c.effect.clone(),
@@ -704,13 +719,15 @@ pub fn run_closed_loop_with_laws<'a>(
             let size = r.map_physical[k];
             let sd = r.laplace.sd_physical()[k];
             say(format!(
-                "round {}: {} refitted to {size:.4e} +- {sd:.1e} {} ({} L-BFGS iterations, {} Newton steps, {} gradient evaluations in the search)",
+                "round {}: {} refitted to {size:.4e} +- {sd:.1e} {} ({} Gauss-Newton iterations, {} Newton steps, {} evaluations in the search, {}; {:.1} s with the Laplace Hessian)",
                 round + 1,
                 c.effect.name(),
                 c.effect.unit(),
                 r.starts[r.best].iterations,
                 r.polish_steps,
-                r.evaluations
+                r.evaluations,
+                r.starts[r.best].stop_reason,
+                t_refit.elapsed().as_secs_f64()
             ));
             // Laplace evidences when both Hessians are positive definite; otherwise (a fit at
             // a prior bound) the log-posterior gain at the MAPs less the BIC cost of one

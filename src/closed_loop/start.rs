@@ -28,6 +28,8 @@ pub struct ProfileStart {
     pub size: f64,
     pub params: Vec<f64>,
     pub wrss: f64,
+    /// Forward evaluations the profile spent (with or without the Jacobian).
+    pub evaluations: usize,
 }
 
 /// The refit's start for `candidate` added to `post`'s current model at physical parameters
@@ -59,8 +61,10 @@ pub fn profile_start(
             .zip(&post.priors[..np])
             .all(|(x, pr)| pr.contains(*x))
     };
+    let evaluations = std::cell::Cell::new(0usize);
     let wrss = |p: &[f64]| -> Option<f64> {
         fm.check(p).ok()?;
+        evaluations.set(evaluations.get() + 1);
         inside(p).then_some(())?;
         let pred = fm.predict(p, false).ok()?;
         let s: f64 = lik
@@ -80,15 +84,33 @@ pub fn profile_start(
     } else {
         &phys[..np]
     };
+    // The sizes in order of their residual at the start (the ties in the given order), so the
+    // best point so far is good early and the Gauss-Newton model below can leave most of the
+    // grid after one step.
+    let mut order: Vec<(f64, f64)> = sizes
+        .iter()
+        .filter_map(|&e| {
+            let mut p = base.to_vec();
+            p.push(e);
+            wrss(&p).map(|q| (e, q))
+        })
+        .collect();
+    order.sort_by(|a, b| a.1.total_cmp(&b.1));
     let mut best: Option<ProfileStart> = None;
-    for &e in &sizes {
+    for (e, q0) in order {
         let mut p = base.to_vec();
         p.push(e);
-        let Some(mut q) = wrss(&p) else { continue };
+        let mut q = q0;
         for _ in 0..PROFILE_STEPS {
-            let Some(dp) = gauss_newton_step(&fm, lik, &v, &p, np)? else {
+            evaluations.set(evaluations.get() + 1);
+            let Some((dp, decrease)) = gauss_newton_step(&fm, lik, &v, &p, np)? else {
                 break;
             };
+            // A point whose Gauss-Newton model cannot reach the best point so far even at
+            // twice its predicted decrease is left (most of the grid, far from the mode).
+            if best.as_ref().is_some_and(|b| q - 2.0 * decrease > b.wrss) {
+                break;
+            }
             let mut f = 1.0;
             let mut moved = false;
             for _ in 0..8 {
@@ -115,8 +137,12 @@ pub fn profile_start(
                 size: e,
                 params: p[..np].to_vec(),
                 wrss: q,
+                evaluations: 0,
             });
         }
+    }
+    if let Some(b) = best.as_mut() {
+        b.evaluations = evaluations.get();
     }
     best.ok_or_else(|| {
         ForwardError::Setup(format!(
@@ -127,7 +153,8 @@ pub fn profile_start(
 }
 
 /// One Gauss-Newton step of the first `np` parameters of `p` (the last, the effect, held):
-/// `dp = I_pp^-1 S_p` with the columns scaled by `|p_i|` for conditioning. None when the
+/// `dp = I_pp^-1 S_p` with the columns scaled by `|p_i|` for conditioning, and the decrease of
+/// the weighted residual sum of squares its linear model predicts, `S_p^T dp`. None when the
 /// information is singular.
 fn gauss_newton_step(
     fm: &crate::forward::ForwardModel<'_>,
@@ -135,7 +162,7 @@ fn gauss_newton_step(
     v: &[f64],
     p: &[f64],
     np: usize,
-) -> Result<Option<Vec<f64>>, ForwardError> {
+) -> Result<Option<(Vec<f64>, f64)>, ForwardError> {
     let pred = fm.predict(p, true)?;
     let scale: Vec<f64> = p[..np]
         .iter()
@@ -163,7 +190,11 @@ fn gauss_newton_step(
         return Ok(None);
     };
     let d = chol_solve(&l, np, &s);
-    Ok(Some(d.iter().zip(&scale).map(|(d, s)| d * s).collect()))
+    let decrease = d.iter().zip(&s).map(|(a, b)| a * b).sum::<f64>();
+    Ok(Some((
+        d.iter().zip(&scale).map(|(d, s)| d * s).collect(),
+        decrease,
+    )))
 }
 
 /// Relative distance (of the prior's range; log range for a log-uniform prior) within which
