@@ -5,8 +5,13 @@
 //! ROM is reused only for the same structure, points, band, range and tolerance; any change
 //! builds and certifies a new one. The file is JSON (matrices row-major as f64 bit patterns,
 //! so the round trip is exact) and is written atomically.
+//!
+//! ROMs with terms (degraded bond strips, adherend damping, base springs; minutes to build,
+//! certify and compress) are cached the same way ([`term_key`], [`save_terms`],
+//! [`load_terms`]), their key adding every term's matrix and settings.
 
 use super::reduced::ReducedModel;
+use super::terms::{pinvs, TermCertificate, TermMap, TermRom, TermSpec};
 use super::{Certificate, ModulusRange, RomParams};
 use crate::fe::model::{SpMat, StructuralModel};
 use faer::Mat;
@@ -106,6 +111,14 @@ impl DenseJson {
 struct RomJson {
     format: u32,
     key: String,
+    #[serde(flatten)]
+    model: ModelJson,
+    certificate: Certificate,
+}
+
+/// The matrices of a [`ReducedModel`].
+#[derive(Serialize, Deserialize)]
+struct ModelJson {
     n_r: usize,
     n_out: usize,
     inputs: Vec<usize>,
@@ -117,34 +130,77 @@ struct RomJson {
     b_r: DenseJson,
     sb_r: DenseJson,
     range: ModulusRange,
-    certificate: Certificate,
 }
 
-/// Save a ROM and its certificate under `key` (atomic write).
-pub fn save(path: &Path, key: &str, rom: &ReducedModel, cert: &Certificate) -> std::io::Result<()> {
-    let j = RomJson {
-        format: FORMAT,
-        key: key.to_string(),
-        n_r: rom.n_r,
-        n_out: rom.n_out,
-        inputs: rom.inputs.clone(),
-        m_r: DenseJson::from(&rom.m_r),
-        k_r: DenseJson::from(&rom.k_r),
-        s_r: DenseJson::from(&rom.s_r),
-        c_r: rom.c_r.as_ref().map(DenseJson::from),
-        d_r: rom.d_r.as_ref().map(DenseJson::from),
-        b_r: DenseJson::from(&rom.b_r),
-        sb_r: DenseJson::from(&rom.sb_r),
-        range: rom.range,
-        certificate: cert.clone(),
-    };
-    let text = serde_json::to_vec(&j).map_err(std::io::Error::other)?;
+impl ModelJson {
+    fn from(rom: &ReducedModel) -> Self {
+        ModelJson {
+            n_r: rom.n_r,
+            n_out: rom.n_out,
+            inputs: rom.inputs.clone(),
+            m_r: DenseJson::from(&rom.m_r),
+            k_r: DenseJson::from(&rom.k_r),
+            s_r: DenseJson::from(&rom.s_r),
+            c_r: rom.c_r.as_ref().map(DenseJson::from),
+            d_r: rom.d_r.as_ref().map(DenseJson::from),
+            b_r: DenseJson::from(&rom.b_r),
+            sb_r: DenseJson::from(&rom.sb_r),
+            range: rom.range,
+        }
+    }
+
+    /// The model, or None when a matrix has the wrong shape.
+    fn to_model(&self) -> Option<ReducedModel> {
+        let n = self.n_r;
+        let sq = |d: &DenseJson| d.to_mat().filter(|m| m.nrows() == n && m.ncols() == n);
+        let tall = |d: &DenseJson| {
+            d.to_mat()
+                .filter(|m| m.nrows() == n && m.ncols() == self.n_out)
+        };
+        let opt = |d: &Option<DenseJson>| match d {
+            None => Some(None),
+            Some(d) => sq(d).map(Some),
+        };
+        Some(ReducedModel {
+            n_r: n,
+            n_out: self.n_out,
+            inputs: self.inputs.clone(),
+            m_r: sq(&self.m_r)?,
+            k_r: sq(&self.k_r)?,
+            s_r: sq(&self.s_r)?,
+            c_r: opt(&self.c_r)?,
+            d_r: opt(&self.d_r)?,
+            b_r: tall(&self.b_r)?,
+            sb_r: tall(&self.sb_r)?,
+            range: self.range,
+            // Not cached: only mode classification uses it (the runner classifies by the points).
+            m_axes_r: None,
+        })
+    }
+}
+
+/// Write `value` as JSON to `path` atomically (a temporary file renamed).
+fn write_atomic<T: Serialize>(path: &Path, value: &T) -> std::io::Result<()> {
+    let text = serde_json::to_vec(value).map_err(std::io::Error::other)?;
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir)?;
     }
     let tmp = path.with_extension("json.tmp");
     std::fs::write(&tmp, text)?;
     std::fs::rename(&tmp, path)
+}
+
+/// Save a ROM and its certificate under `key` (atomic write).
+pub fn save(path: &Path, key: &str, rom: &ReducedModel, cert: &Certificate) -> std::io::Result<()> {
+    write_atomic(
+        path,
+        &RomJson {
+            format: FORMAT,
+            key: key.to_string(),
+            model: ModelJson::from(rom),
+            certificate: cert.clone(),
+        },
+    )
 }
 
 /// Load the ROM saved at `path` if it exists, parses and was saved under `key`; `None`
@@ -155,30 +211,104 @@ pub fn load(path: &Path, key: &str) -> Option<(ReducedModel, Certificate)> {
     if j.format != FORMAT || j.key != key {
         return None;
     }
-    let n = j.n_r;
-    let sq = |d: &DenseJson| d.to_mat().filter(|m| m.nrows() == n && m.ncols() == n);
-    let tall = |d: &DenseJson| {
-        d.to_mat()
-            .filter(|m| m.nrows() == n && m.ncols() == j.n_out)
-    };
-    let opt = |d: &Option<DenseJson>| match d {
-        None => Some(None),
-        Some(d) => sq(d).map(Some),
-    };
-    let rom = ReducedModel {
-        n_r: n,
-        n_out: j.n_out,
-        inputs: j.inputs.clone(),
-        m_r: sq(&j.m_r)?,
-        k_r: sq(&j.k_r)?,
-        s_r: sq(&j.s_r)?,
-        c_r: opt(&j.c_r)?,
-        d_r: opt(&j.d_r)?,
-        b_r: tall(&j.b_r)?,
-        sb_r: tall(&j.sb_r)?,
-        range: j.range,
-        // Not cached: only mode classification uses it (the runner classifies by the points).
-        m_axes_r: None,
-    };
-    Some((rom, j.certificate))
+    Some((j.model.to_model()?, j.certificate))
+}
+
+/// The cache key of a ROM with terms ([`crate::rom::terms::build_term_rom`]): the plain ROM's
+/// [`key`] plus every term (name, matrix, coefficient, map, enrichment and certificate values)
+/// and the settings the plain key leaves out (the certificate's reference solver, the
+/// compression).
+pub fn term_key(
+    model: &StructuralModel,
+    inputs: &[usize],
+    params: &RomParams,
+    specs: &[TermSpec],
+) -> String {
+    let mut h = Sha256::new();
+    h.update(b"terms");
+    h.update(key(model, inputs, params).as_bytes());
+    let f = |h: &mut Sha256, x: f64| h.update(x.to_bits().to_le_bytes());
+    for s in specs {
+        h.update(b"T");
+        h.update(s.name.as_bytes());
+        hash_sp(&mut h, "G", Some(&s.matrix));
+        f(&mut h, s.offset.re);
+        f(&mut h, s.offset.im);
+        f(&mut h, s.per_modulus);
+        h.update(b"enrich");
+        s.enrich_values.iter().for_each(|v| f(&mut h, *v));
+        h.update(b"cert");
+        s.cert_values.iter().for_each(|v| f(&mut h, *v));
+        match s.map {
+            TermMap::Linear => h.update(b"linear"),
+            TermMap::Compliance { v_ref, v_floor } => {
+                h.update(b"compliance");
+                f(&mut h, v_ref);
+                f(&mut h, v_floor);
+            }
+        }
+    }
+    // Debug of f64 is the shortest text that reads back to the same value: exact.
+    h.update(format!("{:?}|{:?}", params.reference, params.compress).as_bytes());
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+#[derive(Serialize, Deserialize)]
+struct TermRomJson {
+    format: u32,
+    key: String,
+    model: ModelJson,
+    g_r: Vec<DenseJson>,
+    names: Vec<String>,
+    maps: Vec<TermMap>,
+    certificate: TermCertificate,
+}
+
+/// Save a ROM with terms and its certificate under `key` (atomic write).
+pub fn save_terms(
+    path: &Path,
+    key: &str,
+    rom: &TermRom,
+    cert: &TermCertificate,
+) -> std::io::Result<()> {
+    write_atomic(
+        path,
+        &TermRomJson {
+            format: FORMAT,
+            key: key.to_string(),
+            model: ModelJson::from(&rom.rom),
+            g_r: rom.g_r.iter().map(DenseJson::from).collect(),
+            names: rom.names.clone(),
+            maps: rom.maps.clone(),
+            certificate: cert.clone(),
+        },
+    )
+}
+
+/// Load the ROM with terms saved at `path` if it exists, parses and was saved under `key`
+/// (the compliance terms' pseudo-inverses are recomputed); `None` otherwise.
+pub fn load_terms(path: &Path, key: &str) -> Option<(TermRom, TermCertificate)> {
+    let bytes = std::fs::read(path).ok()?;
+    let j: TermRomJson = serde_json::from_slice(&bytes).ok()?;
+    if j.format != FORMAT || j.key != key || j.g_r.len() != j.names.len() {
+        return None;
+    }
+    let rom = j.model.to_model()?;
+    let n = rom.n_r;
+    let g_r = j
+        .g_r
+        .iter()
+        .map(|d| d.to_mat().filter(|m| m.nrows() == n && m.ncols() == n))
+        .collect::<Option<Vec<_>>>()?;
+    let g_pinv = pinvs(&g_r, &j.maps);
+    Some((
+        TermRom {
+            rom,
+            g_r,
+            names: j.names,
+            maps: j.maps,
+            g_pinv,
+        },
+        j.certificate,
+    ))
 }

@@ -50,7 +50,7 @@ pub const COMPLIANCE_FD_BELOW: f64 = 1e-2;
 pub const COMPLIANCE_FD_STEP: f64 = 1e-4;
 
 /// How a term's value `v` enters its coefficient: `c = f(v) (offset + per_modulus E*)`.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum TermMap {
     /// `f(v) = v`.
     #[default]

@@ -245,28 +245,38 @@ pub fn diagnose_into(
             })
         })
         .collect();
+    // The term ROM's cache: where `rfmlab run` keeps its ROMs (beside the output folder).
+    let term_cache = study
+        .output_dir
+        .parent()
+        .unwrap_or(std::path::Path::new("."))
+        .join(".rom-cache");
     if !bonds.is_empty() {
         let names: Vec<String> = bonds.iter().map(|e| e.name()).collect();
         params.progress.say(&format!(
-            "building and certifying the term ROM ({})",
-            names.join(", ")
+            "the term ROM ({}): from the cache {} or built and certified",
+            names.join(", "),
+            term_cache.display()
         ));
     }
+    let t_terms = std::time::Instant::now();
     let term_rom = super::terms::term_rom_for(
         study,
         &built,
         engine,
         &super::terms::with_declared(study, &bonds),
         super::terms::band_of(&levels),
+        Some(&term_cache),
     )?;
     if let Some((_, c)) = &term_rom {
         params.progress.say(&format!(
-            "term ROM: n_r {} (enriched {}), certificate {:.2e} of the peak{}, {:.0} s",
+            "term ROM: n_r {} (enriched {}), certificate {:.2e} of the peak{}, built in {:.0} s, here {:.1} s",
             c.basis_size,
             c.enriched_basis_size,
             c.max_rel_error,
             if c.passed { "" } else { " (NOT certified)" },
-            c.seconds_basis + c.seconds_certify + c.seconds_compress
+            c.seconds_basis + c.seconds_certify + c.seconds_compress,
+            t_terms.elapsed().as_secs_f64()
         ));
     }
     let wrapped = match &term_rom {

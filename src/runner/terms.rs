@@ -192,14 +192,16 @@ pub fn bond_candidates(study: &Study, width_m: f64) -> Vec<Effect> {
 
 /// A certified term ROM for the degraded-bond regions and the adherend damping among
 /// `effects` (None when there are none), for the points and inputs of `engine`, over `band_hz`
-/// and [`term_modulus_range`]. A region outside the adhesive block is an error naming the
-/// effect's key.
+/// and [`term_modulus_range`], loaded from `cache` (a folder) when it holds one built for the
+/// same model, terms and settings, else built, certified and saved there. A region outside the
+/// adhesive block is an error naming the effect's key.
 pub fn term_rom_for(
     study: &Study,
     built: &BuiltModel,
     engine: &dyn FrfEngine,
     effects: &[(Effect, String)],
     band_hz: (f64, f64),
+    cache: Option<&std::path::Path>,
 ) -> Result<Option<(TermRom, TermCertificate)>, RunError> {
     let mut specs: Vec<TermSpec> = Vec::new();
     // Base springs change the model's DOFs (the base face is free): every term then lives on
@@ -277,13 +279,23 @@ pub fn term_rom_for(
         n_cert_moduli_per_axis: 2,
         ..Default::default()
     };
-    let (rom, cert) = build_term_rom(
-        model.as_ref().unwrap_or(&built.model),
-        engine.inputs(),
-        &params,
-        &specs,
-    )
-    .map_err(|e| RunError::Engine(e.to_string()))?;
+    let model = model.as_ref().unwrap_or(&built.model);
+    let file = cache.map(|dir| {
+        let key = crate::rom::cache::term_key(model, engine.inputs(), &params, &specs);
+        (dir.join(format!("terms-{}.json", &key[..16])), key)
+    });
+    if let Some(hit) = file
+        .as_ref()
+        .and_then(|(f, key)| crate::rom::cache::load_terms(f, key))
+    {
+        return Ok(Some(hit));
+    }
+    let (rom, cert) = build_term_rom(model, engine.inputs(), &params, &specs)
+        .map_err(|e| RunError::Engine(e.to_string()))?;
+    if let Some((f, key)) = &file {
+        // A cache that cannot be written costs time next run, nothing else.
+        let _ = crate::rom::cache::save_terms(f, key, &rom, &cert);
+    }
     Ok(Some((rom, cert)))
 }
 

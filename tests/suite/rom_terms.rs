@@ -54,6 +54,16 @@ fn terms(spec: &rfmlab::fe::joint::JointSpec, k_b: &rfmlab::fe::model::SpMat) ->
     out
 }
 
+/// A quick term ROM's settings, uncertified (tests of its algebra, not of its accuracy).
+fn quick(max_levels: usize, n_cert_lines: usize) -> RomParams {
+    RomParams {
+        allow_uncertified: true,
+        max_levels,
+        n_cert_lines,
+        ..params()
+    }
+}
+
 /// The term ROMs' settings (also tests/suite/base_springs.rs).
 pub(crate) fn params() -> RomParams {
     RomParams {
@@ -173,12 +183,7 @@ fn term_derivatives_match_central_differences() {
     let model = &built.model;
     let inputs = [built.excitation];
     let ts = terms(&spec, &model.k_b);
-    let p = RomParams {
-        allow_uncertified: true,
-        max_levels: 2,
-        n_cert_lines: 5,
-        ..params()
-    };
+    let p = quick(2, 5);
     let (rom, _) = build_term_rom(model, &inputs, &p, &ts[1..]).unwrap();
     let w: Vec<f64> = [40.0, 170.0, 333.0].iter().map(|f| TAU * f).collect();
     let e = vec![C64::new(5e6, 1e6); w.len()];
@@ -267,12 +272,7 @@ fn wrapped_engine_keeps_the_plain_sweep() {
     let inputs = [built.excitation];
     let (plain, _) = build_rom(model, &inputs, &RomParams::default()).unwrap();
     let ts = terms(&spec, &model.k_b);
-    let p = RomParams {
-        allow_uncertified: true,
-        max_levels: 1,
-        n_cert_lines: 3,
-        ..params()
-    };
+    let p = quick(1, 3);
     let (tr, _) = build_term_rom(model, &inputs, &p, &ts[..1]).unwrap();
     let eng = WithTerms::new(&plain, &tr).unwrap();
     let w: Vec<f64> = (1..50).map(|k| TAU * 9.7 * k as f64).collect();
@@ -548,4 +548,69 @@ fn declared_adherend_damping_is_validated() {
         e.default_prior(),
         rfmlab::inference::prior::Prior::Uniform { lo: 0.0, hi: 0.01 }
     );
+}
+
+/// The term ROM's cache (src/rom/cache.rs): a saved ROM loads back with its certificate and
+/// sweeps (values, dH/dE' and the terms' columns) bit for bit; the key changes with a term's
+/// matrix, its enrichment values, the compression and the inputs; a damaged file or another
+/// key loads nothing.
+#[test]
+fn term_rom_cache_round_trips_bit_for_bit_and_keys_every_setting() {
+    use rfmlab::rom::cache::{load_terms, save_terms, term_key};
+    let (spec, built) = joint();
+    let model = &built.model;
+    let inputs = [built.excitation];
+    let ts = terms(&spec, &model.k_b);
+    let p = quick(1, 3);
+    let (tr, cert) = build_term_rom(model, &inputs, &p, &ts[..1]).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("terms.json");
+    let key = term_key(model, &inputs, &p, &ts[..1]);
+    save_terms(&file, &key, &tr, &cert).unwrap();
+    let (back, cert_back) = load_terms(&file, &key).expect("cached term ROM");
+    assert_eq!(cert_back.basis_size, cert.basis_size);
+    // The certificate's numbers are JSON floats (serde_json's parser may be 1 ulp off); the
+    // matrices are bit patterns, exact.
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-15 * a.abs().max(b.abs());
+    assert!(close(cert_back.max_rel_error, cert.max_rel_error));
+    assert_eq!(cert_back.per_case.len(), cert.per_case.len());
+    for (a, b) in cert_back.per_case.iter().zip(&cert.per_case) {
+        assert!(
+            a.0 == b.0 && close(a.1, b.1) && close(a.2, b.2),
+            "{a:?} vs {b:?}"
+        );
+    }
+    let (plain, _) = build_rom(model, &inputs, &RomParams::default()).unwrap();
+    let a_eng = WithTerms::new(&plain, &tr).unwrap();
+    let b_eng = WithTerms::new(&plain, &back).unwrap();
+    let w: Vec<f64> = (1..40).map(|k| TAU * 11.3 * k as f64).collect();
+    let e = vec![C64::new(6e6, 1e6); w.len()];
+    let coef = [TermCoef {
+        index: 0,
+        value: 0.7,
+        offset: C64::new(0.0, 0.0),
+        per_modulus: -1.0,
+    }];
+    let a = a_eng.sweep_terms(&w, &e, &coef, true).unwrap();
+    let b = b_eng.sweep_terms(&w, &e, &coef, true).unwrap();
+    assert_eq!(a.0.h, b.0.h);
+    assert_eq!(a.0.dh_de, b.0.dh_de);
+    assert_eq!(a.1, b.1);
+    // Every setting is in the key.
+    let mut other = ts[..1].to_vec();
+    other[0].enrich_values = vec![0.9];
+    assert_ne!(term_key(model, &inputs, &p, &other), key);
+    assert_ne!(term_key(model, &inputs, &p, &ts[1..2]), key);
+    let no_compress = RomParams {
+        compress: None,
+        ..p.clone()
+    };
+    assert_ne!(term_key(model, &inputs, &no_compress, &ts[..1]), key);
+    assert_ne!(term_key(model, &[0], &p, &ts[..1]), key);
+    assert_eq!(term_key(model, &inputs, &p, &ts[..1]), key);
+    // Another key or a damaged file: nothing.
+    assert!(load_terms(&file, &key[1..]).is_none());
+    let text = std::fs::read(&file).unwrap();
+    std::fs::write(&file, &text[..text.len() / 2]).unwrap();
+    assert!(load_terms(&file, &key).is_none());
 }
