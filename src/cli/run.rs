@@ -64,13 +64,7 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
             }
         }
     };
-    let rom_cache = (!a.no_cache).then(|| {
-        study
-            .output_dir
-            .parent()
-            .unwrap_or(std::path::Path::new("."))
-            .join(".rom-cache")
-    });
+    let rom_cache = (!a.no_cache).then(|| rfmlab::runner::rom_cache_dir(&study));
     let opts = RunOptions {
         no_figures: a.no_figures,
         output_dir: None,

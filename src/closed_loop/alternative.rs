@@ -447,14 +447,7 @@ fn profile_point(
     let wrss = |p: &[f64]| -> Option<f64> {
         fm.check(p).ok()?;
         let pred = fm.predict(p, false).ok()?;
-        let s: f64 = lik
-            .data
-            .values
-            .iter()
-            .zip(&pred.values)
-            .zip(v)
-            .map(|((x, h), v)| (x - h).norm_sqr() / v)
-            .sum();
+        let s = super::weighted_rss(&lik.data.values, &pred.values, v);
         s.is_finite().then_some(s)
     };
     let Some(mut q) = wrss(&p) else {
@@ -468,23 +461,7 @@ fn profile_point(
             .iter()
             .map(|&i| if p[i] != 0.0 { p[i].abs() } else { 1.0 })
             .collect();
-        let mut g = vec![0.0; k];
-        let mut a = vec![0.0; k * k];
-        for (o, ((x, h), v)) in lik.data.values.iter().zip(&pred.values).zip(v).enumerate() {
-            let r = x - h;
-            for (ii, &i) in free.iter().enumerate() {
-                let ji = pred.jac[i][o] * scale[ii];
-                g[ii] += (r.conj() * ji).re / v;
-                for (jj, &j) in free.iter().enumerate().take(ii + 1) {
-                    a[ii * k + jj] += (ji.conj() * pred.jac[j][o] * scale[jj]).re / v;
-                }
-            }
-        }
-        for i in 0..k {
-            for j in 0..i {
-                a[j * k + i] = a[i * k + j];
-            }
-        }
+        let (g, a) = super::normal_equations(&lik.data.values, &pred, v, &free, &scale);
         let Some(l) = crate::inference::map::cholesky(&a, k) else {
             break;
         };

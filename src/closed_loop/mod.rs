@@ -385,24 +385,8 @@ pub fn score_test_step(
             }
         })
         .collect();
-    let mut s = vec![0.0; d];
-    let mut fi = vec![0.0; d * d];
-    for (o, ((x, h), v)) in lik.data.values.iter().zip(&pred.values).zip(&v).enumerate() {
-        let r = x - h;
-        for i in 0..d {
-            let ji = pred.jac[i][o] * scale[i];
-            s[i] += (r.conj() * ji).re / v;
-            for j in 0..=i {
-                let jj = pred.jac[j][o] * scale[j];
-                fi[i * d + j] += (ji.conj() * jj).re / v;
-            }
-        }
-    }
-    for i in 0..d {
-        for j in 0..i {
-            fi[j * d + i] = fi[i * d + j];
-        }
-    }
+    let cols: Vec<usize> = (0..d).collect();
+    let (s, fi) = normal_equations(&lik.data.values, &pred, &v, &cols, &scale);
     let m = d - 1;
     let ipp: Vec<f64> = (0..m * m).map(|k| fi[(k / m) * d + k % m]).collect();
     let iep: Vec<f64> = (0..m).map(|j| fi[m * d + j]).collect();
@@ -452,6 +436,48 @@ pub fn score_test_step(
         f *= 0.5;
     }
     Ok((t, p_value, de, 1.0 / i_eff.sqrt(), start, conf))
+}
+
+/// The score `S_i = sum Re(conj(r_o) J_oi) / v_o` and the information
+/// `I_ij = sum Re(conj(J_oi) J_oj) / v_o` (row-major, symmetric) of the residuals
+/// `r = data - prediction` with independent observations of variance `v`, for the Jacobian
+/// columns `cols`, each scaled by its `scale` (conditioning).
+pub(crate) fn normal_equations(
+    data: &[C64],
+    pred: &crate::forward::Prediction,
+    v: &[f64],
+    cols: &[usize],
+    scale: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let d = cols.len();
+    let mut s = vec![0.0; d];
+    let mut fi = vec![0.0; d * d];
+    for (o, ((x, h), v)) in data.iter().zip(&pred.values).zip(v).enumerate() {
+        let r = x - h;
+        for i in 0..d {
+            let ji = pred.jac[cols[i]][o] * scale[i];
+            s[i] += (r.conj() * ji).re / v;
+            for j in 0..=i {
+                let jj = pred.jac[cols[j]][o] * scale[j];
+                fi[i * d + j] += (ji.conj() * jj).re / v;
+            }
+        }
+    }
+    for i in 0..d {
+        for j in 0..i {
+            fi[j * d + i] = fi[i * d + j];
+        }
+    }
+    (s, fi)
+}
+
+/// The weighted residual sum of squares `sum |data_o - values_o|^2 / v_o`.
+pub(crate) fn weighted_rss(data: &[C64], values: &[C64], v: &[f64]) -> f64 {
+    data.iter()
+        .zip(values)
+        .zip(v)
+        .map(|((x, h), v)| (x - h).norm_sqr() / v)
+        .sum()
 }
 
 /// A forward model sharing `lik`'s observation with its effects and `candidate` free (last).

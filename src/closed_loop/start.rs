@@ -67,14 +67,7 @@ pub fn profile_start(
         evaluations.set(evaluations.get() + 1);
         inside(p).then_some(())?;
         let pred = fm.predict(p, false).ok()?;
-        let s: f64 = lik
-            .data
-            .values
-            .iter()
-            .zip(&pred.values)
-            .zip(&v)
-            .map(|((x, h), v)| (x - h).norm_sqr() / v)
-            .sum();
+        let s = super::weighted_rss(&lik.data.values, &pred.values, &v);
         s.is_finite().then_some(s)
     };
     // The Gauss-Newton start of the model's parameters, else (outside the priors) the current
@@ -168,24 +161,8 @@ fn gauss_newton_step(
         .iter()
         .map(|x| if *x != 0.0 { x.abs() } else { 1.0 })
         .collect();
-    let mut s = vec![0.0; np];
-    let mut fi = vec![0.0; np * np];
-    for (o, ((x, h), v)) in lik.data.values.iter().zip(&pred.values).zip(v).enumerate() {
-        let r = x - h;
-        for i in 0..np {
-            let ji = pred.jac[i][o] * scale[i];
-            s[i] += (r.conj() * ji).re / v;
-            for j in 0..=i {
-                let jj = pred.jac[j][o] * scale[j];
-                fi[i * np + j] += (ji.conj() * jj).re / v;
-            }
-        }
-    }
-    for i in 0..np {
-        for j in 0..i {
-            fi[j * np + i] = fi[i * np + j];
-        }
-    }
+    let cols: Vec<usize> = (0..np).collect();
+    let (s, fi) = super::normal_equations(&lik.data.values, &pred, v, &cols, &scale);
     let Some(l) = cholesky(&fi, np) else {
         return Ok(None);
     };

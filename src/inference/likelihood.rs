@@ -373,17 +373,6 @@ pub struct FrfLikelihood<'a> {
     correlation: Option<ChannelCorrelation>,
 }
 
-/// What [`FrfLikelihood::information`] returns.
-#[derive(Clone, Debug, Default)]
-pub struct Information {
-    /// `log L`.
-    pub value: f64,
-    /// Its gradient in (law parameters, noise coordinates).
-    pub grad: Vec<f64>,
-    /// The Gauss-Newton curvature of `-log L` (row-major, same order).
-    pub hess: Vec<f64>,
-}
-
 /// What one evaluation returns.
 #[derive(Clone, Debug, Default)]
 pub struct LogLik {
@@ -719,7 +708,8 @@ impl<'a> FrfLikelihood<'a> {
     }
 
     /// The log likelihood at `(p, noise)`, its gradient in `(p, noise)` and a Gauss-Newton
-    /// curvature: an approximation of the Hessian of `-log L`, row-major over `(p, noise)`.
+    /// curvature: an approximation of the Hessian of `-log L`, row-major over `(p, noise)`
+    /// (a [`Curvature`] in the physical coordinates).
     ///
     /// The law's block is the expected information of the residuals through the forward
     /// model's Jacobian `J = dE[H1]/dp`: `sum_o w_o Re(conj(J_io) J_jo)` with the weight
@@ -730,17 +720,20 @@ impl<'a> FrfLikelihood<'a> {
     /// forward solve), so the noise rows are exact. The law's block is the Hessian where the
     /// residuals are noise (it drops the residuals' second-order term), and positive
     /// semi-definite everywhere, which is what a Gauss-Newton search needs.
-    pub fn information(&self, p: &[f64], noise: &[f64]) -> Result<Information, ForwardError> {
+    pub fn information(&self, p: &[f64], noise: &[f64]) -> Result<Curvature, ForwardError> {
         let pred = self.forward.predict(p, true)?;
         let (ll, cot) = self.eval_values(&pred.values, noise, true);
         let np = p.len();
         let nn = self.n_noise();
         let d = np + nn;
-        let mut grad: Vec<f64> = pred
-            .jac
-            .iter()
-            .map(|col| col.iter().zip(&cot).map(|(j, c)| (c.conj() * j).re).sum())
-            .collect();
+        // The law's part of the gradient for a cotangent of the values.
+        let law_grad = |cot: &[C64]| -> Vec<f64> {
+            pred.jac
+                .iter()
+                .map(|col| col.iter().zip(cot).map(|(j, c)| (c.conj() * j).re).sum())
+                .collect()
+        };
+        let mut grad = law_grad(&cot);
         grad.extend_from_slice(&ll.grad);
         let mut hess = vec![0.0; d * d];
         let v = self.variances(noise);
@@ -784,12 +777,6 @@ impl<'a> FrfLikelihood<'a> {
         }
         // The noise coordinates' rows: central differences of the whole gradient in noise
         // coordinate t with the prediction held (the law's part through the cotangent).
-        let law_grad = |cot: &[C64]| -> Vec<f64> {
-            pred.jac
-                .iter()
-                .map(|col| col.iter().zip(cot).map(|(j, c)| (c.conj() * j).re).sum())
-                .collect()
-        };
         for t in 0..nn {
             let e = 1e-6 * (1.0 + noise[t].abs());
             let mut z = noise.to_vec();
@@ -818,7 +805,7 @@ impl<'a> FrfLikelihood<'a> {
                 hess[j * d + i] = s;
             }
         }
-        Ok(Information {
+        Ok(Curvature {
             value: ll.value,
             grad,
             hess,

@@ -124,14 +124,15 @@ pub trait Posterior: Sync {
     }
 }
 
-/// What [`Posterior::curvature`] returns.
+/// A log density, its gradient and an approximation of the Hessian of minus it, in the
+/// coordinates of whoever returns it: `x` for [`Posterior::curvature`] (the value as
+/// [`Posterior::log_posterior`]), the physical law and noise coordinates for
+/// [`likelihood::FrfLikelihood::information`] (the log likelihood).
 #[derive(Clone, Debug, Default)]
 pub struct Curvature {
-    /// `log p(x | data)` up to `log Z` (as [`Posterior::log_posterior`]).
     pub value: f64,
-    /// Its gradient in `x`.
     pub grad: Vec<f64>,
-    /// An approximation of the Hessian of `-log p` in `x` (row-major d x d).
+    /// Row-major d x d.
     pub hess: Vec<f64>,
 }
 

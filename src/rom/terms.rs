@@ -476,13 +476,12 @@ impl TermRom {
                 }
             }
         };
-        let is_compliance = |t: &TermCoef| self.is_compliance(t);
         let mut z = self.rom.z_r(omega, e);
-        for t in terms.iter().filter(|t| !is_compliance(t)) {
+        for t in terms.iter().filter(|t| !self.is_compliance(t)) {
             add(&mut z, t);
         }
         let z_other = other.then(|| z.clone());
-        for t in terms.iter().filter(|t| is_compliance(t)) {
+        for t in terms.iter().filter(|t| self.is_compliance(t)) {
             add(&mut z, t);
         }
         (z, z_other)
@@ -511,7 +510,6 @@ impl TermRom {
         let n = r.n_r;
         let no = r.n_out;
         let ni = r.inputs.len();
-        let is_compliance = |t: &TermCoef| self.is_compliance(t);
         // Near the rigid limit (v below COMPLIANCE_FD_BELOW v_ref) a compliance term's
         // derivative is a forward difference (below), which needs no `z_other`.
         let near_rigid = |t: &TermCoef| match self.maps[t.index] {
@@ -522,7 +520,10 @@ impl TermRom {
             omega,
             e,
             terms,
-            derivs && terms.iter().any(|t| is_compliance(t) && !near_rigid(t)),
+            derivs
+                && terms
+                    .iter()
+                    .any(|t| self.is_compliance(t) && !near_rigid(t)),
         );
         let (x, slot, h) = r.solve_line(z, omega, e, derivs)?;
         let zero = C64::new(0.0, 0.0);
@@ -554,7 +555,7 @@ impl TermRom {
         // y = o G x / v = b - Z_other x + o G x / v_ref, free of the cancellation that G x (of
         // order v) suffers near the rigid limit. (With several compliance terms each one's y would
         // need the others in Z_other: one is supported.)
-        let n_compliance = terms.iter().filter(|t| is_compliance(t)).count();
+        let n_compliance = terms.iter().filter(|t| self.is_compliance(t)).count();
         if n_compliance > 1 {
             return Err(FrfError::Other(
                 "at most one compliance term per sweep".into(),
@@ -589,7 +590,7 @@ impl TermRom {
             None => None,
         };
         let mut y: Vec<Vec<C64>> = Vec::new();
-        if let (Some(zo), Some(tc)) = (&z_other, terms.iter().find(|t| is_compliance(t))) {
+        if let (Some(zo), Some(tc)) = (&z_other, terms.iter().find(|t| self.is_compliance(t))) {
             let TermMap::Compliance { v_ref, .. } = self.maps[tc.index] else {
                 unreachable!("filtered above")
             };
@@ -621,17 +622,19 @@ impl TermRom {
             // G^+ y_j of a compliance term, once per input.
             let gpy: Vec<Option<Vec<C64>>> = terms
                 .iter()
-                .map(|t| match (is_compliance(t), &fd, &self.g_pinv[t.index]) {
-                    (true, None, Some(gp)) => Some(apply(gp, &y[slot[j]])),
-                    _ => None,
-                })
+                .map(
+                    |t| match (self.is_compliance(t), &fd, &self.g_pinv[t.index]) {
+                        (true, None, Some(gp)) => Some(apply(gp, &y[slot[j]])),
+                        _ => None,
+                    },
+                )
                 .collect();
             for i in 0..no {
                 let xi = &x[slot[i]];
                 dh[i * ni + jj] = -(0..n).map(|k| xi[k] * sx[k]).sum::<C64>();
                 sh[i * ni + jj] = (0..n).map(|k| xj[k] * r.sb_r[(k, i)]).sum();
                 for (k, t) in terms.iter().enumerate() {
-                    if let (true, Some(d)) = (is_compliance(t), &fd) {
+                    if let (true, Some(d)) = (self.is_compliance(t), &fd) {
                         dt[k][i * ni + jj] = d[i * ni + jj];
                         continue;
                     }

@@ -245,12 +245,7 @@ pub fn diagnose_into(
             })
         })
         .collect();
-    // The term ROM's cache: where `rfmlab run` keeps its ROMs (beside the output folder).
-    let term_cache = study
-        .output_dir
-        .parent()
-        .unwrap_or(std::path::Path::new("."))
-        .join(".rom-cache");
+    let term_cache = super::rom_cache_dir(study);
     if !bonds.is_empty() {
         let names: Vec<String> = bonds.iter().map(|e| e.name()).collect();
         params.progress.say(&format!(

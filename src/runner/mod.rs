@@ -892,6 +892,16 @@ fn run_study_here(
     })
 }
 
+/// The folder of cached ROMs of `study` (`.rom-cache/` beside its output folder): where
+/// `rfmlab run` keeps its certified ROM and `rfmlab diagnose` its term ROM.
+pub fn rom_cache_dir(study: &Study) -> PathBuf {
+    study
+        .output_dir
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join(".rom-cache")
+}
+
 /// Path helper: `<dir>.<suffix>` next to `dir`.
 pub(crate) fn sibling(dir: &Path, suffix: &str) -> PathBuf {
     let name = dir
