@@ -22,6 +22,12 @@
 //!    "very strong" on the Kass and Raftery 1995 scale after the Bonferroni-like cost of trying
 //!    several candidates) and its size is plausible: at least `min_z` posterior sds from zero and
 //!    inside its prior range (not at an edge).
+//!    When none passes and the residual is far from noise (normalised chi-square above
+//!    `profile_rank_above`), the score at zero is not trusted to rank: an effect that acts
+//!    non-linearly (a shaker's stinger resonance) can have its score point the wrong way. The
+//!    candidates not yet refitted are then profiled over their priors and the `top` by profile
+//!    gain (half the weighted residual sum of squares' decrease, a likelihood ratio over the
+//!    prior) are refitted and judged the same way.
 //! 4. **Alternative laws** ([`alternative`], [`run_closed_loop_with_laws`]): a law not nested in
 //!    the current one has no score test; each round the whole model is refitted with it in
 //!    place of the current law and it competes with the round's effects by Laplace evidence.
@@ -63,6 +69,13 @@ pub struct ClosedLoopParams {
     /// Only candidates whose score test has a p-value below this are refitted. Default 0.01
     /// (1: the top candidates whatever their p).
     pub p_threshold: f64,
+    /// When no score-ranked refit passes and the current residual's normalised chi-square is
+    /// above this, the score test (a linearisation at zero effect) is not trusted to rank:
+    /// every candidate not yet refitted is profiled over its prior ([`start::profile_start`])
+    /// and the `top` with the largest profile gain are refitted. Default 1.5 (the residual is
+    /// far from noise: the acceptance limit is 1.2 and leakage-limited clean data read 0.6-0.7);
+    /// null data never reach it. `f64::INFINITY` turns it off.
+    pub profile_rank_above: f64,
     /// Where the loop reports each step (the CLI shows it on its spinner). Default: nowhere.
     pub progress: Progress,
 }
@@ -117,6 +130,7 @@ impl Default for ClosedLoopParams {
             },
             warm_refits: true,
             p_threshold: 0.01,
+            profile_rank_above: 1.5,
             progress: Progress::default(),
         }
     }
@@ -180,6 +194,10 @@ pub struct Candidate {
     pub one_step: f64,
     pub one_step_sd: f64,
     pub rank: usize,
+    /// Half the decrease of the weighted residual sum of squares at the candidate's profiled
+    /// start (nats, a likelihood-ratio statistic over the prior), when the round ranked by the
+    /// profile (`ClosedLoopParams::profile_rank_above`).
+    pub profile_gain: Option<f64>,
     /// Filled when refitted.
     pub refit: Option<Refit>,
     /// How much the model's parameters absorb the effect ([`confounding`]).
@@ -589,6 +607,7 @@ pub fn run_closed_loop_with_laws<'a>(
         search: SearchMethod::GaussNewton,
         ..params.map.clone()
     };
+    let start_priors = post.priors[..nl].to_vec();
     let say = |m: String| params.progress.say(&m);
     say("MAP of the starting model".into());
     let mut current = find_map(&*post, Some(x0), &params.map, none)?;
@@ -624,6 +643,7 @@ pub fn run_closed_loop_with_laws<'a>(
                 one_step: est,
                 one_step_sd: sd,
                 rank: 0,
+                profile_gain: None,
                 refit: None,
                 confounding: conf,
             });
@@ -635,39 +655,43 @@ pub fn run_closed_loop_with_laws<'a>(
         let np_now = post.likelihood.forward.n_params();
         let base_effects_now = post.likelihood.forward.effects.clone();
         let mut best: Option<(usize, MapResult)> = None;
-        for ci in 0..params.top.min(scored.len()) {
-            let c = &scored[ci];
-            if !(c.p_value < params.p_threshold) {
-                continue;
-            }
-            say(format!(
-                "round {}: refit {} of {} ({})",
-                round + 1,
-                ci + 1,
-                params.top.min(scored.len()),
-                c.effect.name()
-            ));
-            let prior = c.effect.default_prior();
-            let (lo, hi) = match prior {
-                Prior::Uniform { lo, hi } => (lo, hi),
-                _ => (f64::NEG_INFINITY, f64::INFINITY),
-            };
-            let span = hi - lo;
-            let one_step = c.one_step.clamp(lo + 0.01 * span, hi - 0.01 * span);
-            let gn = starts
-                .iter()
-                .find(|(n, _)| *n == c.effect.name())
-                .map_or_else(|| phys[..np_now].to_vec(), |(_, v)| v.clone());
-            // (post may hold the previous candidate's refit model.)
-            install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
-            // The start: the best point of the profile over the effect's prior (the one-step
-            // size among them), see [`start::profile_start`].
-            let t_profile = std::time::Instant::now();
-            let (start, model_start) = match start::profile_start(
-                post, &phys, &c.effect, one_step, &gn,
-            ) {
-                Ok(ps) => {
-                    say(format!(
+        // The refits in order: the top candidates by score with p below the threshold; then,
+        // when none passes and the residual is far from noise, the top by profile gain.
+        let mut queue: Vec<usize> = (0..params.top.min(scored.len()))
+            .filter(|&ci| scored[ci].p_value < params.p_threshold)
+            .collect();
+        let mut profiles: Vec<Option<start::ProfileStart>> = vec![None; scored.len()];
+        let mut profile_ranked = false;
+        loop {
+            let n_queue = queue.len();
+            for (qi, ci) in std::mem::take(&mut queue).into_iter().enumerate() {
+                let c = &scored[ci];
+                say(format!(
+                    "round {}: refit {} of {} ({}{})",
+                    round + 1,
+                    qi + 1,
+                    n_queue,
+                    c.effect.name(),
+                    if profile_ranked {
+                        ", ranked by its profile"
+                    } else {
+                        ""
+                    }
+                ));
+                let (lo, hi, one_step, gn) = refit_inputs(c, &starts, &phys[..np_now]);
+                let span = hi - lo;
+                // (post may hold the previous candidate's refit model.)
+                install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
+                // The start: the best point of the profile over the effect's prior (the one-step
+                // size among them), see [`start::profile_start`].
+                let t_profile = std::time::Instant::now();
+                let profiled = match profiles[ci].take() {
+                    Some(ps) => Ok(ps),
+                    None => start::profile_start(post, &phys, &c.effect, one_step, &gn),
+                };
+                let (start, model_start) = match profiled {
+                    Ok(ps) => {
+                        say(format!(
                             "round {}: {} starts at {:.4e} {} (profile: {} forward evaluations, {:.1} s)",
                             round + 1,
                             c.effect.name(),
@@ -676,75 +700,75 @@ pub fn run_closed_loop_with_laws<'a>(
                             ps.evaluations,
                             t_profile.elapsed().as_secs_f64()
                         ));
-                    (ps.size, ps.params)
-                }
-                Err(_) => (one_step, gn),
-            };
-            let t_refit = std::time::Instant::now();
-            let mut eff = base_effects_now.clone();
-            eff.terms.push(EffectTerm {
-                effect: c.effect.clone(),
-                value: start,
-                free: true,
-            });
-            install(post, &law_priors, &noise_priors, eff)?;
-            let mut p0 = model_start;
-            p0.push(start);
-            p0.extend_from_slice(&phys[np_now..]);
-            let x_start = post.unconstrained(&p0);
-            // The warm refit; when it fails or its Laplace Hessian is not positive definite
-            // (stopped short of the mode), the full multistart search from the same start.
-            let warm = find_map(&*post, Some(&x_start), &refit_map, none);
-            // A warm refit that ends with a parameter at an edge of its prior has a Hessian
-            // that is not positive definite because of the edge, not because it stopped short:
-            // the multistart search would end there too (the fractional-law case ran 17 CPU
-            // min of such searches), so it is not run.
-            // Law candidates (a Maxwell branch) are not searched again either: their start is
-            // already the profile over the branch modulus, and a branch whose relaxation time
-            // the data do not resolve has a flat direction, so the multistart search ends with
-            // the same indefinite Hessian after many times the cost (the fractional-law case
-            // spent 13 CPU min there without finishing); the verdict says so.
-            let law_candidate = is_law_effect(&c.effect);
-            let warm_ok = law_candidate
-                || warm.as_ref().is_ok_and(|r| {
-                    r.laplace.positive_definite
-                        || start::at_prior_edge(&post.priors, &r.map_physical)
+                        (ps.size, ps.params)
+                    }
+                    Err(_) => (one_step, gn),
+                };
+                let t_refit = std::time::Instant::now();
+                let mut eff = base_effects_now.clone();
+                eff.terms.push(EffectTerm {
+                    effect: c.effect.clone(),
+                    value: start,
+                    free: true,
                 });
-            let refit = if params.warm_refits && !warm_ok {
-                match (warm, find_map(&*post, Some(&x_start), &params.map, none)) {
-                    (Ok(a), Ok(b)) => Ok(
-                        if b.laplace.positive_definite
-                            || b.starts[b.best].objective < a.starts[a.best].objective
-                        {
-                            b
-                        } else {
-                            a
-                        },
-                    ),
-                    (Ok(a), Err(_)) => Ok(a),
-                    (Err(_), b) => b,
-                }
-            } else {
-                warm
-            };
-            let r = match refit {
-                Ok(r) => r,
-                Err(e) => {
-                    scored[ci].refit = Some(Refit {
-                        log_evidence: f64::NAN,
-                        evidence_gain: f64::NAN,
-                        size: f64::NAN,
-                        sd: f64::NAN,
-                        accepted: false,
-                        verdict: format!("refit failed: {e}"),
+                install(post, &law_priors, &noise_priors, eff)?;
+                let mut p0 = model_start;
+                p0.push(start);
+                p0.extend_from_slice(&phys[np_now..]);
+                let x_start = post.unconstrained(&p0);
+                // The warm refit; when it fails or its Laplace Hessian is not positive definite
+                // (stopped short of the mode), the full multistart search from the same start.
+                let warm = find_map(&*post, Some(&x_start), &refit_map, none);
+                // A warm refit that ends with a parameter at an edge of its prior has a Hessian
+                // that is not positive definite because of the edge, not because it stopped short:
+                // the multistart search would end there too (the fractional-law case ran 17 CPU
+                // min of such searches), so it is not run.
+                // Law candidates (a Maxwell branch) are not searched again either: their start is
+                // already the profile over the branch modulus, and a branch whose relaxation time
+                // the data do not resolve has a flat direction, so the multistart search ends with
+                // the same indefinite Hessian after many times the cost (the fractional-law case
+                // spent 13 CPU min there without finishing); the verdict says so.
+                let law_candidate = is_law_effect(&c.effect);
+                let warm_ok = law_candidate
+                    || warm.as_ref().is_ok_and(|r| {
+                        r.laplace.positive_definite
+                            || start::at_prior_edge(&post.priors, &r.map_physical)
                     });
-                    continue;
-                }
-            };
-            let k = np_now;
-            let size = r.map_physical[k];
-            let sd = r.laplace.sd_physical()[k];
-            say(format!(
+                let refit = if params.warm_refits && !warm_ok {
+                    match (warm, find_map(&*post, Some(&x_start), &params.map, none)) {
+                        (Ok(a), Ok(b)) => Ok(
+                            if b.laplace.positive_definite
+                                || b.starts[b.best].objective < a.starts[a.best].objective
+                            {
+                                b
+                            } else {
+                                a
+                            },
+                        ),
+                        (Ok(a), Err(_)) => Ok(a),
+                        (Err(_), b) => b,
+                    }
+                } else {
+                    warm
+                };
+                let r = match refit {
+                    Ok(r) => r,
+                    Err(e) => {
+                        scored[ci].refit = Some(Refit {
+                            log_evidence: f64::NAN,
+                            evidence_gain: f64::NAN,
+                            size: f64::NAN,
+                            sd: f64::NAN,
+                            accepted: false,
+                            verdict: format!("refit failed: {e}"),
+                        });
+                        continue;
+                    }
+                };
+                let k = np_now;
+                let size = r.map_physical[k];
+                let sd = r.laplace.sd_physical()[k];
+                say(format!(
                 "round {}: {} refitted to {size:.4e} +- {sd:.1e} {} ({} Gauss-Newton iterations, {} Newton steps, {} evaluations in the search, {}; {:.1} s with the Laplace Hessian)",
                 round + 1,
                 c.effect.name(),
@@ -755,47 +779,87 @@ pub fn run_closed_loop_with_laws<'a>(
                 r.starts[r.best].stop_reason,
                 t_refit.elapsed().as_secs_f64()
             ));
-            // Laplace evidences when both Hessians are positive definite; otherwise (a fit at
-            // a prior bound) the log-posterior gain at the MAPs less the BIC cost of one
-            // parameter, (1/2) ln(2 N).
-            let both_pd = r.laplace.positive_definite && current.laplace.positive_definite;
-            let gain = if both_pd {
-                r.laplace.log_evidence - current.laplace.log_evidence
-            } else {
-                let lp = |l: &crate::inference::map::Laplace| l.log_likelihood + l.log_prior;
-                lp(&r.laplace)
-                    - lp(&current.laplace)
-                    - 0.5 * (2.0 * post.likelihood.data.values.len() as f64).ln()
-            };
-            let at_edge = size < lo + 0.02 * span || size > hi - 0.02 * span;
-            let verdict = if !r.laplace.positive_definite && law_candidate {
-                "Laplace Hessian not positive definite after the warm refit (law candidate: no multistart search)".to_string()
-            } else if !r.laplace.positive_definite {
-                "Laplace Hessian not positive definite".to_string()
-            } else if !(gain >= params.threshold_nats) {
-                format!("evidence gain {gain:.2} nats < {}", params.threshold_nats)
-            } else if (size - c.effect.null_value()).abs() < params.min_z * sd {
-                format!("size {size:.4e} within {} sd of zero", params.min_z)
-            } else if at_edge {
-                format!("size {size:.4e} at the edge of its prior [{lo}, {hi}]")
-            } else {
-                "passes".into()
-            };
-            let passes = verdict == "passes";
-            scored[ci].refit = Some(Refit {
-                log_evidence: r.laplace.log_evidence,
-                evidence_gain: gain,
-                size,
-                sd,
-                accepted: false,
-                verdict,
-            });
-            if passes
-                && best
-                    .as_ref()
-                    .is_none_or(|(_, b)| r.laplace.log_evidence > b.laplace.log_evidence)
-            {
-                best = Some((ci, r));
+                // Laplace evidences when both Hessians are positive definite; otherwise (a fit at
+                // a prior bound) the log-posterior gain at the MAPs less the BIC cost of one
+                // parameter, (1/2) ln(2 N).
+                let both_pd = r.laplace.positive_definite && current.laplace.positive_definite;
+                let gain = if both_pd {
+                    r.laplace.log_evidence - current.laplace.log_evidence
+                } else {
+                    let lp = |l: &crate::inference::map::Laplace| l.log_likelihood + l.log_prior;
+                    lp(&r.laplace)
+                        - lp(&current.laplace)
+                        - 0.5 * (2.0 * post.likelihood.data.values.len() as f64).ln()
+                };
+                let at_edge = size < lo + 0.02 * span || size > hi - 0.02 * span;
+                let verdict = if !r.laplace.positive_definite && law_candidate {
+                    "Laplace Hessian not positive definite after the warm refit (law candidate: no multistart search)".to_string()
+                } else if !r.laplace.positive_definite {
+                    "Laplace Hessian not positive definite".to_string()
+                } else if !(gain >= params.threshold_nats) {
+                    format!("evidence gain {gain:.2} nats < {}", params.threshold_nats)
+                } else if (size - c.effect.null_value()).abs() < params.min_z * sd {
+                    format!("size {size:.4e} within {} sd of zero", params.min_z)
+                } else if at_edge {
+                    format!("size {size:.4e} at the edge of its prior [{lo}, {hi}]")
+                } else {
+                    "passes".into()
+                };
+                let passes = verdict == "passes";
+                scored[ci].refit = Some(Refit {
+                    log_evidence: r.laplace.log_evidence,
+                    evidence_gain: gain,
+                    size,
+                    sd,
+                    accepted: false,
+                    verdict,
+                });
+                if passes
+                    && best
+                        .as_ref()
+                        .is_none_or(|(_, b)| r.laplace.log_evidence > b.laplace.log_evidence)
+                {
+                    best = Some((ci, r));
+                }
+            }
+            if best.is_some() || profile_ranked {
+                break;
+            }
+            // Nothing passed. When the residual is far from noise, the score at zero may point the
+            // wrong way for an effect that acts non-linearly (a shaker's stinger resonance), so
+            // the candidates not yet refitted are ranked by their profile over the prior.
+            profile_ranked = true;
+            install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
+            let now = residuals(post, &phys)?;
+            let (wrss_now, chi2_now) = (now.chi2, now.chi2_normalised);
+            if !(chi2_now > params.profile_rank_above) {
+                break;
+            }
+            let mut gains: Vec<(usize, f64)> = Vec::new();
+            for ci in 0..scored.len() {
+                if scored[ci].refit.is_some() {
+                    continue;
+                }
+                let c = &scored[ci];
+                say(format!(
+                "round {}: profile of {} (the residual's chi-square {chi2_now:.2} is far from noise)",
+                round + 1,
+                c.effect.name()
+            ));
+                let (_, _, one_step, gn) = refit_inputs(c, &starts, &phys[..np_now]);
+                if let Ok(ps) = start::profile_start(post, &phys, &c.effect, one_step, &gn) {
+                    let g = 0.5 * (wrss_now - ps.wrss);
+                    scored[ci].profile_gain = Some(g);
+                    if g >= params.threshold_nats {
+                        gains.push((ci, g));
+                    }
+                    profiles[ci] = Some(ps);
+                }
+            }
+            gains.sort_by(|a, b| b.1.total_cmp(&a.1));
+            queue = gains.iter().take(params.top).map(|&(ci, _)| ci).collect();
+            if queue.is_empty() {
+                break;
             }
         }
         // Alternative laws: refitted every round (no score test; see [`alternative`]).
@@ -906,6 +970,18 @@ pub fn run_closed_loop_with_laws<'a>(
             .collect::<Vec<_>>()
             .join("; ")
     };
+    // Never silent: a starting fit pressed against its prior's edge cannot fit the data inside
+    // the prior, and what the loop identifies from it may sit in another basin.
+    let pressed: Vec<&str> = (0..nl)
+        .filter(|&i| start::at_prior_edge(&start_priors[i..=i], &before.values[i..=i]))
+        .map(|i| before.names[i].as_str())
+        .collect();
+    if !pressed.is_empty() {
+        conclusion = format!(
+            "{conclusion}. The starting fit has {} at the edge of its prior: the model cannot fit these data within its priors, so the sizes found from it may be biased (widen the priors or check the structure)",
+            pressed.join(", ")
+        );
+    }
     // Never silent: candidates the law absorbs are named with the bias they could carry.
     let last = table.iter().map(|c| c.round).max().unwrap_or(0);
     let confounded: Vec<String> = table
@@ -933,6 +1009,27 @@ pub fn run_closed_loop_with_laws<'a>(
         conclusion,
         confounded,
     })
+}
+
+/// The refit's inputs for candidate `c`: its prior's range (infinite when not uniform), the
+/// score test's one-step size kept 1 % of the range inside it, and the model parameters' start
+/// (the score test's Gauss-Newton step from `starts`, else the current MAP's `phys_model`).
+fn refit_inputs(
+    c: &Candidate,
+    starts: &[(String, Vec<f64>)],
+    phys_model: &[f64],
+) -> (f64, f64, f64, Vec<f64>) {
+    let (lo, hi) = match c.effect.default_prior() {
+        Prior::Uniform { lo, hi } => (lo, hi),
+        _ => (f64::NEG_INFINITY, f64::INFINITY),
+    };
+    let span = hi - lo;
+    let one_step = c.one_step.clamp(lo + 0.01 * span, hi - 0.01 * span);
+    let gn = starts
+        .iter()
+        .find(|(n, _)| *n == c.effect.name())
+        .map_or_else(|| phys_model.to_vec(), |(_, v)| v.clone());
+    (lo, hi, one_step, gn)
 }
 
 /// Whether `e` changes the constitutive law (a Maxwell branch) rather than the structure or

@@ -428,12 +428,24 @@ fn hessian_of(post: &dyn Posterior, x: &[f64], physical: bool) -> Result<Vec<f64
 /// [`hessian`] with the Hessian's curvature scales used as difference steps: a first pass
 /// with steps `1e-5 (1 + |x|)`, then steps of `1e-3` posterior sd per coordinate. A posterior
 /// narrower than the first step (thousands of FRF values under a misspecified law) would
-/// otherwise be differenced across its own width.
+/// otherwise be differenced across its own width. The first pass only sets the steps, so a
+/// posterior with a Gauss-Newton curvature ([`Posterior::curvature`]) gives it from that one
+/// call instead of `2 d` gradients.
 pub fn hessian_scaled(post: &dyn Posterior, x: &[f64]) -> Result<Vec<f64>, DensityError> {
     let d = x.len();
-    let h = hessian_of(post, x, false)?;
-    let Some(l) = cholesky(&h, d) else {
-        return Ok(h);
+    let gauss_newton = match post.curvature(x) {
+        Some(Ok(c)) => cholesky(&c.hess, d),
+        _ => None,
+    };
+    let l = match gauss_newton {
+        Some(l) => l,
+        None => {
+            let h = hessian_of(post, x, false)?;
+            let Some(l) = cholesky(&h, d) else {
+                return Ok(h);
+            };
+            l
+        }
     };
     let cov = chol_inverse(&l, d);
     let steps: Vec<f64> = (0..d)

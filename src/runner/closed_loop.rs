@@ -625,7 +625,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
     let mut num: [Vec<f64>; 4] = Default::default();
     let mut refit: [Vec<Option<f64>>; 4] = Default::default();
     let (mut acc, mut verdict, mut unit) = (Vec::new(), Vec::new(), Vec::new());
-    let (mut r2, mut absorbed) = (Vec::new(), Vec::new());
+    let (mut r2, mut absorbed, mut profile) = (Vec::new(), Vec::new(), Vec::new());
     for (level, _, _, res, _) in results {
         for c in &res.candidates {
             c_level.push(level.clone());
@@ -645,6 +645,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
             refit[3].push(r.map(|r| r.sd));
             acc.push(r.is_some_and(|r| r.accepted));
             verdict.push(r.map_or("not refitted".to_string(), |r| r.verdict.clone()));
+            profile.push(c.profile_gain);
             r2.push(c.confounding.r2);
             absorbed.push(
                 c.confounding
@@ -673,6 +674,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
             refit[3].push(None);
             acc.push(r.accepted);
             verdict.push(r.verdict.clone());
+            profile.push(None);
             // A whole law is not a column beside the law's own: no confounding measure.
             r2.push(f64::NAN);
             absorbed.push(String::new());
@@ -696,6 +698,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
         .and_then(|t| t.push_opt_f64("size_sd", "SI (see unit)", sd))
         .and_then(|t| t.push_bool("accepted", acc))
         .and_then(|t| t.push_str("verdict", verdict))
+        .and_then(|t| t.push_opt_f64("profile_gain", "nat", profile))
         .and_then(|t| t.push_f64("law_r2", "1", r2))
         .and_then(|t| t.push_str("absorbed_per_unit", absorbed))
         .map_err(out_err)?;
@@ -785,7 +788,7 @@ fn markdown(
         for c in res
             .candidates
             .iter()
-            .filter(|c| c.rank <= 5 || c.refit.is_some())
+            .filter(|c| c.rank <= 5 || c.refit.is_some() || c.profile_gain.is_some())
         {
             let (g, sz, iv, v) = match &c.refit {
                 Some(r) => (
@@ -799,6 +802,11 @@ fn markdown(
                     r.verdict.clone(),
                 ),
                 None => ("".into(), "".into(), "".into(), "not refitted".into()),
+            };
+            // Ranked by the profile (the residual far from noise): its gain beside the verdict.
+            let v = match c.profile_gain {
+                Some(pg) => format!("{v} (profile gain {pg:.1} nats)"),
+                None => v,
             };
             let _ = writeln!(
                 s,

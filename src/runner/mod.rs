@@ -174,8 +174,17 @@ impl LevelTruth {
     }
 }
 
-/// The truth of level `name` in a sidecar written by `rfmlab simulate`.
-fn read_truth(study: &Study, path: &Path, name: &str) -> Result<Option<LevelTruth>, RunError> {
+/// The truth of `level` in a sidecar written by `rfmlab simulate` (levels named by `"level"`),
+/// or in the `truth.json` of an independent virtual experiment (studies/data/virtual: levels
+/// numbered by `"id"` with their `"force_rms_N"`). A numbered level is the study's level when
+/// its force RMS equals the study level's `force_rms_n` (to 1e-6), or, without a force RMS in
+/// the study, when the study level is named `L<id>`.
+fn read_truth(
+    study: &Study,
+    path: &Path,
+    level: &crate::study::Level,
+) -> Result<Option<LevelTruth>, RunError> {
+    let name = level.name.as_str();
     let bad = |m: String| {
         study_err(
             study,
@@ -187,12 +196,25 @@ fn read_truth(study: &Study, path: &Path, name: &str) -> Result<Option<LevelTrut
     let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
     let Some(levels) = v.get("levels").and_then(|l| l.as_array()) else {
         return Err(bad(
-            "no \"levels\" array: is this a .truth.json of `rfmlab simulate`?".into(),
+            "no \"levels\" array: give the .truth.json of `rfmlab simulate` or the truth.json of a virtual experiment".into(),
         ));
+    };
+    let numbered = |l: &serde_json::Value| {
+        let Some(id) = l.get("id").and_then(|n| n.as_u64()) else {
+            return false;
+        };
+        match (
+            level.force_rms_n,
+            l.get("force_rms_N").and_then(|f| f.as_f64()),
+        ) {
+            (Some(a), Some(b)) => (a - b).abs() <= 1e-6 * b.abs(),
+            _ => name == format!("L{id}"),
+        }
     };
     let Some(l) = levels
         .iter()
         .find(|l| l.get("level").and_then(|n| n.as_str()) == Some(name))
+        .or_else(|| levels.iter().find(|l| numbered(l)))
     else {
         return Ok(None);
     };
@@ -387,7 +409,7 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
             response_ids: ids,
             reference_id: exc_point.id,
             truth: match &meas.truth {
-                Some(p) => read_truth(study, p, &level.name)?,
+                Some(p) => read_truth(study, p, level)?,
                 None => None,
             },
         });

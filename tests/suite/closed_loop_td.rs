@@ -113,7 +113,7 @@ fn run_case_with(
 }
 
 /// Check one case against the acceptance criteria; returns the failures (empty: passed).
-fn judge(
+pub(crate) fn judge(
     l: &DiagnoseLevel,
     expected: &str,
     kind_only: bool,

@@ -20,6 +20,7 @@ mod cli_structure_errors;
 mod closed_loop;
 mod closed_loop_alt;
 mod closed_loop_fast;
+mod closed_loop_independent;
 mod closed_loop_td;
 mod correlation;
 mod csv_io;
