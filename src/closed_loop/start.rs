@@ -8,7 +8,9 @@
 //! at each point of a grid across its prior (plus the one-step size), the model's other
 //! parameters follow by a few Gauss-Newton steps (the profile), and the point with the
 //! smallest weighted residual sum of squares `sum |X - E[H1]|^2 / v` is the refit's start.
-//! Each grid point costs a few forward evaluations with the Jacobian, far less than a refit.
+//! The grid points race by successive halving: each round gives every point still in the race
+//! one Gauss-Newton step and keeps the better half, so most points cost one step with the
+//! Jacobian and the best few [`PROFILE_STEPS`], far less than a refit.
 
 use super::candidate_model;
 use crate::forward::{Effect, ForwardError};
@@ -18,7 +20,7 @@ use crate::inference::prior::Prior;
 
 /// Grid points across a uniform prior (cell centres).
 pub const PROFILE_GRID: usize = 10;
-/// Gauss-Newton steps of the other parameters per grid point.
+/// Gauss-Newton steps of the other parameters at most per grid point (the race's rounds).
 pub const PROFILE_STEPS: usize = 4;
 
 /// A profiled start: the effect's size, the model's other parameters and the weighted
@@ -77,32 +79,34 @@ pub fn profile_start(
     } else {
         &phys[..np]
     };
-    // The sizes in order of their residual at the start (the ties in the given order), so the
-    // best point so far is good early and the Gauss-Newton model below can leave most of the
-    // grid after one step.
-    let mut order: Vec<(f64, f64)> = sizes
+    // The sizes in order of their residual at the start (the ties in the given order).
+    let mut alive: Vec<(f64, Vec<f64>, f64)> = sizes
         .iter()
         .filter_map(|&e| {
             let mut p = base.to_vec();
             p.push(e);
-            wrss(&p).map(|q| (e, q))
+            wrss(&p).map(|q| (e, p, q))
         })
         .collect();
-    order.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let mut best: Option<ProfileStart> = None;
-    for (e, q0) in order {
-        let mut p = base.to_vec();
-        p.push(e);
-        let mut q = q0;
-        for _ in 0..PROFILE_STEPS {
+    alive.sort_by(|a, b| a.2.total_cmp(&b.2));
+    // Successive halving: one Gauss-Newton step for every size still in the race, then the
+    // better half (at least two) goes on, so most of the grid costs one step, not
+    // PROFILE_STEPS (each step is a forward evaluation with the Jacobian: 2 s on a term ROM).
+    // A size whose Gauss-Newton model cannot reach the best point so far even at twice its
+    // predicted decrease leaves the race at once, as does one whose step does not decrease.
+    let mut best_q = alive.first().map_or(f64::INFINITY, |a| a.2);
+    let mut done: Vec<(f64, Vec<f64>, f64)> = Vec::new();
+    for _ in 0..PROFILE_STEPS {
+        let mut next = Vec::with_capacity(alive.len());
+        for (e, mut p, mut q) in std::mem::take(&mut alive) {
             evaluations.set(evaluations.get() + 1);
             let Some((dp, decrease)) = gauss_newton_step(&fm, lik, &v, &p, np)? else {
-                break;
+                done.push((e, p, q));
+                continue;
             };
-            // A point whose Gauss-Newton model cannot reach the best point so far even at
-            // twice its predicted decrease is left (most of the grid, far from the mode).
-            if best.as_ref().is_some_and(|b| q - 2.0 * decrease > b.wrss) {
-                break;
+            if q - 2.0 * decrease > best_q {
+                done.push((e, p, q));
+                continue;
             }
             let mut f = 1.0;
             let mut moved = false;
@@ -121,19 +125,31 @@ pub fn profile_start(
                 }
                 f *= 0.5;
             }
-            if !moved {
-                break;
+            best_q = best_q.min(q);
+            if moved {
+                next.push((e, p, q));
+            } else {
+                done.push((e, p, q));
             }
         }
-        if best.as_ref().is_none_or(|b| q < b.wrss) {
-            best = Some(ProfileStart {
-                size: e,
-                params: p[..np].to_vec(),
-                wrss: q,
-                evaluations: 0,
-            });
+        next.sort_by(|a, b| a.2.total_cmp(&b.2));
+        let keep = next.len().div_ceil(2).max(2).min(next.len());
+        done.extend(next.drain(keep..));
+        alive = next;
+        if alive.is_empty() {
+            break;
         }
     }
+    done.extend(alive);
+    let mut best = done
+        .into_iter()
+        .min_by(|a, b| a.2.total_cmp(&b.2))
+        .map(|(e, p, q)| ProfileStart {
+            size: e,
+            params: p[..np].to_vec(),
+            wrss: q,
+            evaluations: 0,
+        });
     if let Some(b) = best.as_mut() {
         b.evaluations = evaluations.get();
     }
