@@ -404,16 +404,8 @@ pub fn refit_law<'a>(
     let sd = r.laplace.sd_physical();
     row.params = r.map_physical[..n_new].to_vec();
     row.sd = sd[..n_new].to_vec();
-    let both_pd = r.laplace.positive_definite && current.laplace.positive_definite;
-    let gain = if both_pd {
-        r.laplace.log_evidence - current.laplace.log_evidence
-    } else {
-        // As for effects: the log-posterior gain less the BIC cost of the extra parameters.
-        let lp = |l: &crate::inference::map::Laplace| l.log_likelihood + l.log_prior;
-        lp(&r.laplace)
-            - lp(&current.laplace)
-            - 0.5 * (n_new as f64 - n_old as f64) * (2.0 * n_data as f64).ln()
-    };
+    // As for effects (the BIC cost of the extra parameters when a Hessian is indefinite).
+    let gain = super::evidence_gain(&r, current, n_new as i64 - n_old as i64, n_data);
     row.refit.log_evidence = r.laplace.log_evidence;
     row.refit.evidence_gain = gain;
     row.refit.verdict = if !r.laplace.positive_definite {

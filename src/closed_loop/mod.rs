@@ -791,15 +791,7 @@ pub fn run_closed_loop_with_laws<'a>(
                 // Laplace evidences when both Hessians are positive definite; otherwise (a fit at
                 // a prior bound) the log-posterior gain at the MAPs less the BIC cost of one
                 // parameter, (1/2) ln(2 N).
-                let both_pd = r.laplace.positive_definite && current.laplace.positive_definite;
-                let gain = if both_pd {
-                    r.laplace.log_evidence - current.laplace.log_evidence
-                } else {
-                    let lp = |l: &crate::inference::map::Laplace| l.log_likelihood + l.log_prior;
-                    lp(&r.laplace)
-                        - lp(&current.laplace)
-                        - 0.5 * (2.0 * post.likelihood.data.values.len() as f64).ln()
-                };
+                let gain = evidence_gain(&r, &current, 1, post.likelihood.data.values.len());
                 let at_edge = size < lo + 0.02 * span || size > hi - 0.02 * span;
                 let verdict = if !r.laplace.positive_definite && law_candidate {
                     "Laplace Hessian not positive definite after the warm refit (law candidate: no multistart search)".to_string()
@@ -1035,6 +1027,19 @@ fn refit_inputs(
         .find(|(n, _)| *n == c.effect.name())
         .map_or_else(|| phys_model.to_vec(), |(_, v)| v.clone());
     (lo, hi, one_step, gn)
+}
+
+/// The log-evidence gain (nats) of refit `r` over `current`, which has `extra` fewer
+/// parameters, on `n_data` complex values: the Laplace evidences' difference when both Hessians
+/// are positive definite; otherwise (a fit at a prior bound) the log-posterior gain at the MAPs
+/// less the BIC cost of the extra parameters, `(extra / 2) ln(2 N)`.
+pub(crate) fn evidence_gain(r: &MapResult, current: &MapResult, extra: i64, n_data: usize) -> f64 {
+    if r.laplace.positive_definite && current.laplace.positive_definite {
+        r.laplace.log_evidence - current.laplace.log_evidence
+    } else {
+        let lp = |l: &crate::inference::map::Laplace| l.log_likelihood + l.log_prior;
+        lp(&r.laplace) - lp(&current.laplace) - 0.5 * extra as f64 * (2.0 * n_data as f64).ln()
+    }
 }
 
 /// Whether `e` changes the constitutive law (a Maxwell branch) rather than the structure or
