@@ -595,9 +595,6 @@ pub fn run_closed_loop_with_laws<'a>(
     let mut law_priors = post.priors[..nl].to_vec();
     let noise_priors = post.priors[nl..].to_vec();
     let none = &|| {};
-    // Refits search by Gauss-Newton: the effect's data fit is a least-squares valley, narrow
-    // and correlated with the law, where L-BFGS spent hundreds of evaluations (the degraded
-    // bond's refit ran for most of an hour).
     let start_priors = post.priors[..nl].to_vec();
     let say = |m: String| params.progress.say(&m);
     say("MAP of the starting model".into());
@@ -612,6 +609,9 @@ pub fn run_closed_loop_with_laws<'a>(
         .filter(|&i| start::at_prior_edge(&start_priors[i..=i], &before.values[i..=i]))
         .map(|i| before.names[i].as_str())
         .collect();
+    // Refits search by Gauss-Newton: the effect's data fit is a least-squares valley, narrow
+    // and correlated with the law, where L-BFGS spent hundreds of evaluations (the degraded
+    // bond's refit ran for most of an hour).
     let refit_map = MapParams {
         n_starts: if params.warm_refits {
             0
