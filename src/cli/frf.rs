@@ -5,6 +5,7 @@ use super::common::{
     DEFAULT_MODULUS,
 };
 use rfmlab::common::C64;
+use rfmlab::fe::cost::{available_memory_bytes, check_memory, format_seconds};
 use rfmlab::frf::full::{FullModel, FullParams};
 use rfmlab::frf::FrfEngine;
 use rfmlab::output::Table;
@@ -58,13 +59,40 @@ pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
         .into());
     }
     let f0 = if f0 == 0.0 { a.step } else { f0 };
-    let n = ((f1 - f0) / a.step + 1e-9).floor() as usize + 1;
+    let n_f = ((f1 - f0) / a.step + 1e-9).floor() + 1.0;
+    let study = load_study(&a.study)?;
+    // the size first: lines x channels of results, and the model's own cost
+    let (n_points, model_cost) = match rfmlab::study::build::joint_spec(&study.structure) {
+        Some(spec) => (
+            spec.points.len(),
+            Some(
+                rfmlab::fe::joint::joint_cost_estimate(&spec)
+                    .map_err(|e| InputError(format!("{}: {e}", study.file.display())))?,
+            ),
+        ),
+        None => (study.structure.points.len(), None),
+    };
+    let per_line = 32.0 + (n_points as f64) * (if a.derivatives { 2.0 } else { 1.0 }) * 80.0;
+    let bytes = n_f * per_line + model_cost.map_or(0.0, |c| c.memory_bytes);
+    if let Err(msg) = check_memory(bytes, available_memory_bytes()) {
+        let secs = model_cost.map_or(String::new(), |c| {
+            format!(
+                " and about {}",
+                format_seconds(n_f * c.factor_seconds.max(1e-3))
+            )
+        });
+        return Err(InputError(format!(
+            "--step {}: {n_f:.3e} lines over {f0}-{f1} Hz {msg}{secs}: use a larger --step or a narrower --band",
+            a.step
+        ))
+        .into());
+    }
+    let n = n_f as usize;
     let freq: Vec<f64> = (0..n).map(|k| f0 + k as f64 * a.step).collect();
     let omega: Vec<f64> = freq
         .iter()
         .map(|f| 2.0 * std::f64::consts::PI * f)
         .collect();
-    let study = load_study(&a.study)?;
     let b = build_model(g, &study)?;
     let engine = FullModel::new(&b.model, &[b.excitation], FullParams::default())?;
     let pb = progress(g, n as u64, "full-model sweep");

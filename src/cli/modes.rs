@@ -1,9 +1,11 @@
 //! `rfmlab modes STUDY.toml [--modulus E',E''] [--count N] [--json]`
 
+use super::common::InputError;
 use super::common::{
     build_model, load_study, parse_modulus, print_json, spinner, Global, DEFAULT_MODULUS,
 };
-use rfmlab::modes::{complex_modes, ModesParams};
+use rfmlab::fe::cost::{available_memory_bytes, check_memory, format_bytes};
+use rfmlab::modes::{complex_modes, complex_modes_memory, ModesParams};
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -17,6 +19,11 @@ pub struct ModesArgs {
     /// Number of modes.
     #[arg(long, default_value_t = 8)]
     pub count: usize,
+    /// Convergence tolerance of each complex mode: relative residual
+    /// ||(K - lambda M) phi|| / ||K phi|| (a mode whose backward error is at the rounding
+    /// level is accepted as well).
+    #[arg(long, default_value_t = ModesParams::default().tol)]
+    pub tol: f64,
     /// Print JSON for scripts.
     #[arg(long)]
     pub json: bool,
@@ -27,17 +34,32 @@ pub fn run(a: &ModesArgs, g: &Global) -> anyhow::Result<()> {
         Some(s) => parse_modulus(s)?,
         None => DEFAULT_MODULUS,
     };
+    if !(a.tol > 0.0 && a.tol < 1.0) {
+        return Err(InputError(format!(
+            "--tol {}: give a relative residual between 0 and 1, e.g. 1e-6",
+            a.tol
+        ))
+        .into());
+    }
+    if a.count == 0 {
+        return Err(InputError("--count 0: ask for at least one mode".into()).into());
+    }
+    let params = ModesParams {
+        tol: a.tol,
+        ..ModesParams::default()
+    };
     let study = load_study(&a.study)?;
+    // the size first, from the mesh divisions: nothing large is allocated before the checks
+    if let Some(spec) = rfmlab::study::build::joint_spec(&study.structure) {
+        let cost = rfmlab::fe::joint::joint_cost_estimate(&spec)
+            .map_err(|e| InputError(format!("{}: {e}", study.file.display())))?;
+        check_count(a.count, cost.n_dof, &params)?;
+    }
     let b = build_model(g, &study)?;
+    check_count(a.count, b.model.n_dof(), &params)?;
     let sp = spinner(g, "complex modes");
     let t = std::time::Instant::now();
-    let modes = complex_modes(
-        &b.model,
-        e,
-        a.count,
-        b.dof_axes.as_deref(),
-        &ModesParams::default(),
-    )?;
+    let modes = complex_modes(&b.model, e, a.count, b.dof_axes.as_deref(), &params)?;
     let secs = t.elapsed().as_secs_f64();
     sp.finish_and_clear();
     if a.json {
@@ -98,4 +120,22 @@ pub fn run(a: &ModesArgs, g: &Global) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// `--count` against the model's DOFs and the machine's memory (exit 2 before allocating).
+fn check_count(count: usize, n_dof: usize, params: &ModesParams) -> Result<(), InputError> {
+    // the refinement needs distinct modes from a real basis of 2 n + 8 vectors
+    let most = n_dof / 3;
+    let bytes = complex_modes_memory(n_dof, count, params);
+    if count > most {
+        return Err(InputError(format!(
+            "--count {count}: the model has {n_dof} free DOFs (and {count} modes would need an estimated {} of memory); ask for at most {most} modes",
+            format_bytes(bytes)
+        )));
+    }
+    check_memory(bytes, available_memory_bytes()).map_err(|msg| {
+        InputError(format!(
+            "--count {count}: {count} complex modes of {n_dof} DOFs {msg}; ask for fewer modes"
+        ))
+    })
 }

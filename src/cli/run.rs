@@ -103,6 +103,7 @@ pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;
     } else if !g.quiet {
+        let pf = &summary.preflight;
         eprintln!(
             "{}: OK ({} DOFs, {} levels, {} models, initial values evaluated at {} lines)",
             a.study.display(),
@@ -111,6 +112,37 @@ pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
             summary.models.len(),
             summary.lines_checked
         );
+        if let Some(c) = &pf.cost {
+            eprintln!(
+                "  engine: about {} of memory ({} available), {} per factorisation",
+                rfmlab::fe::cost::format_bytes(c.memory_bytes),
+                rfmlab::fe::cost::format_bytes(c.available_memory_bytes),
+                rfmlab::fe::cost::format_seconds(c.factor_seconds)
+            );
+        }
+        if let (Some(m), Some(p)) = (pf.first_mode_hz, pf.first_peak_hz) {
+            eprintln!(
+                "  first y mode at the initial values {m:.2} Hz, data's first peak {p:.2} Hz"
+            );
+        }
+        if !pf.discretisation.is_empty() {
+            eprintln!(
+                "  mesh discretisation error (Richardson, mesh refined twice per direction):"
+            );
+            for d in &pf.discretisation {
+                eprintln!(
+                    "    mode {:>2} {:>10.4} Hz  refined {:>10.4} Hz  error {:+.2e} Hz ({:+.4} %)",
+                    d.mode,
+                    d.freq_hz,
+                    d.freq_refined_hz,
+                    d.error_hz,
+                    100.0 * d.rel_error
+                );
+            }
+        }
+        for w in &pf.warnings {
+            eprintln!("warning: {w}");
+        }
     }
     Ok(())
 }

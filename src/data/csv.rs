@@ -98,6 +98,17 @@ pub fn read_csv(path: impl AsRef<Path>, opts: &CsvOptions) -> Result<FrfSet, Dat
             format!("cannot read the file: {e}; check the path"),
         )
     })?;
+    let head = &bytes[..bytes.len().min(4096)];
+    if bytes.iter().all(|b| b.is_ascii_whitespace()) || head.contains(&0) {
+        let why = crate::data::uff58::not_uff_reason(&bytes);
+        let why = why.split(':').next().unwrap_or("unreadable");
+        return Err(DataError::at(
+            &label,
+            None,
+            None,
+            format!("{why}: a CSV file holds a header line (freq_hz, response, reference, re, im ...) and one row per line"),
+        ));
+    }
     let text = crate::data::uff58::decode_text(&bytes);
     parse_csv(&text, &label, opts)
 }

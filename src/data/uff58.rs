@@ -227,7 +227,32 @@ pub fn read_uff(path: impl AsRef<Path>) -> Result<UffFile, DataError> {
             format!("cannot read the file: {e}; check the path"),
         )
     })?;
-    parse_uff(&bytes, &label)
+    let f = parse_uff(&bytes, &label)?;
+    if f.datasets.is_empty() && f.skipped.is_empty() && f.units.is_none() {
+        return Err(DataError::at(&label, None, None, not_uff_reason(&bytes)));
+    }
+    Ok(f)
+}
+
+/// Why bytes without any UFF dataset are not a UFF file: empty, binary or other text.
+pub(crate) fn not_uff_reason(bytes: &[u8]) -> String {
+    let fix = "give a UFF58 file (datasets between lines holding \"-1\") or a CSV file with the extension .csv";
+    if bytes.iter().all(|b| b.is_ascii_whitespace()) {
+        return format!("the file is empty: {fix}");
+    }
+    let head = &bytes[..bytes.len().min(4096)];
+    let binary = head.contains(&0)
+        || head
+            .iter()
+            .filter(|&&b| b < 0x09 || (b > 0x0d && b < 0x20))
+            .count()
+            * 20
+            > head.len();
+    if binary {
+        format!("this is a binary file, not a UFF text file: {fix}")
+    } else {
+        format!("this text holds no UFF dataset (no line with \"-1\" opening a dataset): {fix}")
+    }
 }
 
 // ---------------------------------------------------------------------------------------

@@ -12,6 +12,7 @@
 
 pub mod assembly;
 pub mod base;
+pub mod cost;
 pub mod element;
 pub mod error;
 pub mod geometry;

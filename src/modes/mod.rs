@@ -15,7 +15,13 @@
 //! solved densely. Each of the lowest n approximations is then refined on the full model by
 //! complex Rayleigh-quotient iteration (the complex-symmetric Rayleigh quotient
 //! lambda = phi^T K phi / phi^T M phi, no conjugate; one sparse complex LU per step, symbolic
-//! analysis shared) until ||(K - lambda M) phi|| / ||K phi|| <= `ModesParams::tol`.
+//! analysis shared) until ||(K - lambda M) phi|| / ||K phi|| <= `ModesParams::tol`, or until
+//! the backward error ||(K - lambda M) phi|| / ((||K||_1 + |lambda| ||M||_1) ||phi||) is at
+//! the rounding level `ModesParams::backward_tol` after `max_refine` steps (the relative
+//! residual's own floor is about eps cond(K), which for a steel beam on a soft adhesive can
+//! sit above `tol`; the backward error is scale-free and reachable in floating point whatever
+//! the conditioning). While the residual keeps falling (by `PROGRESS` per step) the
+//! iterations go on past `max_refine`, up to `EXTRA_REFINE_FACTOR` times it.
 
 pub mod real;
 
@@ -35,7 +41,7 @@ pub enum ModesError {
     BadInput(String),
     #[error("factorisation failed: {0}")]
     Factorization(String),
-    #[error("{what} did not converge: residual {residual:e} > tolerance {tol:e}; raise the iteration limits or loosen the tolerance")]
+    #[error("{what} did not converge: residual {residual:e} > tolerance {tol:e}; loosen the tolerance (`rfmlab modes --tol`) or refine the mesh (structure.mesh.element_size)")]
     NotConverged {
         what: String,
         residual: f64,
@@ -58,8 +64,15 @@ pub struct ModesParams {
     /// beam on a soft adhesive; the eigenvalue itself converges quadratically and is far more
     /// accurate than the residual suggests).
     pub tol: f64,
-    /// Maximum Rayleigh-quotient iterations per mode (default 10).
+    /// Maximum Rayleigh-quotient iterations per mode (default 10; up to
+    /// `EXTRA_REFINE_FACTOR` times more while the residual keeps falling).
     pub max_refine: usize,
+    /// A mode is also converged when its backward error
+    /// ||(K - lambda M) phi|| / ((||K||_1 + |lambda| ||M||_1) ||phi||) is below this
+    /// (default 1e-12, a few thousand times the unit roundoff: where the relative residual's
+    /// rounding floor lies above `tol`, the pair is then exact for a perturbation of K and M
+    /// far below the model's own accuracy).
+    pub backward_tol: f64,
     /// A mode is flagged `y_dominant` when the y fraction of its kinetic energy exceeds this
     /// (default 0.8: torsion modes carry 40-60 % of their energy in y but are invisible at centreline
     /// sensors).
@@ -77,6 +90,7 @@ impl Default for ModesParams {
             extra: 8,
             tol: 1e-6,
             max_refine: 10,
+            backward_tol: 1e-12,
             y_dominant_threshold: 0.8,
         }
     }
@@ -137,6 +151,32 @@ fn tdot(a: &[C64], b: &[C64]) -> C64 {
 
 fn norm2(a: &[C64]) -> f64 {
     a.iter().map(|x| x.norm_sqr()).sum::<f64>().sqrt()
+}
+
+/// Iterations beyond `max_refine` allowed while the residual still falls: up to this factor.
+pub const EXTRA_REFINE_FACTOR: usize = 3;
+/// A step makes progress when it divides the residual by at least this.
+pub const PROGRESS: f64 = 2.0;
+
+/// Largest absolute column sum ||A||_1 of a sparse matrix (an upper bound of ||A||_2 for a
+/// symmetric A).
+fn norm1(a: &crate::fe::model::SpMat) -> f64 {
+    let mut col = vec![0.0f64; a.ncols()];
+    for t in a.triplet_iter() {
+        col[t.col] += t.val.abs();
+    }
+    col.into_iter().fold(0.0, f64::max)
+}
+
+/// Estimated peak memory (bytes) of [`complex_modes`] for `n_modes` modes of a model of
+/// `n_dof` DOFs with the given parameters: the Lanczos basis of the real modes
+/// (max(6 p + 60, 120) vectors, p = `extra_factor` n + `extra`), S Phi and D Phi, and the
+/// dense complex eigenproblem of size p (about 4 p^2 complex values).
+pub fn complex_modes_memory(n_dof: usize, n_modes: usize, params: &ModesParams) -> f64 {
+    let nd = n_dof as f64;
+    let p = ((params.extra_factor * n_modes + params.extra).max(n_modes) as f64).min(nd);
+    let lanczos = (6.0 * p + 60.0).max(120.0).min(nd);
+    8.0 * nd * (lanczos + 3.0 * p) + 8.0 * lanczos * lanczos * 2.0 + 16.0 * 4.0 * p * p
 }
 
 /// Lowest `n_modes` complex modes of (K_b + E* S + j D_b, M) for the complex modulus
@@ -216,6 +256,11 @@ pub fn complex_modes(
     let full = FullModel::new(model, &[], FullParams::default())
         .map_err(|e| ModesError::BadInput(e.to_string()))?;
     let pencil = Pencil { model, e: modulus };
+    let norm_k = norm1(&model.k_b)
+        + modulus.norm() * norm1(&model.s)
+        + model.d_b.as_ref().map_or(0.0, norm1);
+    let norm_m = norm1(&model.m);
+    let hard_limit = params.max_refine.max(1) * EXTRA_REFINE_FACTOR;
     // modes are refined independently: in parallel over modes, sequential inside
     let refine = |idx: usize| -> Result<ComplexMode, ModesError> {
         let mut tmp = vec![C64::new(0.0, 0.0); nd];
@@ -225,9 +270,12 @@ pub fn complex_modes(
         let mut phi: Vec<C64> = (0..nd)
             .map(|r| (0..p).map(|i| u[(i, idx)] * phi_r[(r, i)]).sum())
             .collect();
-        let mut lambda = s[idx];
-        let mut residual = f64::INFINITY;
-        for it in 0..=params.max_refine {
+        let mut lambda: C64;
+        let mut residual: f64;
+        let mut backward: f64;
+        let mut previous = f64::INFINITY;
+        let mut it = 0usize;
+        loop {
             // normalise phi^T M phi = 1, Rayleigh quotient, residual
             pencil.m_mul(&phi, &mut mphi);
             let nrm = tdot(&phi, &mphi).sqrt();
@@ -246,10 +294,24 @@ pub fn complex_modes(
                 .zip(&mphi)
                 .map(|(k, m)| k - lambda * m)
                 .collect();
-            residual = norm2(&r) / norm2(&kphi).max(f64::MIN_POSITIVE);
-            if residual <= params.tol || it == params.max_refine {
+            let rn = norm2(&r);
+            residual = rn / norm2(&kphi).max(f64::MIN_POSITIVE);
+            backward =
+                rn / ((norm_k + lambda.norm() * norm_m) * norm2(&phi)).max(f64::MIN_POSITIVE);
+            // up to max_refine: the relative residual alone (as tight as it can be); beyond
+            // it, a pair at the rounding level is accepted, and the iteration goes on only
+            // while the residual still falls
+            if residual <= params.tol {
                 break;
             }
+            if it >= params.max_refine {
+                let progressing = residual * PROGRESS <= previous;
+                if backward <= params.backward_tol || !progressing || it >= hard_limit {
+                    break;
+                }
+            }
+            previous = residual;
+            it += 1;
             // (K - lambda M) x = M phi
             let mut rhs = Mat::<C64>::from_fn(nd, 1, |i, _| mphi[i]);
             match full.solve_pencil_in_place(lambda, modulus, rhs.as_mut()) {
@@ -257,12 +319,11 @@ pub fn complex_modes(
                 Err(_) => break, // lambda is an eigenvalue to machine precision
             }
         }
-        if residual > params.tol {
+        if residual > params.tol && backward > params.backward_tol {
             return Err(ModesError::NotConverged {
                 what: format!(
-                    "complex mode near {:.4} Hz (Rayleigh-quotient refinement, ModesParams::max_refine = {})",
+                    "complex mode near {:.4} Hz (Rayleigh-quotient refinement, {it} iterations, backward error {backward:.1e})",
                     lambda.re.max(0.0).sqrt() / (2.0 * std::f64::consts::PI),
-                    params.max_refine
                 ),
                 residual,
                 tol: params.tol,
@@ -316,7 +377,7 @@ pub fn complex_modes(
         if (w[1].lambda - w[0].lambda).norm() <= 1e-8 * w[0].lambda.norm() {
             return Err(ModesError::NotConverged {
                 what: format!(
-                    "complex modes: two approximations converged to the same eigenvalue {} (raise ModesParams::extra)",
+                    "complex modes: two approximations converged to the same eigenvalue {} (ask for a different number of modes, `rfmlab modes --count`)",
                     w[0].lambda
                 ),
                 residual: 0.0,

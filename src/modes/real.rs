@@ -112,7 +112,7 @@ impl SparseLlt {
 }
 
 /// a + c b for sparse a, b of the same size (union pattern).
-pub(crate) fn sp_add(a: &SpMat, b: &SpMat, c: f64) -> Result<SpMat, ModesError> {
+pub fn sp_add(a: &SpMat, b: &SpMat, c: f64) -> Result<SpMat, ModesError> {
     let mut t: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(a.val().len() + b.val().len());
     for x in a.triplet_iter() {
         t.push(Triplet::new(x.row, x.col, *x.val));

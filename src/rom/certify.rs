@@ -154,6 +154,26 @@ pub(crate) fn reference(
     moduli: &[C64],
     lines: &[f64],
 ) -> Result<Vec<Vec<Vec<C64>>>, RomError> {
+    let jobs: Vec<(usize, usize)> = (0..moduli.len())
+        .flat_map(|m| (0..lines.len()).map(move |l| (m, l)))
+        .collect();
+    let res = reference_points(model, inputs, moduli, lines, &jobs)?;
+    let mut out = vec![Vec::with_capacity(lines.len()); moduli.len()];
+    for ((m, _), h) in jobs.into_iter().zip(res) {
+        out[m].push(h);
+    }
+    Ok(out)
+}
+
+/// Full-model receptances (n_out x n_in row-major) by sparse complex LU at the validation
+/// points `jobs` = (modulus index, line index).
+pub(crate) fn reference_points(
+    model: &StructuralModel,
+    inputs: &[usize],
+    moduli: &[C64],
+    lines: &[f64],
+    jobs: &[(usize, usize)],
+) -> Result<Vec<Vec<C64>>, RomError> {
     let pat = ModelPattern::new(model)?;
     let solver = FullSolver::new(&pat)?;
     let n = model.n_dof();
@@ -164,9 +184,6 @@ pub(crate) fn reference(
             rhs[(d, jj)] += w;
         }
     }
-    let jobs: Vec<(usize, usize)> = (0..moduli.len())
-        .flat_map(|m| (0..lines.len()).map(move |l| (m, l)))
-        .collect();
     let res: Vec<Vec<C64>> = jobs
         .par_iter()
         .map(|&(m, l)| {
@@ -180,11 +197,7 @@ pub(crate) fn reference(
             Ok(h)
         })
         .collect::<Result<_, RomError>>()?;
-    let mut out = vec![Vec::with_capacity(lines.len()); moduli.len()];
-    for ((m, _), h) in jobs.into_iter().zip(res) {
-        out[m].push(h);
-    }
-    Ok(out)
+    Ok(res)
 }
 
 /// Largest error relative to the peak of each FRF (see module doc).
@@ -300,6 +313,7 @@ pub fn build_rom(
         Reference::Iterative { .. } => None,
     };
     let mut gmres_stats = None;
+    let mut lu_points = 0usize;
     let mut seconds_basis = 0.0;
 
     let pat = ModelPattern::new(model)?;
@@ -324,7 +338,7 @@ pub fn build_rom(
         {
             // the full-model solutions do not depend on the basis (to the residual
             // tolerance), so the first level's basis serves every later level
-            let (h, st) = super::reference::reference(
+            let (mut h, st) = super::reference::reference(
                 &basis,
                 &rom,
                 inputs,
@@ -333,11 +347,15 @@ pub fn build_rom(
                 residual_tol,
                 max_iter,
             )?;
-            if st.not_converged > 0 {
-                return Err(RomError::Factorization(format!(
-                    "the certificate's GMRES reference did not reach the residual {residual_tol:.1e} at {} validation point(s) within {max_iter} iterations (largest residual {:.2e}); raise max_iter or use the sparse-LU reference",
-                    st.not_converged, st.max_residual
-                )));
+            // the points GMRES could not resolve (too ill-conditioned for its
+            // preconditioner) are solved directly instead
+            if !st.unconverged_points.is_empty() {
+                let direct =
+                    reference_points(model, inputs, &moduli, &lines, &st.unconverged_points)?;
+                for (&(m, l), hv) in st.unconverged_points.iter().zip(direct) {
+                    h[m][l] = hv;
+                }
+                lu_points = st.unconverged_points.len();
             }
             gmres_stats = Some(st);
             refh = Some(h);
@@ -371,6 +389,7 @@ pub fn build_rom(
         },
         reference_residual: gmres_stats.as_ref().map(|s| s.max_residual),
         reference_iterations: gmres_stats.as_ref().map(|s| s.max_iterations),
+        reference_direct_points: lu_points,
     };
     if !cert.passed && !params.allow_uncertified {
         return Err(RomError::Uncertified {

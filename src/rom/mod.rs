@@ -189,6 +189,10 @@ pub struct Certificate {
     pub reference_residual: Option<f64>,
     #[serde(default)]
     pub reference_iterations: Option<usize>,
+    /// GMRES: validation points it did not resolve within its iteration limit, solved by
+    /// sparse LU instead.
+    #[serde(default)]
+    pub reference_direct_points: usize,
 }
 
 /// Errors of the ROM build and sweeps.
@@ -200,7 +204,7 @@ pub enum RomError {
     Model(String),
     #[error("factorization failed: {0}")]
     Factorization(String),
-    #[error("the ROM is not certified: max relative error {error:.3e} > tolerance {tolerance:.1e} with {basis_size} basis vectors after {levels} levels; raise max_levels / krylov_depth_step, or set allow_uncertified = true")]
+    #[error("the ROM is not certified: max relative error {error:.3e} > tolerance {tolerance:.1e} with {basis_size} basis vectors after {levels} levels; loosen solver.rom_tolerance (`rfmlab rom --tolerance`), narrow the analysis band or the modulus range, or use solver.engine = \"full\"")]
     Uncertified {
         error: f64,
         tolerance: f64,

@@ -58,6 +58,8 @@ pub struct ReferenceStats {
     pub max_residual: f64,
     /// Points that did not reach the tolerance within the iteration limit.
     pub not_converged: usize,
+    /// Their (modulus, line) indices, each once (for a direct solve in their place).
+    pub unconverged_points: Vec<(usize, usize)>,
 }
 
 /// h[m][l][i * n_in + j]: receptance of output i to input j at modulus m, line l.
@@ -320,10 +322,14 @@ pub(crate) fn reference(
                     .sum::<C64>();
         }
         let res = sys.g.residual() / sys.g.b_norm;
-        stats.max_residual = stats.max_residual.max(res);
         stats.max_iterations = stats.max_iterations.max(y.len());
         if res > tol {
             stats.not_converged += 1;
+            if !stats.unconverged_points.contains(&(sys.m, sys.l)) {
+                stats.unconverged_points.push((sys.m, sys.l));
+            }
+        } else {
+            stats.max_residual = stats.max_residual.max(res);
         }
     };
     let av = side_by_side(&(0..basis.n_ops()).map(|k| basis.av(k)).collect::<Vec<_>>());

@@ -30,6 +30,7 @@ mod evidence_ref;
 mod leakage;
 pub mod levels;
 pub mod material;
+pub mod preflight;
 pub mod redundancy;
 mod sample;
 pub mod terms;
@@ -132,6 +133,9 @@ pub struct CheckSummary {
     pub models: Vec<(String, Vec<String>)>,
     /// Lines at which each model's initial values were evaluated on the full model.
     pub lines_checked: usize,
+    /// Warnings, the engine's cost, the mesh's discretisation error per mode, the first
+    /// mode against the data's first peak.
+    pub preflight: preflight::Preflight,
 }
 
 /// Measured data of one level, reduced to what the identification uses.
@@ -365,14 +369,21 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
             chans.push((ch, sign));
         }
         if outputs.is_empty() {
-            return Err(study_err(
-                study,
-                "measurements.channels",
+            return Err(study_err(study, "measurements.channels", {
+                let mut held: Vec<String> = lvl
+                    .channels
+                    .iter()
+                    .map(|c| format!("{}->{}", c.reference_id, c.response_id))
+                    .collect();
+                held.dedup();
+                let pts: Vec<u32> = built.model.points.iter().map(|p| p.id).collect();
                 format!(
-                    "level {}: no channel with reference point {} and a response at one of the structure's points",
-                    level.name, exc_point.id
-                ),
-            ));
+                        "level {}: no channel with reference point {} and a response at one of the structure's points {pts:?}; the files hold (reference->response) {}: match structure.points / structure.excitation to these ids",
+                        level.name,
+                        exc_point.id,
+                        held.join(", ")
+                    )
+            }));
         }
         let n_out = outputs.len();
         let mut acc = vec![C64::new(0.0, 0.0); lines.len() * n_out];
@@ -758,11 +769,50 @@ fn check_initial_values(
 /// Validate a study without running it: data files, channels, excitation channel, band,
 /// model parameters, and the full model evaluated at every model's initial values.
 pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
+    preflight::check_study_settings(study)?;
     let laws = model_laws(study)?;
+    let spec = crate::study::build::joint_spec(&study.structure);
+    let cost = match &spec {
+        Some(spec) => Some(
+            crate::fe::joint::joint_cost_estimate(spec)
+                .map_err(|e| study_err(study, e.key().to_string(), e.to_string()))?,
+        ),
+        None => None,
+    };
     let built = build(study)?;
     let levels = load_levels(study, &built)?;
+    let mut pf = preflight::Preflight {
+        cost: cost.map(|c| preflight::CostSummary {
+            n_dof: c.n_dof,
+            memory_bytes: c.memory_bytes,
+            factor_seconds: c.factor_seconds,
+            available_memory_bytes: crate::fe::cost::available_memory_bytes(),
+        }),
+        ..Default::default()
+    };
+    preflight::check_bands(study, &levels, &mut pf.warnings)?;
+    preflight::check_channels(&built, &levels, &mut pf.warnings);
     let lines_checked = check_initial_values(study, &built, &levels, &laws)?;
+    preflight::check_first_mode(study, &built, &levels, &laws, &mut pf)?;
+    if let (Some(m), Some(law)) = (study.models.first(), laws.first()) {
+        let f = pf.first_peak_hz.unwrap_or(20.0);
+        let e = law.modulus(&m.initial, TWO_PI * f).re;
+        pf.discretisation = preflight::discretisation_errors(study, &built, e)?;
+        for d in &pf.discretisation {
+            if d.rel_error.abs() > preflight::MESH_ERROR_WARN_REL {
+                pf.warnings.push(format!(
+                    "structure.mesh: mode {} ({:.3} Hz) has an estimated discretisation error of {:+.3} Hz ({:+.2} %), more than the {:.2} % such data resolve: refine the mesh (a smaller element_size, or more divisions)",
+                    d.mode,
+                    d.freq_hz,
+                    d.error_hz,
+                    100.0 * d.rel_error,
+                    100.0 * preflight::MESH_ERROR_WARN_REL
+                ));
+            }
+        }
+    }
     Ok(CheckSummary {
+        preflight: pf,
         study: study.name.clone(),
         n_dof: built.model.n_dof(),
         levels: levels

@@ -28,6 +28,8 @@ mod data_checks;
 mod declared_effects;
 mod default_data;
 mod default_study;
+mod size_guards;
+mod design_space;
 mod effects;
 mod evidence_quadrature;
 mod experiment;

@@ -1,0 +1,282 @@
+//! The pre-flight of `rfmlab check` beyond loading the study and its data: at least one
+//! model, a writable output folder, the analysis bands against the data's lines, the
+//! structure's points against the data's channels, the model's first mode at the initial
+//! values against the data's first peak, the cost of the engine, and the mesh's remaining
+//! discretisation error per mode.
+//!
+//! Discretisation error (Richardson extrapolation): with f_h the frequency of a mode on the
+//! study's mesh and f_{h/2} on the same mesh with every cell split in two per direction, and
+//! an error that falls as h^p, f = f_{h/2} + (f_{h/2} - f_h) / (2^p - 1), so the study mesh's
+//! error is e_h = f_h - f = (f_h - f_{h/2}) 2^p / (2^p - 1). [`RICHARDSON_ORDER`] p = 2 is
+//! the rate near the re-entrant corners of the bond line, below the h^4 of smooth modes on
+//! 20-node hexahedra, so the estimate errs on the large side. The modes are those of the
+//! real pencil (K_b + E' S, M) at the first model's initial storage modulus, paired in order.
+
+use super::{study_err, LevelData, RunError};
+use crate::common::C64;
+use crate::study::build::BuiltModel;
+use crate::study::Study;
+
+/// Order of convergence assumed by the Richardson estimate (see the module doc).
+pub const RICHARDSON_ORDER: f64 = 2.0;
+/// Relative frequency error above which `check` warns that the mesh limits what the data can
+/// say: the frequency uncertainty of a posterior from such data is typically 1e-4-1e-3 of
+/// the frequency (a 3 % mesh error pushed Model 4's parameters 13-20 % off and outside their
+/// intervals), so the mesh must be well below it.
+pub const MESH_ERROR_WARN_REL: f64 = 1e-3;
+/// The model's first mode and the data's first peak are "far apart" beyond this ratio.
+pub const FIRST_MODE_RATIO_WARN: f64 = 1.5;
+/// Modes in the discretisation-error table.
+pub const N_MODES_CHECKED: usize = 6;
+
+/// One mode's discretisation error estimate.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ModeDiscretisation {
+    /// Mode number (1 = lowest).
+    pub mode: usize,
+    /// Frequency on the study's mesh (Hz).
+    pub freq_hz: f64,
+    /// On the mesh refined twice per direction (Hz).
+    pub freq_refined_hz: f64,
+    /// Estimated error of the study mesh's frequency, f_h - f (Hz).
+    pub error_hz: f64,
+    /// error_hz / freq_hz.
+    pub rel_error: f64,
+}
+
+/// The engine's estimated cost.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CostSummary {
+    pub n_dof: usize,
+    pub memory_bytes: f64,
+    pub factor_seconds: f64,
+    pub available_memory_bytes: f64,
+}
+
+/// What the pre-flight found besides hard errors.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Preflight {
+    pub warnings: Vec<String>,
+    pub cost: Option<CostSummary>,
+    /// Per mode: the mesh's discretisation error (meshed structures only).
+    pub discretisation: Vec<ModeDiscretisation>,
+    /// The model's first y mode at the initial values and the data's first peak (Hz).
+    pub first_mode_hz: Option<f64>,
+    pub first_peak_hz: Option<f64>,
+}
+
+/// Checks that need no model: at least one model, a writable output folder.
+pub fn check_study_settings(study: &Study) -> Result<(), RunError> {
+    if study.models.is_empty() {
+        return Err(study_err(
+            study,
+            "models",
+            "no [[models]] to identify: add at least one, e.g. [[models]] name = \"model1\" with [models.initial] E0 and h",
+        ));
+    }
+    let dir = &study.output_dir;
+    let parent = dir
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let probe = parent.join(format!(".rfmlab-write-check-{}", std::process::id()));
+    let ok = std::fs::create_dir_all(parent)
+        .and_then(|_| std::fs::write(&probe, b"check"))
+        .and_then(|_| std::fs::remove_file(&probe));
+    if let Err(e) = ok {
+        return Err(study_err(
+            study,
+            "study.output_dir",
+            format!(
+                "the results folder {} cannot be written ({e}): choose a folder you can write to",
+                dir.display()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The analysis bands against each level's lines: an error when a band holds no line of a
+/// level, a warning when it reaches beyond the data.
+pub fn check_bands(
+    study: &Study,
+    levels: &[LevelData],
+    warnings: &mut Vec<String>,
+) -> Result<(), RunError> {
+    let bands = study
+        .analyses
+        .band_constant
+        .iter()
+        .enumerate()
+        .map(|(i, b)| (format!("analyses.band_constant[{i}]"), b))
+        .chain(
+            study
+                .analyses
+                .iem
+                .iter()
+                .enumerate()
+                .map(|(i, b)| (format!("analyses.iem[{i}]"), b)),
+        );
+    for (key, b) in bands {
+        let (lo, hi) = (
+            b.center_hz - 0.5 * b.width_hz,
+            b.center_hz + 0.5 * b.width_hz,
+        );
+        for level in levels {
+            let (f0, f1) = match (level.freq_hz.first(), level.freq_hz.last()) {
+                (Some(&a), Some(&z)) => (a, z),
+                _ => continue,
+            };
+            let inside = level
+                .freq_hz
+                .iter()
+                .filter(|&&f| f >= lo && f <= hi)
+                .count();
+            if inside == 0 {
+                return Err(study_err(
+                    study,
+                    key,
+                    format!(
+                        "the band {lo}-{hi} Hz holds no line of level {} (its data cover {f0}-{f1} Hz within measurements.band_hz): move center_hz inside the data",
+                        level.name
+                    ),
+                ));
+            }
+            if lo < f0 || hi > f1 {
+                warnings.push(format!(
+                    "{key}: the band {lo}-{hi} Hz reaches beyond level {}'s data ({f0}-{f1} Hz); only its {inside} line(s) inside are used",
+                    level.name
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The structure's points against each level's channels: a warning listing what the files
+/// hold when a point has no channel.
+pub fn check_channels(built: &BuiltModel, levels: &[LevelData], warnings: &mut Vec<String>) {
+    for level in levels {
+        let missing: Vec<u32> = built
+            .model
+            .points
+            .iter()
+            .map(|p| p.id)
+            .filter(|id| !level.response_ids.contains(id))
+            .collect();
+        if !missing.is_empty() {
+            warnings.push(format!(
+                "structure.points: point(s) {missing:?} have no channel in level {}'s files, which hold responses {:?} to the excitation at point {}; they are not used",
+                level.name, level.response_ids, level.reference_id
+            ));
+        }
+    }
+}
+
+/// Lines of the lowest clear peak of the summed magnitude (a local maximum above a tenth of
+/// the largest), in Hz.
+pub fn first_peak_hz(level: &LevelData) -> Option<f64> {
+    let n_out = level.column.outputs.len().max(1);
+    let mag: Vec<f64> = (0..level.freq_hz.len())
+        .map(|l| {
+            (0..n_out)
+                .map(|k| level.column.accelerance[l * n_out + k].norm())
+                .sum::<f64>()
+        })
+        .collect();
+    let top = mag.iter().cloned().fold(0.0, f64::max);
+    if !(top > 0.0) || mag.len() < 3 {
+        return None;
+    }
+    (1..mag.len() - 1)
+        .find(|&l| mag[l] >= mag[l - 1] && mag[l] > mag[l + 1] && mag[l] > 0.1 * top)
+        .map(|l| level.freq_hz[l])
+}
+
+/// The first model's first y-dominant mode at its initial values (modulus at the data's
+/// first peak) against that peak: a warning when they are more than a factor
+/// [`FIRST_MODE_RATIO_WARN`] apart.
+pub fn check_first_mode(
+    study: &Study,
+    built: &BuiltModel,
+    levels: &[LevelData],
+    laws: &[Box<dyn crate::material::ConstitutiveModel>],
+    out: &mut Preflight,
+) -> Result<(), RunError> {
+    let (Some(level), Some(spec), Some(law)) = (levels.first(), study.models.first(), laws.first())
+    else {
+        return Ok(());
+    };
+    let Some(peak) = first_peak_hz(level) else {
+        return Ok(());
+    };
+    let e: C64 = law.modulus(&spec.initial, std::f64::consts::TAU * peak);
+    let modes = crate::modes::complex_modes(
+        &built.model,
+        e,
+        N_MODES_CHECKED,
+        built.dof_axes.as_deref(),
+        &crate::modes::ModesParams::default(),
+    )
+    .map_err(|err| RunError::Engine(format!("the model's modes at the initial values: {err}")))?;
+    let first = modes
+        .iter()
+        .find(|m| m.y_dominant.unwrap_or(true))
+        .map(|m| m.freq_hz);
+    out.first_peak_hz = Some(peak);
+    out.first_mode_hz = first;
+    if let Some(f) = first {
+        let r = f / peak;
+        if !(1.0 / FIRST_MODE_RATIO_WARN..=FIRST_MODE_RATIO_WARN).contains(&r) {
+            out.warnings.push(format!(
+                "the model's first y mode at {}'s initial values is at {f:.2} Hz but level {}'s first peak is at {peak:.2} Hz: check [structure] (the data may belong to another joint) and models[0].initial",
+                spec.name, level.name
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Richardson estimate of each of the lowest modes' discretisation error on the study's
+/// mesh (module doc), at the storage modulus `e_storage_pa`.
+pub fn discretisation_errors(
+    study: &Study,
+    built: &BuiltModel,
+    e_storage_pa: f64,
+) -> Result<Vec<ModeDiscretisation>, RunError> {
+    let Some(spec) = crate::study::build::joint_spec(&study.structure) else {
+        return Ok(Vec::new());
+    };
+    let (fine, _) = crate::fe::joint::build_joint_model_refined(&spec, 2)
+        .map_err(|e| study_err(study, e.key().to_string(), e.to_string()))?;
+    let n = N_MODES_CHECKED.min(built.model.n_dof() / 3).max(1);
+    let params = crate::modes::EigenParams::default();
+    let freqs = |m: &crate::fe::StructuralModel| -> Result<Vec<f64>, RunError> {
+        let k = crate::modes::real::sp_add(&m.k_b, &m.s, e_storage_pa)
+            .map_err(|e| RunError::Engine(format!("discretisation error: {e}")))?;
+        let (lam, _) = crate::modes::real_modes(&k, &m.m, n, &params)
+            .map_err(|e| RunError::Engine(format!("discretisation error: {e}")))?;
+        Ok(lam
+            .iter()
+            .map(|l| l.max(0.0).sqrt() / std::f64::consts::TAU)
+            .collect())
+    };
+    let coarse = freqs(&built.model)?;
+    let refined = freqs(&fine)?;
+    let g = 2f64.powf(RICHARDSON_ORDER);
+    Ok(coarse
+        .iter()
+        .zip(&refined)
+        .enumerate()
+        .map(|(i, (&fh, &ff))| {
+            let err = (fh - ff) * g / (g - 1.0);
+            ModeDiscretisation {
+                mode: i + 1,
+                freq_hz: fh,
+                freq_refined_hz: ff,
+                error_hz: err,
+                rel_error: err / fh,
+            }
+        })
+        .collect())
+}
