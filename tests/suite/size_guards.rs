@@ -82,8 +82,16 @@ fn files_that_are_not_uff_or_csv_are_named() {
     let dir = tempfile::tempdir().unwrap();
     let cases: [(&str, &[u8], &str); 4] = [
         ("empty.uff", b"", "empty"),
-        ("blob.uff", &[0u8, 159, 146, 150, 0, 1, 2, 3, 255, 254], "binary"),
-        ("notes.uff", b"frequency response of the joint\nmeasured on Tuesday\n", "no UFF dataset"),
+        (
+            "blob.uff",
+            &[0u8, 159, 146, 150, 0, 1, 2, 3, 255, 254],
+            "binary",
+        ),
+        (
+            "notes.uff",
+            b"frequency response of the joint\nmeasured on Tuesday\n",
+            "no UFF dataset",
+        ),
         ("blank.csv", b"  \n", "empty"),
     ];
     for (name, bytes, why) in cases {
