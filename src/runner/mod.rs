@@ -797,7 +797,15 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
     if let (Some(m), Some(law)) = (study.models.first(), laws.first()) {
         let f = pf.first_peak_hz.unwrap_or(20.0);
         let e = law.modulus(&m.initial, TWO_PI * f).re;
-        pf.discretisation = preflight::discretisation_errors(study, &built, e)?;
+        match preflight::discretisation_errors(study, &built, e) {
+            Ok(d) => pf.discretisation = d,
+            // an input error (a refined mesh beyond the machine) stays one; a solver that
+            // cannot resolve the refined mesh leaves the estimate out with a warning
+            Err(err) if err.is_input() => return Err(err),
+            Err(err) => pf.warnings.push(format!(
+                "structure.mesh: no discretisation-error estimate ({err})"
+            )),
+        }
         for d in &pf.discretisation {
             if d.rel_error.abs() > preflight::MESH_ERROR_WARN_REL {
                 pf.warnings.push(format!(
