@@ -799,9 +799,8 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
         let e = law.modulus(&m.initial, TWO_PI * f).re;
         match preflight::discretisation_errors(study, &built, e) {
             Ok(d) => pf.discretisation = d,
-            // an input error (a refined mesh beyond the machine) stays one; a solver that
-            // cannot resolve the refined mesh leaves the estimate out with a warning
-            Err(err) if err.is_input() => return Err(err),
+            // a refined mesh beyond the machine, or a solver that cannot resolve it, leaves
+            // the estimate out with a warning (the study's own mesh is fine)
             Err(err) => pf.warnings.push(format!(
                 "structure.mesh: no discretisation-error estimate ({err})"
             )),
