@@ -49,6 +49,7 @@ mod model_comparison;
 mod modes;
 mod output;
 mod paper_joint;
+mod pipeline_closed_loop;
 mod plot;
 mod replicates;
 mod rfm;
