@@ -22,8 +22,9 @@
 //! ```
 
 mod executor;
+mod lower;
 mod plan;
-mod results;
+pub(crate) mod results;
 
 pub use crate::runner::{Event, RunError, RunOptions, RunSummary};
 pub use executor::{Executor, Observer};
@@ -66,7 +67,7 @@ pub(crate) fn run_with(
 
 fn run_here(
     plan: &Plan,
-    lowered: plan::Lowered,
+    lowered: lower::Lowered,
     ex: &mut Executor,
     extra: &(dyn Fn(Event) + Sync),
 ) -> Result<Results, RunError> {

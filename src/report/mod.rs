@@ -8,8 +8,9 @@
 //! deleted by the next write to the same folder.
 
 use crate::output::{Manifest, ResultsDir};
-use crate::pipeline::{Event, Results, RunError};
+use crate::pipeline::results::{Results, LOOP_DIR};
 use crate::runner::{closed_loop, write, write_bayes, write_compare, write_levels};
+use crate::runner::{Event, RunError};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -88,7 +89,7 @@ fn fill(
     write_compare::report(&mut report, &posts);
     write_levels::report(&mut report, level_results, &figs);
     if let Some(o) = results.closed_loop() {
-        let sub = crate::pipeline::LOOP_DIR;
+        let sub = LOOP_DIR;
         let mut d = ResultsDir::create(out.path(), sub)?;
         closed_loop::write_loop(&mut d, o, &study.name, results.figures)?;
         for f in d.written() {
