@@ -220,7 +220,7 @@ pub fn diagnose_into(
     let (engine, _, lik_engine) = super::build_engine(study, &built, &mut levels, &laws, None)?;
     let engine = lik_engine.as_deref().unwrap_or(engine.as_ref());
     // Degraded-bond and adherend-damping candidates and declared ones need a ROM with their
-    // terms (issue 13).
+    // terms.
     // Opt-in: only when `[closed_loop] candidates` names them ("degraded_bond" or a strip's
     // name). Each evaluation with a bond is a dense LU of the term ROM per line (on the paper's
     // 5 mm joint with both strips, 219 unknowns after the compression: 1-2 s per forward
@@ -285,7 +285,7 @@ pub fn diagnose_into(
         None => engine,
     };
     let mut dir = ResultsDir::create(parent, dir_name).map_err(out_err)?;
-    // The alternative law (issue 13): the fractional Zener, unless `[closed_loop] candidates`
+    // The alternative law: the fractional Zener, unless `[closed_loop] candidates`
     // leaves it out (names "fractional_zener" / type "alternative_law").
     let fractional = crate::material::FractionalZener;
     let alt_laws: Vec<&dyn crate::material::ConstitutiveModel> =

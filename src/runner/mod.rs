@@ -1,4 +1,4 @@
-//! The study runner: `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (issue 4, items 5-6).
+//! The study runner: `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml`.
 //! It sits outside the numerical core (like `study`, `output`, `plot`) and wires them together:
 //!
 //! 1. load the measured data of every level (UFF58, [`crate::data::frf_set_from_uff`]) and check

@@ -1,5 +1,5 @@
 //! Tables, figures and report sections of the comparison across levels, parameter redundancy
-//! and initial-value sensitivity (issue 12, items 3-5). Tables (parquet):
+//! and initial-value sensitivity. Tables (parquet):
 //!
 //! | table | columns (unit) |
 //! |---|---|

@@ -1,4 +1,4 @@
-//! Issue 4's acceptance on the default data (`studies/default.toml`, the README's first
+//! The identification on the default data (`studies/default.toml`, the README's first
 //! command, figures off): band-limited Model 1 and the IEM within 2 % (E') and 5 % (E'') of
 //! the truth curve at both resonances of both levels; global Model 4 with FRAC >= 0.99 on all
 //! four FRFs and its parameters near the truth; Models 1-3 correlating worse on FRFs 3 and 4.
@@ -25,7 +25,7 @@ fn truth_params(root: &Path, level: &str) -> Vec<f64> {
 }
 
 #[test]
-fn default_study_meets_the_issue_4_acceptance() {
+fn default_study_identifies_the_truth() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let study = rfmlab::study::load(&root.join("studies/default.toml")).unwrap();
     let dir = tempfile::tempdir().unwrap();

@@ -1,4 +1,4 @@
-//! `rfmlab validate` (issue 12, items 7 and 8): the seconds-long smoke run of the statistical
+//! `rfmlab validate`: the seconds-long smoke run of the statistical
 //! validation, its sharding, and its statistics against SciPy.
 //!
 //! Smoke: the default rig (frequency-domain simulation, 200 Hann blocks, 0.2 % sensor noise,
