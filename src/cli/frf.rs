@@ -27,7 +27,7 @@ pub struct FrfArgs {
     /// Also write dH'/dE' (sensitivity, (m/s^2)/N/Pa).
     #[arg(long)]
     pub derivatives: bool,
-    /// Parquet file to write (columns documented in the README).
+    /// Parquet file to write (columns in docs/outputs.md).
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Print JSON for scripts (summary: peaks per channel).

@@ -23,7 +23,7 @@ use rfmlab::validate::{load_validation, Setup};
 use std::path::Path;
 use std::process::Command;
 
-const EXPERIMENT: &str = r#"
+pub(crate) const EXPERIMENT: &str = r#"
 [experiment]
 name = "validate_smoke"
 mode = "frequency"
