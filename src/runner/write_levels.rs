@@ -210,7 +210,10 @@ pub fn tables(results: &[LevelResults]) -> Result<Vec<Table>, RunError> {
                         .iter()
                         .find_map(|q| {
                             let bq = q.basins.as_ref()?;
-                            bq.names.iter().position(|m| m == n).map(|k| q.units[k].clone())
+                            bq.names
+                                .iter()
+                                .position(|m| m == n)
+                                .map(|k| q.units[k].clone())
                         })
                         .unwrap_or_default();
                     ba.f(
