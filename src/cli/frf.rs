@@ -27,8 +27,8 @@ pub struct FrfArgs {
     /// Also write dH'/dE' (sensitivity, (m/s^2)/N/Pa).
     #[arg(long)]
     pub derivatives: bool,
-    /// Parquet file to write (columns documented in the README); default: none, the peaks
-    /// are printed only.
+    /// Parquet file to write (columns in docs/outputs.md); default: none, the peaks are
+    /// printed only.
     #[arg(short = 'o', long = "output", alias = "out", value_name = "FILE")]
     pub out: Option<PathBuf>,
     /// Print JSON for scripts (summary: peaks per channel).

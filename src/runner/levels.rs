@@ -1,4 +1,4 @@
-//! Across excitation levels (issue 12, item 3): the level-to-level change of E' and E'' with
+//! Across excitation levels: the level-to-level change of E' and E'' with
 //! credible intervals, and whether the law's parameters differ between levels at all.
 //!
 //! 1. **Change**: at the first two bending modes of the joint (from the lower level's MAP: the

@@ -28,6 +28,7 @@ mod data_checks;
 mod declared_effects;
 mod default_data;
 mod default_study;
+mod docs;
 mod effects;
 mod evidence_quadrature;
 mod experiment;

@@ -107,7 +107,7 @@ fn independent_virtual_experiment_model4_meets_its_targets() {
     }
 }
 
-/// Issue 11's acceptance on the time-domain set, "the posterior 95 % intervals contain the
+/// On the time-domain set, "the posterior 95 % intervals contain the
 /// truth": `studies/bayes_virtual_td.toml` as shipped (coherence noise model, the channels'
 /// errors as the Welch leakage jitter, `channel_correlation = "leakage"`) without its samplers,
 /// the MAP and its Laplace sd (the samplers' sds are within 4 % of it there). Measured: |z| <=
