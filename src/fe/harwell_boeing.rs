@@ -23,7 +23,9 @@
 //! elemental is rejected). Fields are read by the column widths of the Fortran formats
 //! (`(nIw)`, `(nEw.d)`, `(nDw.d)`, `(nFw.d)`, `(nGw.d)`, an optional leading `kP` scale factor,
 //! which does not change values that carry an exponent), so adjacent fields without a blank
-//! between them are read correctly; `D` exponents and the exponent-without-letter form
+//! between them are read correctly; a line whose blank-separated fields are exactly the
+//! expected count of valid numbers is read by blanks (SciPy's `hb_write` writes 24-character
+//! values under an `E25.16` format). `D` exponents and the exponent-without-letter form
 //! `1.5-300` are accepted.
 //!
 //! Units and DOF order are the writer's: the rows are the writer's equation numbers (ANSYS: the
@@ -343,7 +345,20 @@ pub fn parse_hb(text: &str, path: &Path) -> Result<SpMat, HbError> {
                         format!("the file ends after {} of the {count} {what}", out.len()),
                     ));
                 };
-                for s in fields(line, f) {
+                // Blank-separated fields are read as such (SciPy's hb_write writes 24-character
+                // values under an E25.16 format); fields that run together are cut by width.
+                let want = f.per_line.min(count - out.len());
+                let tokens: Vec<&str> = line.split_whitespace().collect();
+                let separated = tokens.len() == want
+                    && tokens.iter().all(|t| {
+                        if f.integer {
+                            t.parse::<usize>().is_ok()
+                        } else {
+                            parse_real(t).is_some()
+                        }
+                    });
+                let cut = if separated { tokens } else { fields(line, f) };
+                for s in cut {
                     if out.len() < count {
                         out.push((s.trim().to_string(), at + 1));
                     }

@@ -198,12 +198,12 @@ description = "Model 4 on an imported joint (SIMULATED)"
 mode = "frequency"
 seed = 11
 output = "{format}.uff"
-engine = "full"
+engine = "rom"
 
 {}
 [chain]
 band_hz = [20.0, 400.0]
-lines_hz = [20.0, 400.0, 1.0]
+lines_hz = [20.0, 400.0, 2.0]
 {noise}
 
 [[levels]]

@@ -220,7 +220,7 @@ fn check_geometry(dir: &Path, k: usize, g: &[f64; 5]) -> f64 {
     let f1 = full[0].freq_hz;
     let f3 = full[full.len().min(3) - 1].freq_hz;
     let (lo, hi) = ((0.5 * f1).max(1.0).round(), (1.15 * f3).round());
-    let step = ((hi - lo) / 120.0).max(0.5).round();
+    let step = ((hi - lo) / 60.0).max(0.5).round();
     let hi = lo + step * ((hi - lo) / step).floor();
     // noise-free frequency-domain data on the full model
     let exp = format!(
@@ -230,7 +230,7 @@ description = "Model 4 on a lap joint (SIMULATED)"
 mode = "frequency"
 seed = {k}
 output = "lap{k}.uff"
-engine = "full"
+engine = "rom"
 
 {st}
 [chain]
