@@ -217,7 +217,7 @@ pub fn parse_abaqus(text: &str, path: &Path) -> Result<AbaqusMatrix, AbqError> {
         };
         // a trailing comma leaves an empty last field
         let f: Vec<&str> = match f.last() {
-            Some(s) if s.is_empty() => f[..f.len() - 1].to_vec(),
+            Some(&"") => f[..f.len() - 1].to_vec(),
             _ => f,
         };
         match kind {
