@@ -28,10 +28,11 @@
 use super::assembly::{Assembler, DofMap};
 use super::element::Integration;
 use super::error::FeError;
-use super::geometry::Elasticity;
-use super::joint::{AdherendDamping, IsoMaterial, MeshInfo, PointSpec};
+use super::joint::{
+    assemble_joint_matrices, AdherendDamping, IsoMaterial, JointMatrices, MeshInfo, PointSpec,
+};
 use super::mesh::{segment_divisions, structured_mesh, HexMesh, Region};
-use super::model::{SpMat, StructuralModel};
+use super::model::StructuralModel;
 use super::points::{map_point, PointMapping, SURFACE_TOL_M};
 use std::time::Instant;
 
@@ -453,54 +454,22 @@ pub fn build_lap_model(spec: &LapSpec) -> Result<(StructuralModel, MeshInfo), Fe
     }
     let dofs = DofMap::new(&mesh);
     let asm = Assembler::new(&mesh, &dofs);
-    let all: Vec<usize> = (0..mesh.n_elements()).collect();
-    let strips = mesh.elements_in(Region::Beam);
-    let adh = mesh.elements_in(Region::Adhesive);
-    let rule = spec.mesh.integration;
-    let (rho_b, rho_a) = (spec.adherend.rho_kg_m3, spec.adhesive_rho_kg_m3);
-    let regions = &mesh.regions;
-    let m = asm.mass(&asm.pattern(&all), |e| {
-        if regions[e] == Region::Beam {
-            rho_b
-        } else {
-            rho_a
-        }
-    })?;
-    let mat = Elasticity {
-        e_pa: spec.adherend.e_pa,
-        nu: spec.adherend.nu,
-    };
-    let k_b = asm.stiffness(&asm.pattern(&strips), |_| mat, rule)?;
-    let unit = Elasticity {
-        e_pa: 1.0,
-        nu: spec.adhesive_nu,
-    };
-    let s = asm.stiffness(&asm.pattern(&adh), |_| unit, rule)?;
-    let c_b = if d.rayleigh_alpha_per_s != 0.0 || d.rayleigh_beta_s != 0.0 {
-        let (a, b) = (d.rayleigh_alpha_per_s, d.rayleigh_beta_s);
-        Some(
-            faer::sparse::ops::binary_op(
-                m.as_ref(),
-                k_b.as_ref(),
-                |x: Option<&f64>, y: Option<&f64>| {
-                    a * x.copied().unwrap_or(0.0) + b * y.copied().unwrap_or(0.0)
-                },
-            )
-            .map_err(|_| FeError::OutOfMemory {
-                key: format!("{KEY}.mesh"),
-                what: "C_b = alpha M + beta K_b".into(),
-            })?,
-        )
-    } else {
-        None
-    };
-    let d_b: Option<SpMat> = (d.structural_loss_factor != 0.0).then(|| {
-        let mut b = k_b.clone();
-        for v in b.val_mut() {
-            *v *= d.structural_loss_factor;
-        }
-        b
-    });
+    let JointMatrices {
+        m,
+        k_b,
+        s,
+        c_b,
+        d_b,
+    } = assemble_joint_matrices(
+        &asm,
+        &mesh,
+        &spec.adherend,
+        spec.adhesive_nu,
+        spec.adhesive_rho_kg_m3,
+        spec.mesh.integration,
+        &spec.damping,
+        &format!("{KEY}.mesh"),
+    )?;
     let assembly_seconds = t0.elapsed().as_secs_f64();
 
     // points: on the surface of either strip (the first whose box holds the point)
@@ -543,7 +512,7 @@ pub fn build_lap_model(spec: &LapSpec) -> Result<(StructuralModel, MeshInfo), Fe
     }
     let info = MeshInfo {
         n_elements: mesh.n_elements(),
-        n_adhesive_elements: adh.len(),
+        n_adhesive_elements: mesh.elements_in(Region::Adhesive).len(),
         n_nodes: mesh.n_nodes(),
         n_dof: dofs.n_free,
         element_size_m: mesh.max_cell_size(),
@@ -564,7 +533,7 @@ pub fn build_lap_model(spec: &LapSpec) -> Result<(StructuralModel, MeshInfo), Fe
         adhesive_aspect_ratio(&mesh).1,
         info.n_nodes,
         info.n_dof,
-        rule
+        spec.mesh.integration
     );
     Ok((
         StructuralModel {
