@@ -289,11 +289,13 @@ fn resolve_divisions(l: &JointLayout, size: &MeshSize) -> Result<JointDivisions,
                     0
                 }
             };
-            // at least MIN_LAYER_DIVISIONS quadratic elements through every layer; under
-            // a thin bond line the adhesive's x cells are shortened to keep their aspect
-            // ratio (length / thickness) at most MAX_ADHESIVE_ASPECT
-            let y_adhesive = n(l.adhesive_thickness_m).max(MIN_LAYER_DIVISIONS);
-            let y_beam = n(l.beam_thickness_m).max(MIN_LAYER_DIVISIONS);
+            // a layer thinner than the element size gets MIN_LAYER_DIVISIONS quadratic
+            // elements through its thickness (a layer at least one element thick keeps
+            // ceil(t / h), so the paper's meshes are unchanged); under a thin bond line the
+            // adhesive's x cells are shortened to keep their aspect ratio (length /
+            // thickness) at most MAX_ADHESIVE_ASPECT
+            let y_adhesive = layer_divisions(l.adhesive_thickness_m, h);
+            let y_beam = layer_divisions(l.beam_thickness_m, h);
             let h_adh = h.min(MAX_ADHESIVE_ASPECT * l.adhesive_thickness_m / y_adhesive as f64);
             let x_adh = if seg[1] > 0.0 {
                 segment_divisions(seg[1], h_adh)
@@ -371,10 +373,22 @@ fn resolve_divisions(l: &JointLayout, size: &MeshSize) -> Result<JointDivisions,
     Ok(div)
 }
 
-/// Fewest quadratic elements through the thickness of the beam and of the adhesive when the
-/// mesh is given by an element size (one element cannot follow a layer's shear and peel: a
-/// 3 mm bond line under 5 mm elements put the first mode 3 % high).
+/// Fewest quadratic elements through the thickness of a layer (beam or adhesive) thinner than
+/// the element size, when the mesh is given by an element size (one element cannot follow a
+/// thin layer's shear and peel: a 3 mm bond line under 5 mm elements put the first mode 3 %
+/// high). A layer at least one element size thick keeps ceil(t / h) elements.
 pub const MIN_LAYER_DIVISIONS: usize = 2;
+
+/// Elements through a layer of thickness `t` under an element size `h`: ceil(t / h), and at
+/// least [`MIN_LAYER_DIVISIONS`] where the layer is thinner than `h`.
+pub fn layer_divisions(t: f64, h: f64) -> usize {
+    let n = segment_divisions(t, h);
+    if t < h * (1.0 - 1e-9) {
+        n.max(MIN_LAYER_DIVISIONS)
+    } else {
+        n
+    }
+}
 
 /// Largest length-to-thickness ratio of the adhesive's elements along the beam when the mesh
 /// is given by an element size (thin bond lines get shorter elements under the adhesive).

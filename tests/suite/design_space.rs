@@ -2,11 +2,12 @@
 //! 0.15-0.6 m long, 3-20 mm thick, 10-50 mm wide; adhesive 10-100 mm long, 0.5-10 mm thick,
 //! anywhere along the beam; 2-6 points anywhere on the upper face, the excitation at one of
 //! them), each through the whole chain with the default mesh rule (two or more elements
-//! through every layer):
+//! through every layer thinner than the element size):
 //!
 //! 1. the mesh builds and its cost estimate is within a factor 2 of the DOFs it has;
 //! 2. the ROM is built and certified (GMRES reference, direct solves where GMRES stalls);
-//! 3. the ROM's lowest modes agree with the full model's complex modes (1e-6 relative);
+//! 3. the ROM's lowest modes in the band agree with the full model's complex modes (1e-6
+//!    relative);
 //! 4. Model 4 is identified from noise-free frequency-domain data made by the full model
 //!    (sparse LU per line) with the paper's parameters, to within 0.5 % by the deterministic
 //!    RFM and by the MAP of a posterior with flat priors.
@@ -68,7 +69,7 @@ fn draw(seed: u64) -> JointSpec {
         })
         .collect();
     // element size: the default 5 mm where the joint is small, coarser on long and wide ones
-    // to keep each geometry to about 10^4 DOFs (the mesher keeps two elements through layers)
+    // to keep each geometry to about 10^4 DOFs (the mesher puts two elements through thin layers)
     let h = 0.005f64.max(l / 40.0).max(w / 5.0);
     JointSpec {
         geometry: JointGeometry {
@@ -145,7 +146,8 @@ fn run_geometry(seed: u64) -> Result<Outcome, String> {
         },
         ..RomParams::default()
     };
-    let (rom, cert) = build_rom(&model, &[exc], &params).map_err(|e| format!("ROM: {e}"))?;
+    // every point an input: the RFM needs S H_A,i for every response i
+    let (rom, cert) = build_rom(&model, &outputs, &params).map_err(|e| format!("ROM: {e}"))?;
     if !cert.passed {
         return Err(format!("ROM not certified: {:e}", cert.max_rel_error));
     }
@@ -153,10 +155,12 @@ fn run_geometry(seed: u64) -> Result<Outcome, String> {
     let rom_modes = rom
         .complex_modes(e_mid, 3)
         .map_err(|e| format!("ROM modes: {e}"))?;
-    // each ROM mode against the nearest full-model mode (a mode the excitation cannot
-    // reach, e.g. torsion under a centreline point, need not be in the ROM)
+    // each ROM mode in the certified band against the nearest full-model mode (a mode the
+    // inputs cannot reach, e.g. bending across the width under +y forces, need not be in the
+    // ROM, and the ROM's modes above the band are not certified)
     let mode_err = rom_modes
         .iter()
+        .filter(|a| a.freq_hz() <= band.1)
         .map(|a| {
             full_modes
                 .iter()

@@ -7,7 +7,8 @@ use rfmlab::common::{Axis, Direction};
 use rfmlab::fe::assembly::{Assembler, DofMap};
 use rfmlab::fe::geometry::Elasticity;
 use rfmlab::fe::joint::{
-    build_joint_model, joint_mesh_from_spec, Divisions, JointSpec, MeshSize, PointSpec,
+    build_joint_model, joint_mesh_from_spec, layer_divisions, Divisions, JointSpec, MeshSize,
+    PointSpec,
 };
 use rfmlab::fe::mesh::Region;
 use rfmlab::fe::points::PointMapping;
@@ -46,6 +47,36 @@ fn counts_for_10_and_5_mm() {
     });
     let (_, id) = build_joint_model(&s).unwrap();
     assert_eq!((id.n_elements, id.n_nodes, id.n_dof), (560, 3565, i5.n_dof));
+}
+
+#[test]
+fn thin_layers_get_two_elements_through_their_thickness() {
+    // ceil(t / h) through a layer at least one element thick (the paper's meshes above), 2
+    // through a layer thinner than the element size
+    for (t, h, n) in [
+        (0.010, 0.010, 1),
+        (0.010, 0.005, 2),
+        (0.012, 0.005, 3),
+        (0.003, 0.005, 2),
+        (0.001, 0.005, 2),
+        (0.0005, 0.010, 2),
+    ] {
+        assert_eq!(layer_divisions(t, h), n, "t {t} m, h {h} m");
+    }
+    // a 3 mm bond line under 5 mm elements: 2 through it; along x its 50 mm at most 10
+    // times its 1.5 mm element thickness, so 10 elements; 4 across the 20 mm width
+    let mut s = spec(0.005);
+    s.geometry.adhesive_thickness_m = 0.003;
+    let (_, info) = build_joint_model(&s).unwrap();
+    assert_eq!(info.n_adhesive_elements, 10 * 2 * 4);
+    // a 1 mm bond line: 0.5 mm thick elements at most 5 mm long, still 10 along x
+    s.geometry.adhesive_thickness_m = 0.001;
+    let (_, info) = build_joint_model(&s).unwrap();
+    assert_eq!(info.n_adhesive_elements, 10 * 2 * 4);
+    // 0.5 mm: 0.25 mm thick elements at most 2.5 mm long, 20 along x
+    s.geometry.adhesive_thickness_m = 0.0005;
+    let (_, info) = build_joint_model(&s).unwrap();
+    assert_eq!(info.n_adhesive_elements, 20 * 2 * 4);
 }
 
 #[test]
