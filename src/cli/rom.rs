@@ -95,6 +95,15 @@ pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
         cert.n_lines,
         if cert.passed { "CERTIFIED" } else { "NOT certified" }
     );
+    if cert.floor_points > 0 {
+        println!(
+            "{} validation point(s) at the floating-point floor: the full model itself is resolved only to {:.1e} there; the ROM is within {:.2e} of it (allowed {:.0} x the floor)",
+            cert.floor_points,
+            cert.floor_max,
+            cert.floor_points_error,
+            rfmlab::rom::certify::FLOOR_FACTOR
+        );
+    }
     println!(
         "basis {:.2} s, certificate {:.2} s, total {secs:.2} s, {} enrichment level(s)",
         cert.seconds_basis, cert.seconds_certify, cert.levels

@@ -194,6 +194,20 @@ pub struct Certificate {
     /// tolerance (a GMRES solution near a lightly damped resonance can be off by that much).
     #[serde(default)]
     pub reference_direct_points: usize,
+    /// Validation points where double precision cannot resolve the full model to the
+    /// tolerance: the sparse LU's iterative refinement stagnates at a relative step above
+    /// tolerance / [`certify::FLOOR_FACTOR`] (a stiff adherend held by a soft layer, near a
+    /// resonance). There the ROM is judged against `FLOOR_FACTOR` x that floor, and
+    /// `max_rel_error` is the error scaled to the tolerance (error x tolerance / allowance).
+    #[serde(default)]
+    pub floor_points: usize,
+    /// The largest attainable relative accuracy of a sparse-LU reference solve (the size of
+    /// its second refinement step relative to the solution).
+    #[serde(default)]
+    pub floor_max: f64,
+    /// The largest plain relative error at the floor-limited points.
+    #[serde(default)]
+    pub floor_points_error: f64,
 }
 
 /// Errors of the ROM build and sweeps.
