@@ -26,6 +26,29 @@
 //! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
 //!
 //! Numerical modules never import `study`, `output`, `plot` or the CLI.
+//!
+//! # The public API
+//! A study file -> [`Study::load`] -> [`Study::plan`] (typed `*Params` per stage) ->
+//! [`pipeline::run`] with a [`pipeline::Executor`] (ROM cache, progress observers,
+//! cancellation, timings) -> [`Results`] in memory -> [`report::write`] (parquet, figures,
+//! report.md, manifest.json, swapped into place as one folder). The CLI's `rfmlab run` is
+//! this path.
+//!
+//! ```no_run
+//! use rfmlab::{pipeline, Study};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let study = Study::load("studies/default.toml")?;
+//! let mut plan = study.plan()?;
+//! plan.figures = false;
+//! let results = pipeline::run(&plan, &mut pipeline::Executor::new())?;
+//! let m4 = results.identified_at("L1", "model4").unwrap();
+//! assert!(m4.frac_updated.iter().all(|&f| f > 0.99));
+//! let params = results.table("parameters").unwrap(); // a polars DataFrame
+//! assert!(params.height() > 0);
+//! rfmlab::report::write(&results, "results/default")?;
+//! # Ok(())
+//! # }
+//! ```
 
 // Index loops are the clearest form of many linear-algebra kernels here, and `!(x > 0.0)` is
 // the deliberate NaN-rejecting form of a positivity check.
@@ -47,10 +70,15 @@ pub mod material_fit;
 pub mod modal;
 pub mod modes;
 pub mod output;
+pub mod pipeline;
 pub mod plot;
+pub mod report;
 pub mod rfm;
 #[allow(clippy::needless_borrow)]
 pub mod rom;
 pub mod runner;
 pub mod study;
 pub mod validate;
+
+pub use pipeline::Results;
+pub use study::Study;

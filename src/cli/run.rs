@@ -1,9 +1,10 @@
 //! `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (the study runner, [`rfmlab::runner`]).
 
 use super::common::{print_json, Global, InputError};
-use rfmlab::runner::{Event, RunError, RunOptions};
+use rfmlab::pipeline::{self, Event, Executor, RunError};
+use rfmlab::runner::RunSummary;
 use std::path::PathBuf;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
@@ -41,39 +42,56 @@ fn wrap(e: RunError) -> anyhow::Error {
 
 pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
     let study = super::common::load_study(&a.study)?;
-    let bar: Mutex<Option<indicatif::ProgressBar>> = Mutex::new(None);
-    let progress = |ev: Event| match ev {
-        Event::Start { step, total } => {
-            let pb = if total > 0 {
-                super::common::progress(g, total, &step)
-            } else {
-                super::common::spinner(g, &step)
-            };
-            if let Some(old) = bar.lock().unwrap_or_else(|e| e.into_inner()).replace(pb) {
-                old.finish_and_clear();
+    let mut plan = study.plan().map_err(wrap)?;
+    plan.figures &= !a.no_figures;
+    let bar: Arc<Mutex<Option<indicatif::ProgressBar>>> = Arc::new(Mutex::new(None));
+    let on_event = {
+        let bar = bar.clone();
+        let g = g.clone();
+        Arc::new(move |ev: &Event| match ev {
+            Event::Start { step, total } => {
+                let pb = if *total > 0 {
+                    super::common::progress(&g, *total, step)
+                } else {
+                    super::common::spinner(&g, step)
+                };
+                if let Some(old) = bar.lock().unwrap_or_else(|e| e.into_inner()).replace(pb) {
+                    old.finish_and_clear();
+                }
             }
-        }
-        Event::Advance => {
-            if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
-                pb.inc(1);
+            Event::Advance => {
+                if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
+                    pb.inc(1);
+                }
             }
-        }
-        Event::Finish => {
-            if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
-                pb.finish_and_clear();
+            Event::Finish => {
+                if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
+                    pb.finish_and_clear();
+                }
             }
-        }
+        })
     };
-    let rom_cache = (!a.no_cache).then(|| rfmlab::runner::rom_cache_dir(&study));
-    let opts = RunOptions {
-        no_figures: a.no_figures,
-        output_dir: None,
-        rom_cache,
+    let mut ex = {
+        let on_event = on_event.clone();
+        Executor::new().observer(move |e| on_event(e))
     };
-    let summary = rfmlab::runner::run_study(&study, &opts, &progress).map_err(wrap)?;
+    if !a.no_cache {
+        ex = ex.rom_cache(rfmlab::runner::rom_cache_dir(&study));
+    }
+    let results = pipeline::run(&plan, &mut ex).map_err(wrap)?;
+    let written =
+        rfmlab::report::write_with(&results, &plan.output_dir, &|e| on_event(&e)).map_err(wrap)?;
+    let files = written.files;
     if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
         pb.finish_and_clear();
     }
+    let summary = RunSummary {
+        study: study.name.clone(),
+        output_dir: plan.output_dir.clone(),
+        files,
+        models: results.model_summaries(),
+        seconds: results.seconds() + written.seconds,
+    };
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;
     } else if !g.quiet {
