@@ -124,22 +124,38 @@ print(results.model_comparison.select("level", "model", "elpd_loo", "elpd_loo_se
 # %% [markdown]
 # ## 5. The closed loop on data with an undeclared sensor mass
 # `studies/closed_loop_mass.toml` fits Model 4 to data simulated with a 12 g sensor mass at
-# point 4 that the study does not declare. The loop tests candidate effects, accepts the
-# mass, and refits.
+# point 4 that the study does not declare. `run(closed_loop=True)` adds the closed loop after
+# the inference: it tests candidate effects (point masses, gains, a beam factor, extra
+# Maxwell branches, another law), accepts those the evidence supports, and refits, all in
+# memory. (`study.diagnose()` runs the loop alone, as `rfmlab diagnose`.)
 
 # %%
 loop_study = rfmlab.load(ROOT / "studies" / "closed_loop_mass.toml")
 t0 = time.perf_counter()
-loop = loop_study.diagnose(quiet=False)
-print(f"closed loop: {time.perf_counter() - t0:.1f} s")
-for lv in loop["levels"]:
+loop_results = loop_study.run(quiet=False, closed_loop=True)
+print(f"run with the closed loop: {time.perf_counter() - t0:.1f} s")
+summary = loop_results.closed_loop
+for lv in summary["levels"]:
     print(f"level {lv['level']}: {lv['conclusion']}")
-    print(f"  chi2/dof before {lv['chi2_normalised_before']:.3g}, after {lv['chi2_normalised_after']:.3g}")
+    print(f"  chi2/dof before {lv['chi2_normalised_before']:.4g}, after {lv['chi2_normalised_after']:.4g}")
+    print(f"  FRAC before {np.round(lv['frac_before'], 5)}, after {np.round(lv['frac_after'], 5)}")
     for name, kind, size, sd in lv["accepted"]:
         print(f"  accepted {name} ({kind}): {size:.6g} +- {sd:.2g}")
-    print(
-        pl.DataFrame(lv["parameters"]).select("name", "before", "after", "after_sd", "truth")
-    )
+print(loop_results.tables["closed_loop/closed_loop"])
+before_after = pl.DataFrame(summary["levels"][0]["parameters"])
+print(before_after.select("name", "before", "before_sd", "after", "after_sd", "truth"))
+
+fig, ax = plt.subplots(figsize=(6, 4))
+pa = before_after.filter(pl.col("truth").is_not_null() & pl.col("before").is_not_null())
+x = np.arange(pa.height)
+ax.bar(x - 0.2, (pa["before"] / pa["truth"] - 1) * 100, 0.4, label="before the loop")
+ax.bar(x + 0.2, (pa["after"] / pa["truth"] - 1) * 100, 0.4, label="after the loop")
+ax.set_xticks(x, pa["name"].to_list())
+ax.set_ylabel("error against the truth (%)")
+ax.axhline(0, color="k", lw=0.8)
+ax.legend()
+fig.tight_layout()
+fig.savefig(OUT / "closed_loop_before_after.png", dpi=120)
 
 # %%
 print(f"tour: {time.perf_counter() - t_start:.1f} s")

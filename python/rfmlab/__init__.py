@@ -85,6 +85,7 @@ class Study:
         progress: Callable[[str, int, int], object] | None = None,
         figures: bool = True,
         rom_cache: bool = True,
+        closed_loop: bool | None = None,
     ) -> Results:
         """Run the study in memory and return its Results.
 
@@ -101,6 +102,9 @@ class Study:
                 ``analyses.figures`` allows).
             rom_cache: reuse a certified ROM from ``.rom-cache/`` beside the study's output
                 folder (as ``rfmlab run``; False builds and certifies it again).
+            closed_loop: run the closed loop after the inference (True; with the study's
+                ``[closed_loop]`` settings, else the defaults), skip it (False), or as the
+                study says (None). Its tables are ``closed_loop/<name>`` in ``tables``.
 
         The GIL is released while the pipeline runs; Ctrl-C stops it (KeyboardInterrupt).
         """
@@ -114,11 +118,17 @@ class Study:
             if progress is not None:
                 progress(step, done, total)
 
-        names, blobs, files = self._native._run(
-            None if output is None else str(output), callback, figures, rom_cache
+        names, blobs, files, loop = self._native._run(
+            None if output is None else str(output), callback, figures, rom_cache, closed_loop
         )
         tables = {n: pl.read_parquet(io.BytesIO(b)) for n, b in zip(names, blobs)}
-        return Results(tables, study=self, files=list(files), output=output)
+        return Results(
+            tables,
+            study=self,
+            files=list(files),
+            output=output,
+            closed_loop=None if loop is None else json.loads(loop),
+        )
 
     def diagnose(
         self,

@@ -27,6 +27,11 @@ class Results:
             see docs/outputs.md), as polars DataFrames.
         files: the files written (relative to ``output``) when the run was asked to write.
         output: the folder written, or None.
+        closed_loop: the closed loop's summary when the run included it (per level: the
+            conclusion, accepted effects, chi-square, residual norm and FRAC before and
+            after, every parameter before and after with the truth), else None. Its tables
+            are ``tables["closed_loop/closed_loop"]`` (before/after per quantity) and
+            ``tables["closed_loop/candidates"]``.
     """
 
     def __init__(
@@ -35,11 +40,13 @@ class Results:
         study: "Study | None" = None,
         files: list[str] | None = None,
         output: str | Path | None = None,
+        closed_loop: dict | None = None,
     ):
         self.tables = tables
         self.study = study
         self.files = files or []
         self.output = None if output is None else Path(output)
+        self.closed_loop = closed_loop
 
     def __repr__(self) -> str:
         name = self.study.name if self.study is not None else "?"

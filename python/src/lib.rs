@@ -283,7 +283,7 @@ impl Study {
     }
 
     /// Run the study (see `run.rs`): table names, parquet bytes per table, files written.
-    #[pyo3(signature = (output=None, callback=None, figures=true, rom_cache=true))]
+    #[pyo3(signature = (output=None, callback=None, figures=true, rom_cache=true, closed_loop=None))]
     fn _run<'py>(
         &self,
         py: Python<'py>,
@@ -291,8 +291,15 @@ impl Study {
         callback: Option<Py<PyAny>>,
         figures: bool,
         rom_cache: bool,
+        closed_loop: Option<bool>,
     ) -> PyResult<Bound<'py, PyTuple>> {
-        run::run(py, &self.study, output, callback, figures, rom_cache)
+        let args = run::RunArgs {
+            output,
+            figures,
+            rom_cache,
+            closed_loop,
+        };
+        run::run(py, &self.study, args, callback)
     }
 
     /// The closed loop on the study (as `rfmlab diagnose`): its summary as JSON text.

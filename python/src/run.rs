@@ -28,6 +28,8 @@ pub(crate) enum Progress {
 pub(crate) struct Outcome {
     pub tables: Vec<(String, DataFrame)>,
     pub files: Vec<String>,
+    /// The closed loop's summary (JSON), when the plan ran it.
+    pub closed_loop: Option<String>,
 }
 
 fn parquet_bytes(df: &DataFrame) -> Result<Vec<u8>, String> {
@@ -108,14 +110,10 @@ where
 pub(crate) fn run<'py>(
     py: Python<'py>,
     study: &rfmlab::study::Study,
-    output: Option<PathBuf>,
+    args: RunArgs,
     callback: Option<Py<PyAny>>,
-    figures: bool,
-    rom_cache: bool,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    let outcome = drive(py, callback, |tx, cancel| {
-        execute(study, output.as_deref(), figures, rom_cache, tx, cancel)
-    })?;
+    let outcome = drive(py, callback, |tx, cancel| execute(study, &args, tx, cancel))?;
     let outcome = outcome.map_err(|e| run_error(py, &e))?;
     let mut names = Vec::new();
     let mut blobs = Vec::new();
@@ -126,7 +124,7 @@ pub(crate) fn run<'py>(
         names.push(name.clone());
         blobs.push(PyBytes::new(py, &bytes));
     }
-    (names, blobs, outcome.files).into_pyobject(py)
+    (names, blobs, outcome.files, outcome.closed_loop).into_pyobject(py)
 }
 
 /// The closed loop (`rfmlab diagnose`) on the worker thread: its summary as JSON text. The
@@ -191,16 +189,72 @@ pub(crate) fn diagnose(
     serde_json::to_string(&s).map_err(|e| error(py, "RunError", (e.to_string(),)))
 }
 
-/// The pipeline itself (on the worker thread).
+/// The pipeline itself (on the worker thread): plan, run, and write when asked. `closed_loop`
+/// overrides whether the plan runs the closed loop (None: as the study says; the loop takes
+/// the study's `[closed_loop]` settings, else the defaults).
 pub(crate) fn execute(
-    _study: &rfmlab::study::Study,
-    _output: Option<&std::path::Path>,
-    _figures: bool,
-    _rom_cache: bool,
-    _tx: mpsc::Sender<Progress>,
-    _cancel: Arc<AtomicBool>,
+    study: &rfmlab::study::Study,
+    opts: &RunArgs,
+    tx: mpsc::Sender<Progress>,
+    cancel: Arc<AtomicBool>,
 ) -> Result<Outcome, RunError> {
-    Err(RunError::Engine(
-        "the in-memory pipeline is not available in this build".into(),
-    ))
+    use rfmlab::pipeline::{Event, Executor};
+    let mut plan = study.plan()?;
+    plan.figures = plan.figures && opts.figures;
+    match opts.closed_loop {
+        Some(true) if plan.closed_loop.is_none() => {
+            if study.inference.is_none() {
+                return Err(RunError::Study(rfmlab::study::StudyError {
+                    file: study.file.display().to_string(),
+                    key: "inference".into(),
+                    message: "the closed loop needs an [inference] section (its noise model and priors define the likelihood the loop tests); add one as in studies/bayes.toml".into(),
+                }));
+            }
+            plan.closed_loop = Some(rfmlab::runner::closed_loop::params_of(study));
+        }
+        Some(false) => plan.closed_loop = None,
+        _ => {}
+    }
+    let tx = std::sync::Mutex::new(tx);
+    let mut ex = Executor::new()
+        .with_cancel_flag(cancel)
+        .observer(move |e: &Event| {
+            let p = match e {
+                Event::Start { step, total } => Progress::Start(step.clone(), *total),
+                Event::Advance => Progress::Advance,
+                Event::Finish => Progress::Finish,
+            };
+            if let Ok(t) = tx.lock() {
+                let _ = t.send(p);
+            }
+        });
+    if opts.rom_cache {
+        ex = ex.rom_cache(rfmlab::runner::rom_cache_dir(study));
+    }
+    let results = rfmlab::pipeline::run(&plan, &mut ex)?;
+    let files = match &opts.output {
+        Some(dir) => rfmlab::report::write(&results, dir)?.files,
+        None => Vec::new(),
+    };
+    let tables = results
+        .table_names()
+        .iter()
+        .filter_map(|n| results.table(n).map(|df| (n.to_string(), df.clone())))
+        .collect();
+    let closed_loop = results
+        .closed_loop()
+        .and_then(|o| serde_json::to_string(&o.summary).ok());
+    Ok(Outcome {
+        tables,
+        files,
+        closed_loop,
+    })
+}
+
+/// The options of `study.run()`.
+pub(crate) struct RunArgs {
+    pub output: Option<PathBuf>,
+    pub figures: bool,
+    pub rom_cache: bool,
+    pub closed_loop: Option<bool>,
 }
