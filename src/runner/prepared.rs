@@ -42,15 +42,14 @@ impl Prepared {
         let laws = super::model_laws(study)?;
         let built = super::build(study)?;
         let mut levels = super::load_levels(study, &built)?;
-        let (engine, engine_note, lik_engine) =
-            super::build_engine(study, &built, &mut levels, &laws, rom_cache)?;
+        let engines = super::build_engine(study, &built, &mut levels, &laws, rom_cache)?;
         Ok(Prepared {
             study: study.clone(),
             levels,
             laws,
-            engine,
-            lik_engine,
-            engine_note,
+            engine: engines.engine,
+            lik_engine: engines.likelihood,
+            engine_note: engines.note,
         })
     }
 
