@@ -51,6 +51,8 @@ where
 {
     let cancel = Arc::new(AtomicBool::new(false));
     let (tx, rx) = mpsc::channel::<Progress>();
+    // Behind a mutex so that the wait without the GIL may borrow it.
+    let rx = std::sync::Mutex::new(rx);
     let (mut step, mut done, mut total) = (String::new(), 0u64, 0u64);
     std::thread::scope(|s| -> PyResult<T> {
         let cancel_w = cancel.clone();
@@ -58,13 +60,14 @@ where
         let mut interrupted: Option<PyErr> = None;
         loop {
             // Wait without the GIL; then, with it, report progress and look for Ctrl-C.
-            let got = py.detach(|| rx.recv_timeout(Duration::from_millis(100)));
+            let got = py.detach(|| {
+                let rx = rx.lock().unwrap_or_else(|e| e.into_inner());
+                rx.recv_timeout(Duration::from_millis(100))
+                    .map(|ev| std::iter::once(ev).chain(rx.try_iter()).collect::<Vec<_>>())
+            });
             let mut events = Vec::new();
             match got {
-                Ok(ev) => {
-                    events.push(ev);
-                    events.extend(rx.try_iter());
-                }
+                Ok(evs) => events = evs,
                 Err(mpsc::RecvTimeoutError::Timeout) => {}
                 Err(mpsc::RecvTimeoutError::Disconnected) => break,
             }
