@@ -67,7 +67,7 @@ def test_bad_key_raises_study_error_naming_it(tmp_path):
 
 
 def test_unknown_key_and_missing_data_name_their_keys(tmp_path):
-    path = study_copy(tmp_path, "default.toml", "typo", {"thickness = 0.010           # m, along y": "thicknes = 0.010"})
+    path = study_copy(tmp_path, "default.toml", "typo", {"[structure.beam]\n": "[structure.beam]\nthicknes = 0.010\n"})
     with pytest.raises(rfmlab.StudyError) as e:
         rfmlab.load(path)
     assert "thicknes" in e.value.key or "thicknes" in e.value.message, (e.value.key, e.value.message)
