@@ -18,6 +18,11 @@ _DRAW_KEYS = ["level", "model", "sampler", "chain", "draw"]
 _STATS = ["lp", "log_lik", "log_prior", "step_size", "tree_depth", "n_steps", "diverging", "energy"]
 
 
+def _columns(df: pl.DataFrame) -> dict[str, str]:
+    """Column names by their lower-case form (the draws table writes parameters lower-case)."""
+    return {c.lower(): c for c in df.columns}
+
+
 class Results:
     """What ``Study.run`` returns.
 
@@ -108,7 +113,8 @@ class Results:
         shape = (n_chain, d.height // n_chain)
         if shape[0] * shape[1] != d.height:
             raise ValueError(f"{sampler} draws of {model} at {level}: chains of unequal length")
-        return {p: d[p].to_numpy().reshape(shape) for p in names}
+        col = _columns(d)
+        return {p: d[col[p.lower()]].to_numpy().reshape(shape) for p in names}
 
     def _parameters(self, model: str, level: str, sampler: str) -> list[str]:
         s = self.summary.filter(
@@ -177,8 +183,10 @@ class Results:
         elif loo_draws:
             raise KeyError(f"no pointwise log likelihood of {model} at {level} ({sampler})")
 
+        cols = _columns(d)
+
         def cube(col: str, dtype=np.float64) -> np.ndarray:
-            a = d[col].to_numpy().astype(dtype).reshape(len(chains), n_draw)
+            a = d[cols.get(col.lower(), col)].to_numpy().astype(dtype).reshape(len(chains), n_draw)
             return a if keep is None else a[:, keep]
 
         ids = draw_ids if keep is None else draw_ids[keep]

@@ -21,7 +21,8 @@ def test_logp_is_the_samplers_density(posterior):
     post, results = posterior
     assert post.names == ["E0", "h", "E1", "eta1"] and post.linearised
     d = results.draws.filter(pl.col("sampler") == "nuts").sort("chain", "draw")
-    rows = d.select(post.names).to_numpy()[::97]
+    lower = {c.lower(): c for c in d.columns}
+    rows = d.select([lower[n.lower()] for n in post.names]).to_numpy()[::97]
     lp = d["lp"].to_numpy()[::97]
     ll = d["log_lik"].to_numpy()[::97]
     shifts = []
