@@ -10,6 +10,10 @@ use std::sync::{Arc, Mutex};
 pub struct RunArgs {
     /// The study file (TOML).
     pub study: PathBuf,
+    /// Results folder, replaced as a whole (default: the study's `output_dir`, else
+    /// `results/<study name>`, relative to the current directory).
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: Option<PathBuf>,
     /// Print a JSON summary (identified parameters, FRACs, files) on stdout.
     #[arg(long)]
     pub json: bool,
@@ -44,6 +48,9 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
     let study = super::common::load_study(&a.study)?;
     let mut plan = study.plan().map_err(wrap)?;
     plan.figures &= !a.no_figures;
+    if let Some(o) = &a.output {
+        plan.output_dir = o.clone();
+    }
     let bar: Arc<Mutex<Option<indicatif::ProgressBar>>> = Arc::new(Mutex::new(None));
     let on_event = {
         let bar = bar.clone();
@@ -122,12 +129,13 @@ pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
         print_json(&serde_json::to_value(&summary)?)?;
     } else if !g.quiet {
         eprintln!(
-            "{}: OK ({} DOFs, {} levels, {} models, initial values evaluated at {} lines)",
+            "{}: OK ({} DOFs, {} levels, {} models, initial values evaluated at {} lines); `rfmlab run` writes its results to {} (change with -o/--output)",
             a.study.display(),
             summary.n_dof,
             summary.levels.len(),
             summary.models.len(),
-            summary.lines_checked
+            summary.lines_checked,
+            study.output_dir.display()
         );
     }
     Ok(())

@@ -217,7 +217,7 @@ pub(crate) fn loop_stage(
         ));
     };
     // Degraded-bond and adherend-damping candidates and declared ones need a ROM with their
-    // terms (issue 13).
+    // terms.
     // Opt-in: only when `[closed_loop] candidates` names them ("degraded_bond" or a strip's
     // name). Each evaluation with a bond is a dense LU of the term ROM per line (on the paper's
     // 5 mm joint with both strips, 219 unknowns after the compression: 1-2 s per forward
@@ -281,7 +281,7 @@ pub(crate) fn loop_stage(
         Some(w) => w,
         None => engine,
     };
-    // The alternative law (issue 13): the fractional Zener, unless `[closed_loop] candidates`
+    // The alternative law: the fractional Zener, unless `[closed_loop] candidates`
     // leaves it out (names "fractional_zener" / type "alternative_law").
     let fractional = crate::material::FractionalZener;
     let alt_laws: Vec<&dyn crate::material::ConstitutiveModel> =

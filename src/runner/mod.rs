@@ -1,5 +1,6 @@
-//! The study runner: `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (issue 4, items 5-6).
-//! It sits outside the numerical core (like `study`, `output`, `plot`) and wires them together:
+//! The stages of a study's run, sequenced by [`crate::pipeline`] (`rfmlab run STUDY.toml`) and
+//! `rfmlab check STUDY.toml`. It sits outside the numerical core (like `study`, `output`,
+//! `plot`) and wires them together:
 //!
 //! 1. load the measured data of every level (UFF58, [`crate::data::frf_set_from_uff`]) and check
 //!    it ([`crate::data::check_level`]: excitation channel present, band covered);
@@ -12,13 +13,8 @@
 //!    and the analyses: per-line RFM (paper eq. 10-11, Fig. 13/18), Model 1 over bands (case
 //!    study 1), circle fit (Table 2) and IEM (eq. 20, Table 3), global RFM per model (eq. 37,
 //!    Tables 4-5), correlation (FRAC eq. 38, SCC eq. 39, ACC eq. 40) and sensitivities (Fig. 9);
-//! 4. results in `study.output_dir` (see [`write`] for the tables, their columns and units).
-//!
-//! # Atomicity
-//! Everything is written into a fresh temporary sibling folder `<output_dir>.tmp-<pid>`; only when
-//! every file (manifest last) is written is the old folder renamed away and the new one renamed
-//! into place (then the old one is deleted). A failed or interrupted run therefore leaves the
-//! earlier results untouched (at worst a stray `.tmp-*` folder).
+//! 4. the tables, figures and report sections of the results ([`write`] lists the tables, their
+//!    columns and units), written by [`crate::report::write`] in one atomic folder swap.
 
 pub mod basins;
 pub mod bayes;
@@ -37,8 +33,8 @@ pub mod simulate;
 pub mod terms;
 pub mod write;
 pub(crate) mod write_bayes;
-mod write_compare;
-mod write_levels;
+pub(crate) mod write_compare;
+pub(crate) mod write_levels;
 
 pub use compute::{
     BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,
@@ -129,6 +125,8 @@ pub struct ModelSummary {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CheckSummary {
     pub study: String,
+    /// Where `rfmlab run` writes the results (without `-o/--output`).
+    pub output_dir: PathBuf,
     pub n_dof: usize,
     /// Per level: name, number of lines in the band, channel (response) ids used.
     pub levels: Vec<(String, usize, Vec<u32>)>,
@@ -785,6 +783,7 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
     let lines_checked = check_initial_values(study, &built, &levels, &laws)?;
     Ok(CheckSummary {
         study: study.name.clone(),
+        output_dir: study.output_dir.clone(),
         n_dof: built.model.n_dof(),
         levels: levels
             .iter()
@@ -796,34 +795,6 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
             .map(|m| (m.name.clone(), m.levels.clone()))
             .collect(),
         lines_checked,
-    })
-}
-
-/// Run a study: identification, correlation, tables, figures, report and manifest in
-/// `study.output_dir` (or `opts.output_dir`), replaced atomically as a whole (module doc).
-/// The same path as [`crate::pipeline::run`] then [`crate::report::write`].
-pub fn run_study(
-    study: &Study,
-    opts: &RunOptions,
-    progress: &(dyn Fn(Event) + Sync),
-) -> Result<RunSummary, RunError> {
-    let mut plan = study.plan()?;
-    if let Some(d) = &opts.output_dir {
-        plan.output_dir = d.clone();
-    }
-    plan.figures &= !opts.no_figures;
-    let mut ex = crate::pipeline::Executor::new();
-    if let Some(d) = &opts.rom_cache {
-        ex = ex.rom_cache(d.clone());
-    }
-    let results = crate::pipeline::run_with(&plan, &mut ex, progress)?;
-    let written = crate::report::write_with(&results, &plan.output_dir, progress)?;
-    Ok(RunSummary {
-        study: study.name.clone(),
-        output_dir: plan.output_dir.clone(),
-        files: written.files,
-        models: results.model_summaries(),
-        seconds: results.seconds() + written.seconds,
     })
 }
 

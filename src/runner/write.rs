@@ -15,13 +15,12 @@
 //! Plus `manifest.json` (written last), `report.md` and figures `fig_*.png` / `.svg`.
 
 use super::compute::{frf_of, LevelResults};
-use super::{Event, LevelData, RunError};
+use super::{LevelData, RunError};
 use crate::common::C64;
-use crate::output::{Manifest, Report, ResultsDir, Table};
+use crate::output::{Report, Table};
 use crate::plot::{Curve, CurveStyle, FrfCurve};
 use crate::study::Study;
 use std::path::Path;
-use std::time::Instant;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
@@ -347,7 +346,7 @@ fn f4(v: f64) -> String {
 }
 
 /// The report: Tables 2-5 of the paper with its values beside ours, and the figures.
-fn build_report(
+pub(crate) fn build_report(
     study: &Study,
     levels: &[LevelData],
     results: &[LevelResults],
@@ -652,7 +651,7 @@ fn build_report(
 }
 
 /// Draw the figures into `dir`; returns (file name of the PNG, caption).
-fn draw_figures(
+pub(crate) fn draw_figures(
     dir: &Path,
     levels: &[LevelData],
     results: &[LevelResults],
@@ -832,75 +831,4 @@ pub(crate) fn tables(
     out.extend(super::write_compare::tables(&posts)?);
     out.extend(super::write_levels::tables(results)?);
     Ok(out)
-}
-
-/// Write every result file of `results` into the (new, empty) folder `dir`: tables, figures
-/// when asked for, report.md, and manifest.json last. Returns the files written.
-pub(crate) fn fill(
-    dir: &Path,
-    results: &crate::pipeline::Results,
-    t0: Instant,
-    progress: &(dyn Fn(Event) + Sync),
-) -> Result<Vec<String>, RunError> {
-    let parent = dir.parent().map(Path::to_path_buf).unwrap_or_default();
-    let name = dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let mut out = ResultsDir::create(&parent, &name)?;
-    let study = results.study();
-    let levels = results.levels();
-    let level_results = results.level_results();
-    progress(Event::Start {
-        step: "writing results".into(),
-        total: 0,
-    });
-    for table in results.top_tables() {
-        out.write_table(table)?;
-    }
-    let posts: Vec<&super::bayes::PosteriorResult> = results.posteriors().collect();
-    let figs = if results.figures {
-        let mut f = draw_figures(out.path(), levels, level_results)?;
-        f.extend(super::write_bayes::figures(out.path(), &posts)?);
-        f.extend(super::write_levels::figures(out.path(), level_results)?);
-        for (png, _) in &f {
-            out.record(png);
-            out.record(png.replace(".png", ".svg"));
-        }
-        f
-    } else {
-        Vec::new()
-    };
-    let engine_note = results.engine_note();
-    let mut report = build_report(study, levels, level_results, &figs, engine_note);
-    super::write_bayes::report(&mut report, levels, &posts, &figs);
-    super::write_compare::report(&mut report, &posts);
-    super::write_levels::report(&mut report, level_results, &figs);
-    if let Some(o) = results.closed_loop() {
-        let sub = crate::pipeline::LOOP_DIR;
-        let mut d = ResultsDir::create(out.path(), sub)?;
-        super::closed_loop::write_loop(&mut d, o, &study.name, results.figures)?;
-        for f in d.written() {
-            out.record(format!("{sub}/{f}"));
-        }
-        report.paragraph(&super::closed_loop::report_section(&o.markdown, sub));
-    }
-    out.write_report(&report)?;
-    let mut manifest = Manifest::new(&study.file, Some(study.seed));
-    for (step, secs) in results.timings() {
-        manifest.add_timing(step.clone(), *secs);
-    }
-    manifest.add_timing("total", results.seconds() + t0.elapsed().as_secs_f64());
-    for (name, n) in results.counters() {
-        manifest.add_count(name.clone(), *n);
-    }
-    manifest.add_note(engine_note.to_string());
-    manifest.add_note(
-        "results written into a temporary folder and swapped into place at the end".to_string(),
-    );
-    out.write_manifest(&mut manifest)?;
-    progress(Event::Finish);
-    let mut files = out.written().to_vec();
-    files.push("manifest.json".into());
-    Ok(files)
 }

@@ -1,5 +1,5 @@
 //! Declared effects (`[[structure.effects]]`) and the closed loop's settings (`[closed_loop]`)
-//! of a study (issue 13, item 3): effects the study knows of enter every forward model of the
+//! of a study: effects the study knows of enter every forward model of the
 //! run (fixed at their value, or free with a prior); the loop runs after inference.
 //!
 //! ```toml
