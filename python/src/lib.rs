@@ -415,8 +415,11 @@ impl Posterior {
 }
 
 /// A density error: recoverable ones (outside the admissible range) give -inf, fatal ones raise.
-fn density<T>(py: Python<'_>, r: Result<T, DensityError>, bad: T) -> PyResult<T> {
+fn density(py: Python<'_>, r: Result<f64, DensityError>, bad: f64) -> PyResult<f64> {
     match r {
+        // A NaN (coordinates that are not numbers, an overflow) is a point the density
+        // cannot be evaluated at, like a recoverable failure.
+        Ok(v) if v.is_nan() => Ok(bad),
         Ok(v) => Ok(v),
         Err(DensityError::Recoverable(_)) => Ok(bad),
         Err(DensityError::Fatal(m)) => Err(error(py, "RunError", (m,))),
