@@ -107,3 +107,52 @@ def test_results_tables_and_errors(bayes_run):
         results.table("closed_loop")
     m = results.map_point("model4", "L1")
     assert list(m) == ["E0", "h", "E1", "eta1"]
+
+
+def test_progress_interrupt_and_the_gil(tmp_path):
+    """A run reports its steps to the callback; while it computes, another Python thread runs
+    (the GIL is released); an exception in the callback and Ctrl-C (a SIGINT to the main
+    thread) each stop the run at the next stage and are raised, leaving nothing written."""
+    import _thread
+    import threading
+
+    path = study_copy(tmp_path, "default.toml", "py_progress")
+    study = rfmlab.load(path)
+
+    steps = []
+    ticks = []
+    stop = threading.Event()
+
+    def ticker():
+        while not stop.is_set():
+            ticks.append(1)
+            stop.wait(0.05)
+
+    t = threading.Thread(target=ticker)
+    t.start()
+    try:
+        study.run(figures=False, rom_cache=False, progress=lambda s, d, n: steps.append((s, d, n)))
+    finally:
+        stop.set()
+        t.join()
+    assert len({s for s, _, _ in steps}) >= 3, steps
+    assert len(ticks) >= 10, "another Python thread should run while the study computes"
+
+    class Stop(Exception):
+        pass
+
+    def fail(step, done, total):
+        raise Stop(step)
+
+    with pytest.raises(Stop):
+        study.run(figures=False, rom_cache=False, progress=fail, output=tmp_path / "never")
+    assert not (tmp_path / "never").exists()
+
+    timer = threading.Timer(1.0, _thread.interrupt_main)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            study.run(figures=False, rom_cache=False, output=tmp_path / "never")
+    finally:
+        timer.cancel()
+    assert not (tmp_path / "never").exists()

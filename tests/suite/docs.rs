@@ -938,9 +938,6 @@ fn the_validation_tables_are_documented() {
 // and, with `#anchor`, a heading of that file (GitHub's anchors: lower case, punctuation other
 // than `-` and `_` dropped, spaces to `-`).
 
-/// Pages written on other branches; empty this list once they are merged.
-const PENDING: &[&str] = &["docs/python.md"];
-
 fn anchors(md: &str) -> BTreeSet<String> {
     md.lines()
         .filter(|l| l.starts_with('#'))
@@ -995,14 +992,8 @@ fn every_documentation_link_resolves() {
             } else {
                 base.join(file)
             };
-            let rel = target
-                .strip_prefix(root())
-                .map(|p| p.to_string_lossy().replace('\\', "/"))
-                .unwrap_or_default();
             if !target.exists() {
-                if !PENDING.iter().any(|p| rel.ends_with(p)) {
-                    problems.push(format!("{}: link {link}: no such file", page.display()));
-                }
+                problems.push(format!("{}: link {link}: no such file", page.display()));
                 continue;
             }
             if !anchor.is_empty() {
