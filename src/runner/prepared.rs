@@ -190,23 +190,33 @@ mod tests {
             .log_likelihood(&post.unconstrained(&off), None)
             .unwrap();
         assert!(l_true > l_off + 100.0, "{l_true} vs {l_off}");
-        let mut g = vec![0.0; post.dim()];
-        let lp = post.log_posterior(&x, Some(&mut g)).unwrap();
-        for i in 0..post.dim() {
-            let h = 1e-6;
-            let mut a = x.clone();
-            a[i] += h;
-            let mut b = x.clone();
-            b[i] -= h;
-            let fd = (post.log_posterior(&a, None).unwrap()
-                - post.log_posterior(&b, None).unwrap())
-                / (2.0 * h);
-            assert!(
-                (fd - g[i]).abs() <= 1e-4 * (1.0 + g[i].abs()),
-                "coordinate {i}: {fd} vs {}",
-                g[i]
-            );
-        }
+        // The gradient against central differences: exact for the density the samplers see
+        // (the measurement bias linearised at a point, here the truth); within 1 % for the
+        // exact measurement operator, whose Jacobian holds a shaker's force weights fixed
+        // (measured: 0.1 % on E0 with the study's shaker).
+        let lin = prep.posterior("model4", "L1", Some(&p)).unwrap();
+        let check = |post: &FrfPosterior<'_>, tol: f64| -> f64 {
+            let mut g = vec![0.0; post.dim()];
+            let lp = post.log_posterior(&x, Some(&mut g)).unwrap();
+            for i in 0..post.dim() {
+                let h = 1e-6;
+                let mut a = x.clone();
+                a[i] += h;
+                let mut b = x.clone();
+                b[i] -= h;
+                let fd = (post.log_posterior(&a, None).unwrap()
+                    - post.log_posterior(&b, None).unwrap())
+                    / (2.0 * h);
+                assert!(
+                    (fd - g[i]).abs() <= tol * (1.0 + g[i].abs()),
+                    "coordinate {i}: {fd} vs {} (tolerance {tol})",
+                    g[i]
+                );
+            }
+            lp
+        };
+        let lp = check(&lin, 1e-4);
+        check(&post, 1e-2);
         assert!(lp.is_finite());
         // A misspelt model names the key.
         let e = prep.posterior("model9", "L1", None).err().unwrap();
