@@ -196,16 +196,10 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
     let (engine, engine_note) = plant_engine(&model, built.excitation, ex)?;
     notes.extend(engine_note);
     let exc = &model.points[built.excitation];
-    let labels: Vec<ChannelLabel> = model
-        .points
-        .iter()
-        .map(|p| ChannelLabel {
-            response_id: p.id,
-            response_dir: p.direction,
-            reference_id: exc.id,
-            reference_dir: exc.direction,
-        })
-        .collect();
+    let labels = ChannelLabel::for_responses(
+        model.points.iter().map(|p| (p.id, p.direction)),
+        (exc.id, exc.direction),
+    );
     let mut set = FrfSet::default();
     let mut truths = Vec::new();
     for (k, lv) in ex.levels.iter().enumerate() {
