@@ -157,6 +157,9 @@ pub(crate) fn reference(
     Ok(reference_with_floor(model, inputs, moduli, lines)?.0)
 }
 
+/// Receptances per modulus and line (each n_out x n_in row-major).
+type Receptances = Vec<Vec<Vec<C64>>>;
+
 /// [`reference`] and, per modulus and line, the sparse LU's attainable relative accuracy
 /// ([`FullSolver::solve`]).
 fn reference_with_floor(
@@ -164,7 +167,7 @@ fn reference_with_floor(
     inputs: &[usize],
     moduli: &[C64],
     lines: &[f64],
-) -> Result<(Vec<Vec<Vec<C64>>>, Vec<Vec<f64>>), RomError> {
+) -> Result<(Receptances, Vec<Vec<f64>>), RomError> {
     let jobs: Vec<(usize, usize)> = (0..moduli.len())
         .flat_map(|m| (0..lines.len()).map(move |l| (m, l)))
         .collect();
