@@ -19,8 +19,8 @@
 use rand::{RngExt, SeedableRng};
 use rfmlab::common::{Direction, C64};
 use rfmlab::fe::joint::{
-    build_joint_model, joint_cost_estimate, IsoMaterial, JointGeometry, JointSpec, MeshParams,
-    MeshSize, PointSpec,
+    build_joint_model, joint_cost_estimate, JointGeometry, JointSpec, MeshParams, MeshSize,
+    PointSpec,
 };
 use rfmlab::forward::ForwardModel;
 use rfmlab::frf::full::{FullModel, FullParams};
@@ -80,19 +80,13 @@ fn draw(seed: u64) -> JointSpec {
             adhesive_thickness_m: t_a,
             adhesive_x_start_m: x0,
         },
-        beam: IsoMaterial {
-            e_pa: 198e9,
-            nu: 0.3,
-            rho_kg_m3: 7800.0,
-        },
-        adhesive_nu: 0.44,
-        adhesive_rho_kg_m3: 1160.0,
-        damping: Default::default(),
         mesh: MeshParams {
             size: MeshSize::ElementSize(h),
             ..MeshParams::default()
         },
         points,
+        // the paper's steel and Sikaflex-252
+        ..JointSpec::paper()
     }
 }
 
