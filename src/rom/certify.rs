@@ -418,6 +418,23 @@ pub fn build_rom(
     let mut direct: Vec<(usize, usize)> = Vec::new();
     let mut seconds_basis = 0.0;
 
+    // the reference and its floor at `points` by sparse LU, the points recorded as direct
+    let solve_directly = |points: &[(usize, usize)],
+                          h: &mut Receptances,
+                          floor: &mut Vec<Vec<f64>>,
+                          direct: &mut Vec<(usize, usize)>|
+     -> Result<(), RomError> {
+        if points.is_empty() {
+            return Ok(());
+        }
+        let lu = reference_points(model, inputs, &moduli, &lines, points)?;
+        for (&(m, l), (hv, f)) in points.iter().zip(lu) {
+            h[m][l] = hv;
+            floor[m][l] = f;
+        }
+        direct.extend_from_slice(points);
+        Ok(())
+    };
     let pat = ModelPattern::new(model)?;
     let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
     let mut history = Vec::new();
@@ -451,14 +468,7 @@ pub fn build_rom(
             )?;
             // the points GMRES could not resolve (too ill-conditioned for its
             // preconditioner) are solved directly instead
-            if !st.unconverged_points.is_empty() {
-                let lu = reference_points(model, inputs, &moduli, &lines, &st.unconverged_points)?;
-                for (&(m, l), (hv, f)) in st.unconverged_points.iter().zip(lu) {
-                    h[m][l] = hv;
-                    floor[m][l] = f;
-                }
-                direct.extend_from_slice(&st.unconverged_points);
-            }
+            solve_directly(&st.unconverged_points, &mut h, &mut floor, &mut direct)?;
             gmres_stats = Some(st);
             refh = Some(h);
         }
@@ -475,12 +485,7 @@ pub fn build_rom(
                 .filter(|p| !direct.contains(p))
                 .collect();
             if !suspect.is_empty() && suspect.len() * MAX_DIRECT_FRACTION_INV <= n_points {
-                let lu = reference_points(model, inputs, &moduli, &lines, &suspect)?;
-                for (&(m, l), (hv, f)) in suspect.iter().zip(lu) {
-                    h[m][l] = hv;
-                    floor[m][l] = f;
-                }
-                direct.extend_from_slice(&suspect);
+                solve_directly(&suspect, h, &mut floor, &mut direct)?;
                 judged = judge(&rom, &moduli, &lines, h, &floor, params.tolerance)?;
             }
         }
