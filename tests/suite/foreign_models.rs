@@ -114,8 +114,6 @@ fn dense_diff(a: &rfmlab::fe::model::SpMat, b: &rfmlab::fe::model::SpMat) -> f64
 }
 
 #[test]
-#[ignore = "rfmlab's real eigensolver does not converge on this 6840-DOF import (residual 1.5e-5 \
-            at the default Krylov cap, 44 at 1500 vectors); run before the modes step, the two imports agreed to 1e-15"]
 fn foreign_joint_modes_match_the_scripts_own_in_both_formats() {
     let dir = tempfile::tempdir().unwrap();
     let Some(info) = generate(dir.path(), "foreign_joint_modes") else {
@@ -171,14 +169,7 @@ fn foreign_joint_modes_match_the_scripts_own_in_both_formats() {
         assert_eq!((p.id, p.direction, &p.dofs), (q.id, q.direction, &q.dofs));
     }
     for (name, model) in [("abaqus", &abq), ("harwell_boeing", &hb)] {
-        // the default Krylov basis cap (6 n + 60 vectors) does not converge here; a larger one does
-        let params = rfmlab::modes::ModesParams {
-            eigen: rfmlab::modes::real::EigenParams {
-                max_basis: 1500,
-                ..Default::default()
-            },
-            ..Default::default()
-        };
+        let params = rfmlab::modes::ModesParams::default();
         let modes =
             rfmlab::modes::complex_modes(model, C64::new(e, 0.0), want.len(), None, &params)
                 .unwrap();

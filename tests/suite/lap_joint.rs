@@ -38,7 +38,6 @@ fn first_modes(h: f64, n: usize) -> (Vec<f64>, usize) {
 /// line, graded to 2 mm at the overlap ends). Each halving must shrink the change, and the
 /// 5 mm mesh must be within 0.5 % of the 2.5 mm one for the first three modes.
 #[test]
-#[ignore = "not yet run to completion (uses the real eigensolver that fails on the imported joint)"]
 fn lap_joint_modes_converge_for_a_1mm_bond_line() {
     let sizes = [0.010, 0.005, 0.0025];
     let runs: Vec<(Vec<f64>, usize)> = sizes.iter().map(|&h| first_modes(h, 3)).collect();
