@@ -36,6 +36,13 @@ pub struct ReducedModel {
 /// ([`ReducedModel::solve_line`]).
 pub(crate) type LineSolution = (Vec<Vec<C64>>, Vec<usize>, Vec<C64>);
 
+/// Eigenvalues of M_r below this fraction of its largest are numerically dependent
+/// directions of the basis ([`ReducedModel::complex_modes`] drops them). M_r's own rounding
+/// is ~1e-16 of its largest eigenvalue, and K_r's rounding seen through a kept direction is
+/// ~1e-16 / MASS_RANK_RTOL of the basis' largest eigenvalue: 1e-10 keeps that far below
+/// the band's modes.
+pub const MASS_RANK_RTOL: f64 = 1e-10;
+
 impl ReducedModel {
     /// The same reduced model with fewer inputs (`inputs` must be among its inputs): the basis
     /// and certificate are unchanged, a sweep then computes only those columns (the
@@ -63,21 +70,37 @@ impl ReducedModel {
 
     /// The lowest `n_modes` complex modes of the reduced pencil (K_r + j D_r + E* S_r, M_r)
     /// at a constant modulus (Pa), sorted by Re lambda (viscous C_r is left out, as in
-    /// [`crate::modes::complex_modes`]). With M_r = L L^T the pencil becomes the complex
-    /// symmetric A = L^-1 (K_r + j D_r + E* S_r) L^-T, whose eigenvectors y give
-    /// phi_r = L^-T y, normalised phi_r^T M_r phi_r = 1 (no conjugate). The basis holds the
-    /// Krylov sequences of the observation loads, so these are the modes the FRFs see, as
-    /// accurate as the certified FRFs around their resonances; modes the points do not
-    /// excite (torsion, lateral bending for in-plane loads) are absent.
+    /// [`crate::modes::complex_modes`]). With M_r = U S U^T (symmetric eigendecomposition)
+    /// and W = U_k S_k^-1/2 over the eigenvalues above [`MASS_RANK_RTOL`] of the largest, the
+    /// pencil becomes the complex symmetric A = W^T (K_r + j D_r + E* S_r) W, whose
+    /// eigenvectors y give phi_r = W y, normalised phi_r^T M_r phi_r = 1 (no conjugate).
+    /// Directions of the basis that are numerically dependent (M_r singular to rounding: a
+    /// Krylov basis of a joint whose points barely move some modes) are dropped instead of
+    /// failing a Cholesky factorisation; they carry no mode. The basis holds the Krylov
+    /// sequences of the observation loads, so these are the modes the FRFs see, as accurate
+    /// as the certified FRFs around their resonances; modes the points do not excite
+    /// (torsion, lateral bending for in-plane loads) are absent.
     pub fn complex_modes(&self, modulus: C64, n_modes: usize) -> Result<Vec<EngineMode>, RomError> {
         let n = self.n_r;
-        let l = self
+        let eig = self
             .m_r
-            .llt(faer::Side::Lower)
-            .map_err(|e| RomError::Factorization(format!("M_r is not positive definite: {e:?}")))?
-            .L()
-            .to_owned();
-        // K = K_r + j D_r + E* S_r, then A = L^-1 K L^-T.
+            .self_adjoint_eigen(faer::Side::Lower)
+            .map_err(|e| RomError::Factorization(format!("eigendecomposition of M_r: {e:?}")))?;
+        let s_max = (0..n).map(|i| eig.S()[i]).fold(0.0f64, f64::max);
+        if s_max <= 0.0 || !s_max.is_finite() {
+            return Err(RomError::Factorization(
+                "M_r has no positive eigenvalue: the reduced basis is empty or broken".into(),
+            ));
+        }
+        let kept: Vec<usize> = (0..n)
+            .filter(|&i| eig.S()[i] > MASS_RANK_RTOL * s_max)
+            .collect();
+        let r = kept.len();
+        let w = Mat::<f64>::from_fn(n, r, |i, c| {
+            let k = kept[c];
+            eig.U()[(i, k)] / eig.S()[k].sqrt()
+        });
+        // K = K_r + j D_r + E* S_r, then A = W^T K W (complex symmetric).
         let k = Mat::<C64>::from_fn(n, n, |i, j| {
             let mut v = C64::new(self.k_r[(i, j)], 0.0) + modulus * self.s_r[(i, j)];
             if let Some(d) = &self.d_r {
@@ -85,36 +108,24 @@ impl ReducedModel {
             }
             v
         });
-        let lc = Mat::<C64>::from_fn(n, n, |i, j| C64::new(l[(i, j)], 0.0));
-        let mut a = k;
-        faer::linalg::triangular_solve::solve_lower_triangular_in_place(
-            lc.as_ref(),
-            a.as_mut(),
-            faer::Par::Seq,
-        );
-        let mut at = a.transpose().to_owned();
-        faer::linalg::triangular_solve::solve_lower_triangular_in_place(
-            lc.as_ref(),
-            at.as_mut(),
-            faer::Par::Seq,
-        );
-        // at = L^-1 (L^-1 K)^T = L^-1 K^T L^-T; K is symmetric, so at = A.
+        let wc = Mat::<C64>::from_fn(n, r, |i, j| C64::new(w[(i, j)], 0.0));
+        let kw = &k * &wc;
+        let aw = wc.transpose() * &kw;
+        let at = Mat::<C64>::from_fn(r, r, |i, j| 0.5 * (aw[(i, j)] + aw[(j, i)]));
         let evd = at
             .eigen()
             .map_err(|e| RomError::Factorization(format!("reduced complex eigensolver: {e:?}")))?;
         let (vals, vecs) = (evd.S(), evd.U());
-        let mut order: Vec<usize> = (0..n).collect();
+        let mut order: Vec<usize> = (0..r).collect();
         order.sort_by(|&x, &y| vals[x].re.total_cmp(&vals[y].re));
         order.truncate(n_modes);
         let mut out = Vec::with_capacity(order.len());
         for idx in order {
-            // phi_r = L^-T y: solve L^T phi = y.
-            let mut phi = Mat::<C64>::from_fn(n, 1, |i, _| vecs[(i, idx)]);
-            faer::linalg::triangular_solve::solve_upper_triangular_in_place(
-                lc.transpose(),
-                phi.as_mut(),
-                faer::Par::Seq,
-            );
+            // phi_r = W y
+            let phi = Mat::<C64>::from_fn(n, 1, |i, _| {
+                (0..r).map(|c| vecs[(c, idx)] * w[(i, c)]).sum::<C64>()
+            });
+            let mut phi = phi;
             // phi^T m phi (no conjugate)
             let quad = |phi: &Mat<C64>, m: &Mat<f64>| -> C64 {
                 let mut acc = C64::new(0.0, 0.0);
