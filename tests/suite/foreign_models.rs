@@ -232,54 +232,15 @@ fn simulate(dir: &Path, format: &str, noise: &str) -> PathBuf {
 }
 
 /// Noise-free data: the experiment's UFF with every channel replaced by the exact accelerance
-/// of the imported model at the truth (the sidecar's `exact`; the frequency-domain mode's
-/// values carry the Hann window's leakage, which a study without `[measurements.estimator]`
-/// does not model). The sidecar lists channels in the order of the UFF's datasets; the
-/// noise-free H1 of each must be its channel's `expected_h1`.
+/// of the imported model at the truth ([`crate::common_data::exact_uff`]).
 fn exact_data(dir: &Path, format: &str) -> PathBuf {
-    use rfmlab::data::{frf_set_from_uff, frf_set_to_uff, UffImportOptions};
     let uff = simulate(
         dir,
         format,
         "force_noise_fraction = 0.0\nresponse_noise_fraction = 0.0",
     );
-    let truth: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.join(format!("{format}.truth.json"))).unwrap(),
-    )
-    .unwrap();
-    let values = |v: &serde_json::Value| -> Vec<C64> {
-        let part = |k: &str| -> Vec<f64> {
-            v[k].as_array()
-                .unwrap()
-                .iter()
-                .map(|x| x.as_f64().unwrap())
-                .collect()
-        };
-        part("re")
-            .into_iter()
-            .zip(part("im"))
-            .map(|(r, i)| C64::new(r, i))
-            .collect()
-    };
-    let mut set =
-        frf_set_from_uff(&[(&uff, "L1".to_string())], &UffImportOptions::default()).unwrap();
-    let channels = truth["levels"][0]["channels"].as_array().unwrap();
-    let level = &mut set.levels[0];
-    assert_eq!(level.channels.len(), channels.len());
-    for (ch, t) in level.channels.iter_mut().zip(channels) {
-        let (h1, exact) = (values(&t["expected_h1"]), values(&t["exact"]));
-        // noise-free H1 still scatters where leakage lowers the coherence: compare in norm
-        let norm = |v: &[C64]| v.iter().map(|x| x.norm_sqr()).sum::<f64>().sqrt();
-        let diff: Vec<C64> = ch.values.iter().zip(&h1).map(|(a, b)| a - b).collect();
-        assert!(
-            norm(&diff) < 0.05 * norm(&h1),
-            "channel {}: the UFF is not the sidecar's channel",
-            ch.response_id
-        );
-        ch.values = exact;
-    }
     let out = dir.join(format!("{format}_exact.uff"));
-    frf_set_to_uff(&set, &out, false).unwrap();
+    crate::common_data::exact_uff(&uff, &dir.join(format!("{format}.truth.json")), &out);
     out
 }
 

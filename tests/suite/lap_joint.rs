@@ -222,7 +222,7 @@ fn check_geometry(dir: &Path, k: usize, g: &[f64; 5]) -> f64 {
     let (lo, hi) = ((0.5 * f1).max(1.0).round(), (1.15 * f3).round());
     let step = ((hi - lo) / 60.0).max(0.5).round();
     let hi = lo + step * ((hi - lo) / step).floor();
-    // noise-free frequency-domain data on the full model
+    // noise-free data: the exact accelerances of the simulated experiment (its sidecar)
     let exp = format!(
         r#"[experiment]
 name = "lap{k}"
@@ -258,6 +258,12 @@ params = {{ E0 = {}, h = {}, E1 = {}, eta1 = {} }}
         "geometry {k}: simulate: {}",
         String::from_utf8_lossy(&out.stderr)
     );
+    let exact = dir.join(format!("lap{k}_exact.uff"));
+    crate::common_data::exact_uff(
+        &dir.join(format!("lap{k}_L1.uff")),
+        &dir.join(format!("lap{k}.truth.json")),
+        &exact,
+    );
     let study_text = format!(
         r#"[study]
 name = "lap{k}_fit"
@@ -291,7 +297,7 @@ correlation = false
 sensitivity = false
 figures = false
 "#,
-        dir.join(format!("lap{k}_L1.uff")).display()
+        exact.display()
     );
     let sf = dir.join(format!("lap{k}_fit.toml"));
     std::fs::write(&sf, study_text).unwrap();
@@ -334,7 +340,6 @@ figures = false
 
 /// Seeded lap geometries (3 in CI; `RFMLAB_LONG=1` runs 12).
 #[test]
-#[ignore = "not yet run to completion"]
 fn lap_joint_design_space() {
     let n = if std::env::var_os("RFMLAB_LONG").is_some() {
         12
