@@ -96,3 +96,23 @@ impl std::fmt::Display for Direction {
         write!(f, "{s}{a}")
     }
 }
+
+/// Quantile `p` in `[0, 1]` of already sorted values, linear interpolation between order
+/// statistics (numpy's default "linear" method, Hyndman & Fan type 7); NaN for no values.
+pub fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
+    let n = sorted.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let h = (n - 1) as f64 * p.clamp(0.0, 1.0);
+    let lo = h.floor();
+    let i = (lo as usize).min(n - 1);
+    let j = (i + 1).min(n - 1);
+    // numpy's form of the interpolation, exact at both ends
+    let (a, b, t) = (sorted[i], sorted[j], h - lo);
+    if t >= 0.5 {
+        b - (b - a) * (1.0 - t)
+    } else {
+        a + (b - a) * t
+    }
+}

@@ -44,7 +44,8 @@ pub mod start;
 use crate::inference::map::{
     chol_solve, cholesky, find_map, MapError, MapParams, MapResult, SearchMethod,
 };
-use crate::inference::prior::{erfc, Prior};
+use crate::inference::prior::Prior;
+use libm::erfc;
 use crate::material::ConstitutiveModel;
 
 /// Settings of the loop.

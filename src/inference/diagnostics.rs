@@ -40,6 +40,7 @@
 //! as ArviZ does; only malformed input (no chains, ragged chains, a probability outside (0, 1))
 //! is an error.
 
+use crate::common::quantile_sorted;
 use rustfft::{num_complex::Complex, FftPlanner};
 
 /// Malformed input to a diagnostic.
@@ -144,28 +145,6 @@ fn sorted(x: &[f64]) -> Vec<f64> {
     let mut s = x.to_vec();
     s.sort_by(f64::total_cmp);
     s
-}
-
-/// Linear interpolation between `a` and `b` at `t` in numpy's form (exact at both ends).
-fn lerp(a: f64, b: f64, t: f64) -> f64 {
-    let d = b - a;
-    if t >= 0.5 {
-        b - d * (1.0 - t)
-    } else {
-        a + d * t
-    }
-}
-
-/// Quantile `p` of already sorted values (numpy's default "linear" method).
-fn quantile_sorted(s: &[f64], p: f64) -> f64 {
-    if s.is_empty() {
-        return f64::NAN;
-    }
-    let h = (s.len() - 1) as f64 * p;
-    let lo = h.floor();
-    let i = (lo.max(0.0) as usize).min(s.len() - 1);
-    let j = (i + 1).min(s.len() - 1);
-    lerp(s[i], s[j], h - lo)
 }
 
 /// Quantile `p` in `[0, 1]` of `values` with numpy's default linear interpolation

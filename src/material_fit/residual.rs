@@ -10,7 +10,7 @@
 //!   with the systematic part.
 //! * The lag-1 autocorrelation.
 
-use crate::inference::prior::erfc;
+use libm::erfc;
 
 /// Statistics of one residual sequence.
 #[derive(Clone, Copy, Debug, PartialEq)]

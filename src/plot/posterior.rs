@@ -7,6 +7,7 @@
 //! stem), skips non-finite values, and turns every bad input (no draws, mismatched lengths,
 //! nothing finite to draw) into a [`PlotError`], never a panic.
 
+use crate::common::quantile_sorted;
 use std::path::{Path, PathBuf};
 
 use plotters::coord::types::RangedCoordf64;
@@ -565,18 +566,6 @@ fn kde(xs: &[f64], grid: &[f64], span: f64) -> Vec<f64> {
                 * norm
         })
         .collect()
-}
-
-/// Quantile of sorted data, linear interpolation between order statistics (type 7).
-fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
-    let n = sorted.len();
-    if n == 1 {
-        return sorted[0];
-    }
-    let h = p * (n - 1) as f64;
-    let lo = h.floor() as usize;
-    let hi = (lo + 1).min(n - 1);
-    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
 }
 
 /// A histogram as density bars (x0, x1, density) over the sample range (2 n^(1/3) bins,

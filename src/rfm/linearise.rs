@@ -170,20 +170,11 @@ pub(crate) fn linearise_mapped(
     Ok(lin)
 }
 
-/// FRAC between measured and analytical FRF k over the given lines (paper eq. 38):
-/// |sum conj(X) A|^2 / (sum |X|^2 sum |A|^2). `analytical` is `[line][k]` over `lines`.
+/// FRAC between measured and analytical FRF k over the given lines (paper eq. 38,
+/// [`crate::correlation::frac`]). `analytical` is `[line][k]` over `lines`.
 pub fn frac(data: &MeasuredColumn, analytical: &[C64], lines: &[usize], k: usize) -> f64 {
     let n_k = data.outputs.len();
-    let (mut xa, mut xx, mut aa) = (C64::new(0.0, 0.0), 0.0, 0.0);
-    for (l, &dl) in lines.iter().enumerate() {
-        let x = data.at(dl, k);
-        let a = analytical[l * n_k + k];
-        xa += x.conj() * a;
-        xx += x.norm_sqr();
-        aa += a.norm_sqr();
-    }
-    if xx == 0.0 || aa == 0.0 {
-        return 0.0;
-    }
-    xa.norm_sqr() / (xx * aa)
+    let x: Vec<C64> = lines.iter().map(|&dl| data.at(dl, k)).collect();
+    let a: Vec<C64> = (0..lines.len()).map(|l| analytical[l * n_k + k]).collect();
+    crate::correlation::frac(&x, &a)
 }

@@ -13,6 +13,7 @@
 //!    (`log Z_low + log Z_high`). Laplace always (TMCMC when asked). `log B = log Z_separate -
 //!    log Z_shared > 0` favours a level-dependent (amplitude-dependent) law.
 
+use crate::common::quantile_sorted;
 use super::bayes::{build_posterior, PosteriorResult};
 use super::{LevelData, LevelResults, RunError};
 use crate::frf::FrfEngine;
@@ -32,17 +33,6 @@ pub struct Quantiles {
     pub median: f64,
     pub q75: f64,
     pub q97_5: f64,
-}
-
-/// Quantile `q` of the sorted sample `s`.
-pub fn quantile_sorted(s: &[f64], q: f64) -> f64 {
-    if s.is_empty() {
-        return f64::NAN;
-    }
-    let h = q * (s.len() - 1) as f64;
-    let lo = h.floor() as usize;
-    let hi = (lo + 1).min(s.len() - 1);
-    s[lo] + (h - lo as f64) * (s[hi] - s[lo])
 }
 
 impl Quantiles {
