@@ -409,22 +409,70 @@ fn kasa_fit(z: &[C64]) -> Option<(C64, f64)> {
     ))
 }
 
-/// Geometric circle fit: minimise sum (|z_k - c| - R)^2 by Levenberg-Marquardt from (c0, r0).
-fn geometric_fit(z: &[C64], c0: C64, r0: f64, max_iter: usize) -> Option<(C64, f64)> {
-    let cost_of = |c: C64, r: f64| z.iter().map(|p| ((p - c).norm() - r).powi(2)).sum::<f64>();
-    let (mut c, mut r) = (c0, r0);
-    let mut cost = cost_of(c, r);
+/// Levenberg-Marquardt on three parameters from `p0`: `normal(p)` gives the Gauss-Newton
+/// normal equations (J^T J, the step's right-hand side) or None when the model breaks down;
+/// a trial step is taken when `feasible` and it lowers `cost` (damping x0.3, at least 1e-12),
+/// else the damping grows x10 (20 tries); stops when a step gains less than 1e-15 relative.
+fn levenberg_marquardt3(
+    p0: [f64; 3],
+    cost_of: impl Fn([f64; 3]) -> f64,
+    normal: impl Fn([f64; 3]) -> Option<([[f64; 3]; 3], [f64; 3])>,
+    feasible: impl Fn([f64; 3]) -> bool,
+    max_iter: usize,
+) -> Option<[f64; 3]> {
+    let mut p = p0;
+    let mut cost = cost_of(p);
     let mut lambda = 1e-3;
     for _ in 0..max_iter {
+        let (jtj, jtr) = normal(p)?;
+        let mut improved = false;
+        for _ in 0..20 {
+            let mut a = jtj;
+            for (i, row) in a.iter_mut().enumerate() {
+                row[i] += lambda * jtj[i][i].max(1e-300);
+            }
+            let step = solve3(a, jtr)?;
+            let p1 = [p[0] + step[0], p[1] + step[1], p[2] + step[2]];
+            if feasible(p1) {
+                let cost1 = cost_of(p1);
+                if cost1 < cost {
+                    let rel = (cost - cost1) / cost.max(1e-300);
+                    p = p1;
+                    cost = cost1;
+                    lambda = (lambda * 0.3).max(1e-12);
+                    improved = rel > 1e-15;
+                    break;
+                }
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            break;
+        }
+    }
+    Some(p)
+}
+
+/// Geometric circle fit: minimise sum (|z_k - c| - R)^2 by Levenberg-Marquardt from (c0, r0).
+fn geometric_fit(z: &[C64], c0: C64, r0: f64, max_iter: usize) -> Option<(C64, f64)> {
+    // p = (Re c, Im c, R)
+    let cost_of = |p: [f64; 3]| {
+        let c = C64::new(p[0], p[1]);
+        z.iter()
+            .map(|q| ((q - c).norm() - p[2]).powi(2))
+            .sum::<f64>()
+    };
+    let normal = |p: [f64; 3]| {
+        let c = C64::new(p[0], p[1]);
         let mut jtj = [[0.0; 3]; 3];
         let mut jtr = [0.0; 3];
-        for p in z {
-            let d = p - c;
+        for q in z {
+            let d = q - c;
             let dist = d.norm();
             if dist == 0.0 {
                 return None;
             }
-            let res = dist - r;
+            let res = dist - p[2];
             let g = [-d.re / dist, -d.im / dist, -1.0];
             for i in 0..3 {
                 for j in 0..3 {
@@ -433,31 +481,16 @@ fn geometric_fit(z: &[C64], c0: C64, r0: f64, max_iter: usize) -> Option<(C64, f
                 jtr[i] -= g[i] * res;
             }
         }
-        let mut improved = false;
-        for _ in 0..20 {
-            let mut a = jtj;
-            for (i, row) in a.iter_mut().enumerate() {
-                row[i] += lambda * jtj[i][i].max(1e-300);
-            }
-            let step = solve3(a, jtr)?;
-            let (c1, r1) = (c + C64::new(step[0], step[1]), r + step[2]);
-            let cost1 = cost_of(c1, r1);
-            if r1 > 0.0 && cost1 < cost {
-                let rel = (cost - cost1) / cost.max(1e-300);
-                c = c1;
-                r = r1;
-                cost = cost1;
-                lambda = (lambda * 0.3).max(1e-12);
-                improved = rel > 1e-15;
-                break;
-            }
-            lambda *= 10.0;
-        }
-        if !improved {
-            break;
-        }
-    }
-    Some((c, r))
+        Some((jtj, jtr))
+    };
+    let p = levenberg_marquardt3(
+        [c0.re, c0.im, r0],
+        cost_of,
+        normal,
+        |p| p[2] > 0.0,
+        max_iter,
+    )?;
+    Some((C64::new(p[0], p[1]), p[2]))
 }
 
 /// Fit psi_k = psi_r + 2 atan((s_k - s_r)/gamma) by Levenberg-Marquardt (s scaled by s_r0).
@@ -478,13 +511,7 @@ fn angle_law_fit(
             .map(|(&xk, &yk)| (yk - p[0] - 2.0 * ((xk - p[1]) / p[2]).atan()).powi(2))
             .sum::<f64>()
     };
-    let mut p = [psi_r0, 1.0, gamma0 / s0];
-    if !(p[2] > 0.0 && p[2].is_finite()) {
-        return None;
-    }
-    let mut cost = cost_of(p);
-    let mut lambda = 1e-3;
-    for _ in 0..max_iter {
+    let normal = |p: [f64; 3]| {
         let mut jtj = [[0.0; 3]; 3];
         let mut jtr = [0.0; 3];
         for (&xk, &yk) in x.iter().zip(psi) {
@@ -500,30 +527,12 @@ fn angle_law_fit(
                 jtr[i] += g[i] * res;
             }
         }
-        let mut improved = false;
-        for _ in 0..20 {
-            let mut a = jtj;
-            for (i, row) in a.iter_mut().enumerate() {
-                row[i] += lambda * jtj[i][i].max(1e-300);
-            }
-            let step = solve3(a, jtr)?;
-            let p1 = [p[0] + step[0], p[1] + step[1], p[2] + step[2]];
-            if p1[1] > 0.0 && p1[2] > 0.0 {
-                let cost1 = cost_of(p1);
-                if cost1 < cost {
-                    let rel = (cost - cost1) / cost.max(1e-300);
-                    p = p1;
-                    cost = cost1;
-                    lambda = (lambda * 0.3).max(1e-12);
-                    improved = rel > 1e-15;
-                    break;
-                }
-            }
-            lambda *= 10.0;
-        }
-        if !improved {
-            break;
-        }
+        Some((jtj, jtr))
+    };
+    let p0 = [psi_r0, 1.0, gamma0 / s0];
+    if !(p0[2] > 0.0 && p0[2].is_finite()) {
+        return None;
     }
+    let p = levenberg_marquardt3(p0, cost_of, normal, |p| p[1] > 0.0 && p[2] > 0.0, max_iter)?;
     Some((p[0], p[1] * s0, p[2] * s0))
 }
