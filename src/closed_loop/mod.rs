@@ -45,8 +45,8 @@ use crate::inference::map::{
     chol_solve, cholesky, find_map, MapError, MapParams, MapResult, SearchMethod,
 };
 use crate::inference::prior::Prior;
-use libm::erfc;
 use crate::material::ConstitutiveModel;
+use libm::erfc;
 
 /// Settings of the loop.
 #[derive(Clone, Debug, PartialEq)]

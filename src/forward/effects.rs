@@ -386,7 +386,7 @@ impl Effects {
                     if !engine.term_names().contains(&name) =>
                 {
                     return Err(super::ForwardError::Setup(format!(
-                        "effect {name}: the engine has no term for this region (build it with rom::terms::build_term_rom; terms: {:?})",
+                        "effect {name}: the engine has no term for this region (build it with rom::term_build::build_term_rom; terms: {:?})",
                         engine.term_names()
                     )));
                 }

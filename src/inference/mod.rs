@@ -31,7 +31,7 @@ pub use reference::{
     importance_evidence, reference_stepping_stone, reference_stepping_stone_replica, ImportanceRun,
     Reference, ReferenceError, ReferencePosterior,
 };
-pub use sampling::{no_progress, Progress, SamplerError};
+pub use sampling::{no_progress, Progress, Sampler, SamplerError};
 pub use stepping_stone::{
     combine_replicas, stepping_stone, stepping_stone_replica, SteppingStoneParams,
     SteppingStoneReplica, SteppingStoneRun, SteppingStoneRung,

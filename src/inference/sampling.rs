@@ -23,6 +23,32 @@ use rayon::prelude::*;
 
 use super::{DensityError, Posterior};
 
+/// The posterior samplers a study can run. Their names (`"nuts"`, `"tmcmc"`) are the study
+/// file's words and the `sampler` column of the results.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Sampler {
+    /// The No-U-Turn sampler ([`super::nuts`]).
+    Nuts,
+    /// Transitional MCMC ([`super::tmcmc`]), which also estimates the evidence.
+    Tmcmc,
+}
+
+impl Sampler {
+    /// The name in study files and result tables.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampler::Nuts => "nuts",
+            Sampler::Tmcmc => "tmcmc",
+        }
+    }
+}
+
+impl std::fmt::Display for Sampler {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Why a sampler stopped without a result.
 #[derive(Debug, thiserror::Error)]
 pub enum SamplerError {

@@ -19,6 +19,7 @@
 //!   results stay intact.
 
 mod atomic;
+mod columns;
 mod error;
 mod manifest;
 mod report;
@@ -27,6 +28,7 @@ mod table;
 
 pub(crate) use atomic::{check_parent, commit, temp_sibling};
 pub use atomic::{write_atomic, write_atomic_bytes};
+pub use columns::Columns;
 pub use error::OutputError;
 pub use manifest::{
     git_revision, sha256_file, sha256_hex, utc_now_rfc3339, FileEntry, Manifest, StepTiming,

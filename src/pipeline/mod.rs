@@ -71,7 +71,7 @@ fn run_here(
     ex: &mut Executor,
     extra: &(dyn Fn(Event) + Sync),
 ) -> Result<Results, RunError> {
-    use crate::runner::{basins, bayes, declared, levels, stages};
+    use crate::runner::{bayes, declared, levels, stages};
     let t0 = Instant::now();
     let observers = ex.progress();
     let progress = |e: Event| {
@@ -113,7 +113,7 @@ fn run_here(
         if let Some(inf) = lowered.inference(&level.name) {
             r.posteriors = bayes::infer_level(study, inf, lik, level, &laws, &r.global, &progress)?;
             ex.lap(format!("inference {}", level.name))?;
-            basins::run_level(study, inf, lik, engine, level, &laws, &mut r.posteriors)?;
+            bayes::basins_of_level(study, inf, lik, engine, level, &laws, &mut r.posteriors)?;
             if inf.basins.is_some() {
                 ex.lap(format!("basins {}", level.name))?;
             }

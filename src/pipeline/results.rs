@@ -6,8 +6,9 @@
 
 use crate::inference::diagnostics::Summary;
 use crate::output::Table;
-use crate::runner::bayes::{Draws, PosteriorResult};
+use crate::runner::bayes::PosteriorResult;
 use crate::runner::closed_loop::LoopOutcome;
+use crate::runner::posterior::Draws;
 use crate::runner::{GlobalResult, LevelData, LevelResults, ModelSummary, RunError};
 use crate::study::Study;
 use polars::prelude::DataFrame;
@@ -195,7 +196,7 @@ impl Results {
     ) -> Option<(&[String], &Draws)> {
         let p = self.posterior(level, model)?;
         let s = match sampler {
-            Some(name) => p.samplers.iter().find(|s| s.sampler == name)?,
+            Some(name) => p.samplers.iter().find(|s| s.sampler.name() == name)?,
             None => p.figure_sampler()?,
         };
         Some((&p.names, &s.draws))

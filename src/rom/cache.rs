@@ -214,7 +214,7 @@ pub fn load(path: &Path, key: &str) -> Option<(ReducedModel, Certificate)> {
     Some((j.model.to_model()?, j.certificate))
 }
 
-/// The cache key of a ROM with terms ([`crate::rom::terms::build_term_rom`]): the plain ROM's
+/// The cache key of a ROM with terms ([`crate::rom::term_build::build_term_rom`]): the plain ROM's
 /// [`key`] plus every term (name, matrix, coefficient, map, enrichment and certificate values)
 /// and the settings the plain key leaves out (the certificate's reference solver, the
 /// compression).

@@ -21,7 +21,7 @@
 //! anti-resonances as well as at peaks. The samples are a Halton sequence (deterministic,
 //! whatever the thread count). The compressed ROM is then compared with the enriched one on
 //! other samples (the error relative to the largest |H| of each FRF over them) and
-//! re-certified against the full model like the enriched one ([`super::terms::build_term_rom`]);
+//! re-certified against the full model like the enriched one ([`super::term_build::build_term_rom`]);
 //! when either check fails, the enriched ROM is kept.
 
 use super::terms::{TermRom, TermSpec};

@@ -25,12 +25,14 @@ pub mod pencil;
 pub mod reduced;
 pub mod reference;
 pub(crate) mod sparse;
+pub mod term_build;
 pub mod terms;
 
 pub use certify::{build_basis_only, build_rom};
 pub use pencil::{PencilParams, PencilSweep};
 pub use reduced::ReducedModel;
-pub use terms::{build_term_rom, TermCertificate, TermRom, TermSpec, WithTerms};
+pub use term_build::{add_scaled, build_term_rom, model_with_term};
+pub use terms::{TermCertificate, TermRom, TermSpec, WithTerms};
 
 /// Declared range of the adhesive's complex modulus E* = E' + j E'' (Pa).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -104,7 +106,7 @@ pub struct RomParams {
     pub n_cert_lines: usize,
     /// How the certificate's full-model FRFs are computed. Default [`Reference::default`].
     pub reference: Reference,
-    /// ROMs with terms only ([`terms::build_term_rom`]): the second-stage compression of the
+    /// ROMs with terms only ([`term_build::build_term_rom`]): the second-stage compression of the
     /// certified basis ([`compress`]); None keeps the enriched basis. Default
     /// [`compress::CompressParams::default`].
     pub compress: Option<compress::CompressParams>,

@@ -20,20 +20,13 @@
 //! pencil path of [`super::pencil`] stays the engine of the effect-free model).
 //! `sh` (b_i^T S x_j, the RFM fill) is that of the effect-free S.
 
-use super::basis::BasisBuilder;
-use super::certify::{
-    enrich, reduce, reference, validate, validation_lines, validation_moduli, worst_rel_to_peak,
-};
-use super::compress;
 use super::reduced::ReducedModel;
-use super::sparse::ModelPattern;
-use super::{RomError, RomParams};
+use super::RomError;
 use crate::common::C64;
-use crate::fe::model::{SpMat, StructuralModel};
+use crate::fe::model::SpMat;
 use crate::frf::{FrfEngine, FrfError, Sweep, TermCoef};
 use faer::Mat;
 use rayon::prelude::*;
-use std::time::Instant;
 
 /// Column `p` of a dense matrix as a slice (faer stores columns contiguously).
 fn column(a: &Mat<f64>, p: usize) -> &[f64] {
@@ -99,7 +92,7 @@ pub struct TermSpec {
 }
 
 impl TermSpec {
-    fn coef(&self, index: usize, value: f64) -> TermCoef {
+    pub(crate) fn coef(&self, index: usize, value: f64) -> TermCoef {
         TermCoef {
             index,
             value,
@@ -137,10 +130,6 @@ pub struct TermCertificate {
     pub passed: bool,
 }
 
-/// Full-model receptances of one validation case: `[modulus][line][output * n_in + input]`.
-type CaseReference = Vec<Vec<Vec<C64>>>;
-/// Per-case errors of a certificate: (term name, value, error).
-type CaseErrors = Vec<(String, f64, f64)>;
 /// One line of a sweep with terms: (h, dh/dE', sh, dh/dv_k per term).
 type TermLine = (Vec<C64>, Vec<C64>, Vec<C64>, Vec<Vec<C64>>);
 
@@ -188,237 +177,6 @@ pub(crate) fn pinvs(g_r: &[Mat<f64>], maps: &[TermMap]) -> Vec<Option<Mat<f64>>>
             TermMap::Compliance { .. } => psd_pinv(g),
         })
         .collect()
-}
-
-/// `a + c b` for two sparse matrices of the same size (any patterns).
-pub fn add_scaled(a: &SpMat, b: &SpMat, c: f64) -> Result<SpMat, RomError> {
-    let mut t: Vec<faer::sparse::Triplet<usize, usize, f64>> = a
-        .triplet_iter()
-        .map(|t| faer::sparse::Triplet::new(t.row, t.col, *t.val))
-        .collect();
-    t.extend(
-        b.triplet_iter()
-            .map(|t| faer::sparse::Triplet::new(t.row, t.col, c * *t.val)),
-    );
-    SpMat::try_new_from_triplets(a.nrows(), a.ncols(), &t)
-        .map_err(|e| RomError::Model(format!("sum of sparse matrices: {e:?}")))
-}
-
-/// The full model with one term on at value `v` (real part of `c G` into K_b and S, imaginary
-/// part into D_b).
-pub fn model_with_term(
-    model: &StructuralModel,
-    spec: &TermSpec,
-    v: f64,
-) -> Result<StructuralModel, RomError> {
-    if spec.matrix.nrows() != model.n_dof() || spec.matrix.ncols() != model.n_dof() {
-        return Err(RomError::Model(format!(
-            "term {}: G is {} x {}, the model has {} DOFs",
-            spec.name,
-            spec.matrix.nrows(),
-            spec.matrix.ncols(),
-            model.n_dof()
-        )));
-    }
-    let mut out = model.clone();
-    let fv = spec.map.f(v);
-    let p = spec.offset * fv;
-    if p.re != 0.0 {
-        out.k_b = add_scaled(&out.k_b, &spec.matrix, p.re)?;
-    }
-    if p.im != 0.0 {
-        out.d_b = Some(match &out.d_b {
-            Some(d) => add_scaled(d, &spec.matrix, p.im)?,
-            None => add_scaled(&spec.matrix, &spec.matrix, p.im - 1.0)?,
-        });
-    }
-    if spec.per_modulus != 0.0 {
-        out.s = add_scaled(&out.s, &spec.matrix, spec.per_modulus * fv)?;
-    }
-    out.description = format!("{} + term {} at {v}", model.description, spec.name);
-    Ok(out)
-}
-
-/// Build and certify a reduced model of `model` with the extra `terms` (see the module doc),
-/// for the FRFs of all observation points x `inputs`, with the band, range, tolerance,
-/// enrichment schedule and validation grid of `params` (the certificate's reference is always
-/// the sparse LU of the modified full model).
-pub fn build_term_rom(
-    model: &StructuralModel,
-    inputs: &[usize],
-    params: &RomParams,
-    terms: &[TermSpec],
-) -> Result<(TermRom, TermCertificate), RomError> {
-    validate(model, inputs, params)?;
-    if terms.is_empty() {
-        return Err(RomError::Params(
-            "build_term_rom needs at least one term".into(),
-        ));
-    }
-    let moduli = validation_moduli(params);
-    let lines = validation_lines(params);
-    // Modified full models: for the basis and for the certificate.
-    let mut side_models = Vec::new();
-    for t in terms {
-        for &v in &t.enrich_values {
-            side_models.push(model_with_term(model, t, v)?);
-        }
-    }
-    let t0 = Instant::now();
-    let mut cases: Vec<(usize, f64, CaseReference)> = Vec::new();
-    for (k, t) in terms.iter().enumerate() {
-        for &v in &t.cert_values {
-            let m = model_with_term(model, t, v)?;
-            cases.push((k, v, reference(&m, inputs, &moduli, &lines)?));
-        }
-    }
-    let mut seconds_certify = t0.elapsed().as_secs_f64();
-    let mut seconds_basis = 0.0;
-
-    let pat = ModelPattern::new(model)?;
-    let side_pats: Vec<ModelPattern<'_>> = side_models
-        .iter()
-        .map(ModelPattern::new)
-        .collect::<Result<_, _>>()?;
-    let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
-    let mut sides: Vec<BasisBuilder<'_>> = side_pats
-        .iter()
-        .map(|p| BasisBuilder::new(p, params.deflation_tol))
-        .collect::<Result<_, _>>()?;
-    let mut best: Option<(TermRom, f64, CaseErrors)> = None;
-    let mut levels = 0;
-    for level in 0..params.max_levels.max(1) {
-        levels = level + 1;
-        let t = Instant::now();
-        enrich(&mut basis, params, level)?;
-        for side in sides.iter_mut() {
-            let before = side.size();
-            enrich(side, params, level)?;
-            let v = side.v();
-            let new = Mat::from_fn(v.nrows(), side.size() - before, |i, j| v[(i, before + j)]);
-            if new.ncols() > 0 {
-                basis.absorb(new);
-            }
-        }
-        let g_r: Vec<Mat<f64>> = terms.iter().map(|t| basis.project(&t.matrix)).collect();
-        let maps: Vec<TermMap> = terms.iter().map(|t| t.map).collect();
-        let rom = TermRom {
-            rom: reduce(model, &basis, inputs, params),
-            g_pinv: pinvs(&g_r, &maps),
-            g_r,
-            names: terms.iter().map(|t| t.name.clone()).collect(),
-            maps,
-        };
-        seconds_basis += t.elapsed().as_secs_f64();
-        let t = Instant::now();
-        let (worst, per_case) = certify_cases(&rom, terms, &cases, &moduli, &lines)?;
-        seconds_certify += t.elapsed().as_secs_f64();
-        best = Some((rom, worst, per_case));
-        if worst <= params.tolerance {
-            break;
-        }
-    }
-    basis.drop_factors();
-    let (mut rom, mut err, mut per_case) =
-        best.ok_or_else(|| RomError::Params("max_levels must be >= 1".into()))?;
-    let enriched_size = rom.rom.n_r;
-    let mut compression_error = None;
-    let t = Instant::now();
-    // Not with a compliance term: at its rigid limit (springs 1e19 times stiffer than the
-    // structure) the reduced system is a penalty method, and a compressed basis whose vectors
-    // meet the constraint to 1e-8 instead of to rounding is stiffer there by that much squared
-    // times 1e19 (on the 10 mm joint: 2.3e-3 of the peak at c = 0 after compression, 3.5e-8
-    // before).
-    let compliance = terms
-        .iter()
-        .any(|s| matches!(s.map, TermMap::Compliance { .. }));
-    if let (Some(cp), true, false) = (params.compress, err <= params.tolerance, compliance) {
-        // See super::compress: kept only when it agrees with the enriched ROM on samples of
-        // its own and passes the same certificate.
-        let train = compress::samples(params.band_hz, params.range, terms, 0, cp.samples)?;
-        let check = compress::samples(
-            params.band_hz,
-            params.range,
-            terms,
-            cp.samples,
-            cp.check_samples,
-        )?;
-        let u = compress::pod_basis(&rom, &train, cp.sv_tol)?;
-        if u.ncols() < rom.rom.n_r {
-            let small = rom.rotated(&u);
-            let e_check = compress::check_error(&small, &rom, &check)?;
-            compression_error = Some(e_check);
-            if e_check <= params.tolerance {
-                let (worst, cases_small) = certify_cases(&small, terms, &cases, &moduli, &lines)?;
-                if worst <= params.tolerance {
-                    rom = small;
-                    err = worst;
-                    per_case = cases_small;
-                }
-            }
-        }
-    }
-    let seconds_compress = t.elapsed().as_secs_f64();
-    let cert = TermCertificate {
-        max_rel_error: err,
-        per_case,
-        basis_size: rom.rom.n_r,
-        enriched_basis_size: enriched_size,
-        compression_error,
-        levels,
-        n_moduli: moduli.len(),
-        n_lines: lines.len(),
-        seconds_basis,
-        seconds_certify,
-        seconds_compress,
-        passed: err <= params.tolerance,
-    };
-    if !cert.passed && !params.allow_uncertified {
-        return Err(RomError::Uncertified {
-            error: err,
-            tolerance: params.tolerance,
-            basis_size: rom.rom.n_r,
-            levels,
-        });
-    }
-    Ok((rom, cert))
-}
-
-/// The certificate of `rom` over every (term, value) case: the largest error and each case's.
-fn certify_cases(
-    rom: &TermRom,
-    terms: &[TermSpec],
-    cases: &[(usize, f64, CaseReference)],
-    moduli: &[C64],
-    lines: &[f64],
-) -> Result<(f64, CaseErrors), RomError> {
-    let mut worst = 0.0f64;
-    let mut per_case = Vec::new();
-    for (k, v, refh) in cases {
-        let coef = [terms[*k].coef(*k, *v)];
-        let err = case_error(rom, &coef, moduli, lines, refh)?;
-        worst = worst.max(err);
-        per_case.push((terms[*k].name.clone(), *v, err));
-    }
-    Ok((worst, per_case))
-}
-
-/// Largest error relative to the peak of each FRF of one (term, value) case.
-fn case_error(
-    rom: &TermRom,
-    coef: &[TermCoef],
-    moduli: &[C64],
-    lines: &[f64],
-    refh: &[Vec<Vec<C64>>],
-) -> Result<f64, RomError> {
-    let mut worst = 0.0f64;
-    for (m, &e) in moduli.iter().enumerate() {
-        let (sw, _) = rom
-            .sweep_terms_impl(lines, &vec![e; lines.len()], coef, false)
-            .map_err(|x| RomError::Factorization(x.to_string()))?;
-        worst = worst.max(worst_rel_to_peak(&sw.h, &refh[m], rom.inputs().len()));
-    }
-    Ok(worst)
 }
 
 impl TermRom {

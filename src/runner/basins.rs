@@ -17,12 +17,11 @@
 //! Starts run in parallel (rayon); results are collected in start order, so they do not depend
 //! on the thread count.
 
-use super::bayes::PosteriorResult;
 use super::{LevelData, RunError};
 use crate::frf::FrfEngine;
 use crate::inference::basins::{cluster, Basin};
 use crate::inference::likelihood::FrfPosterior;
-use crate::inference::map::{find_map, polish_end_point, MapParams};
+use crate::inference::map::{find_map, polish_end_point, MapParams, MapResult};
 use crate::inference::Posterior;
 use crate::material::ConstitutiveModel;
 use crate::study::comparison::BasinSettings;
@@ -123,7 +122,8 @@ fn at_prior_bound(post: &FrfPosterior<'_>, x: &[f64]) -> Option<String> {
         .map(|(_, n)| n.clone())
 }
 
-/// Run the basin study of `result` (the level's posterior of `law`) with `post` rebuilt in the
+/// Run the basin study around `map` (the MAP of the level's posterior of `law`, found from
+/// `initial_x`; `label` names model and level in errors) with `post` rebuilt in the
 /// state the MAP search saw (measurement bias linearised at the MAP when the study does so).
 #[allow(clippy::too_many_arguments)]
 pub fn run(
@@ -133,13 +133,15 @@ pub fn run(
     square_engine: &dyn FrfEngine,
     level: &LevelData,
     law: &dyn ConstitutiveModel,
-    result: &PosteriorResult,
+    map: &MapResult,
+    initial_x: &[f64],
+    label: &str,
     max_iters: u64,
     seed: u64,
 ) -> Result<BasinStudy, RunError> {
     let d = post.dim();
     let nl = post.n_law();
-    let lap = &result.map.laplace;
+    let lap = &map.laplace;
     let sd: Vec<f64> = (0..d)
         .map(|i| {
             let v = lap.cov_x[i * d + i];
@@ -150,7 +152,7 @@ pub fn run(
             }
         })
         .collect();
-    let map_scaled = scaled(post, &result.map.map_physical, &sd);
+    let map_scaled = scaled(post, &map.map_physical, &sd);
     let dist = |p: &[f64]| -> f64 {
         scaled(post, p, &sd)
             .iter()
@@ -166,11 +168,9 @@ pub fn run(
         seed,
         ..MapParams::default()
     };
-    let map = find_map(post, Some(&result.initial_x), &params, &|| ()).map_err(|e| {
-        RunError::Analysis {
-            analysis: format!("basin study of {} at {}", result.model, result.level),
-            message: e.to_string(),
-        }
+    let map = find_map(post, Some(initial_x), &params, &|| ()).map_err(|e| RunError::Analysis {
+        analysis: format!("basin study of {label}"),
+        message: e.to_string(),
     })?;
     // Polish each end point (in parallel, collected in start order); a failed polish keeps
     // the search's end point.
@@ -236,7 +236,7 @@ pub fn run(
     // 2. The deterministic RFM from the same starts (law parameters only).
     if settings.rfm && nl == d {
         let t0 = Instant::now();
-        let rp = super::compute::rfm_params(study);
+        let rp = super::settings::rfm_params(study);
         let starts_phys: Vec<(&'static str, Vec<f64>)> = methods[0]
             .starts
             .iter()
@@ -326,59 +326,4 @@ pub fn run(
         tolerance_sd: settings.tolerance_sd,
         methods,
     })
-}
-
-/// The basin study of every posterior of a level (hook of the runner after the level's
-/// inference): rebuilds each posterior, linearises its measurement bias at the MAP as the
-/// search did, and runs [`run`].
-pub fn run_level(
-    study: &Study,
-    inf: &crate::study::inference::Inference,
-    lik_engine: &dyn FrfEngine,
-    square_engine: &dyn FrfEngine,
-    level: &LevelData,
-    laws: &[Box<dyn ConstitutiveModel>],
-    posts: &mut [PosteriorResult],
-) -> Result<(), RunError> {
-    let Some(settings) = &inf.basins else {
-        return Ok(());
-    };
-    for (mi, p) in posts.iter_mut().enumerate() {
-        let Some((_, law)) = study
-            .models
-            .iter()
-            .zip(laws)
-            .find(|(m, _)| m.name.eq_ignore_ascii_case(&p.model))
-        else {
-            continue;
-        };
-        let mut post =
-            super::bayes::build_posterior(study, inf, lik_engine, level, law.as_ref(), &p.model)?;
-        let nl = law.n_params();
-        if inf.linearised_measurement && post.likelihood.forward.obs.measurement.is_some() {
-            post.likelihood
-                .forward
-                .linearise_measurement(&p.map.map_physical[..nl])
-                .map_err(|e| RunError::Analysis {
-                    analysis: format!("basin study of {} at {}", p.model, p.level),
-                    message: e.to_string(),
-                })?;
-        }
-        let seed = study.seed
-            ^ 0xBA51_0000_0000
-            ^ ((mi as u64 + 1) << 40)
-            ^ super::bayes::level_hash(&level.name);
-        p.basins = Some(run(
-            study,
-            settings,
-            &post,
-            square_engine,
-            level,
-            law.as_ref(),
-            p,
-            inf.map_max_iterations,
-            seed,
-        )?);
-    }
-    Ok(())
 }

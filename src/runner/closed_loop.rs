@@ -7,7 +7,7 @@
 //! parquet tables `residuals`, `candidates`, `closed_loop` and a markdown summary
 //! `closed_loop.md` into `<output_dir>.diagnose/`.
 
-use super::{bayes, RunError};
+use super::{posterior, RunError};
 use crate::closed_loop::{
     default_candidates, run_closed_loop_with_laws, ClosedLoopParams, ClosedLoopResult, Residuals,
 };
@@ -298,8 +298,8 @@ pub(crate) fn loop_stage(
     let mut summary = Vec::new();
     let mut results = Vec::new();
     for level in levels.iter().filter(|l| inf.levels.contains(&l.name)) {
-        let mut post = bayes::build_posterior(study, inf, engine, level, law.as_ref(), &name)?;
-        let x0 = bayes::initial_x(&post, &spec.initial);
+        let mut post = posterior::build_posterior(study, inf, engine, level, law.as_ref(), &name)?;
+        let x0 = posterior::initial_x(&post, &spec.initial);
         let col = &level.column;
         let mass_points: Vec<(usize, u32)> = col
             .outputs

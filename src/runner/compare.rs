@@ -22,7 +22,7 @@
 //! (it does beyond about 5). For log-uniform priors the ratio is constant inside the support
 //! and the shift is exactly `-d ln 10` for `d` parameters.
 
-use super::bayes::SamplerResult;
+use super::posterior::SamplerResult;
 use super::sample::checkpoint_dir;
 use super::{Event, LevelData, RunError};
 use crate::common::C64;
@@ -31,6 +31,7 @@ use crate::inference::likelihood::FrfPosterior;
 use crate::inference::loo::{self, Loo, Waic};
 use crate::inference::prior::Prior;
 use crate::inference::special::chi2_sf;
+use crate::inference::Sampler;
 use crate::inference::{
     combine_replicas, reference_stepping_stone_replica, stepping_stone_replica, Posterior,
     Progress, SteppingStoneParams, SteppingStoneReplica,
@@ -428,7 +429,7 @@ pub fn compare(
     for s in samplers {
         if let Some((lz, se)) = s.log_evidence {
             c.evidence.push(EvidenceRow {
-                estimator: s.sampler.clone(),
+                estimator: s.sampler.to_string(),
                 prior: "declared".into(),
                 log_evidence: lz,
                 se,
@@ -465,12 +466,12 @@ pub fn compare(
     // The posterior draws of the criteria: NUTS's when it ran, else TMCMC's.
     let Some(s) = samplers
         .iter()
-        .find(|s| s.sampler == "nuts")
+        .find(|s| s.sampler == Sampler::Nuts)
         .or(samplers.iter().find(|s| !s.draws.lp.is_empty()))
     else {
         return Ok(c);
     };
-    c.draws_from = s.sampler.clone();
+    c.draws_from = s.sampler.to_string();
     // Widened priors by importance reweighting of the draws.
     let (shift, shift_se) = widening_shift(&post.priors, &s.draws.values, nl);
     c.inside_sd = inside_sd(&post.priors, &s.draws.values, nl);

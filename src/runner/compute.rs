@@ -2,13 +2,14 @@
 //! global RFM per model, correlation and sensitivity.
 
 use super::leakage::{fixed_point, Leakage};
+use super::settings::rfm_params;
 use super::{Event, LevelData, RunError};
 use crate::common::{C64, J};
 use crate::frf::FrfEngine;
 use crate::iem::{AnalyticalMode, ExperimentalMode, IemParams, IemResult};
 use crate::material::ConstitutiveModel;
 use crate::modal::circle_fit::{circle_fit, CircleFitParams, CircleFitResult};
-use crate::rfm::{BandResult, MeasuredColumn, PerLineEstimate, RfmParams, RfmResult};
+use crate::rfm::{BandResult, MeasuredColumn, PerLineEstimate, RfmResult};
 use crate::study::build::BuiltModel;
 use crate::study::Study;
 
@@ -104,16 +105,6 @@ fn analysis(name: impl Into<String>, e: impl std::fmt::Display) -> RunError {
     }
 }
 
-/// The RFM settings of a study.
-pub fn rfm_params(study: &Study) -> RfmParams {
-    RfmParams {
-        tol_rel_change: study.solver.tolerance,
-        max_iterations: study.solver.max_iterations,
-        rcond: study.solver.svd_rtol,
-        ..RfmParams::default()
-    }
-}
-
 /// Analytical accelerance -w^2 H_ij on the column's lines and outputs at `moduli` (one per
 /// line), `[line][k]` flattened; with `derivs`, also -w^2 dH_ij/dE'.
 pub fn analytical_column(
@@ -187,7 +178,7 @@ pub fn analyse_level(
         .map(|m| C64::new(m.initial[0], m.initial[1]))
         .unwrap_or(DEFAULT_E0);
 
-    let leak = super::bayes::measurement_model(study, level)?.map(|measurement| Leakage {
+    let leak = super::posterior::measurement_model(study, level)?.map(|measurement| Leakage {
         engine,
         measurement,
     });

@@ -3,10 +3,11 @@
 //! posterior draws in the samplers' unconstrained coordinates (NUTS's when it ran, else
 //! TMCMC's), or to the Laplace mode and covariance when there are no draws.
 
-use super::bayes::SamplerResult;
+use super::posterior::SamplerResult;
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::MapResult;
 use crate::inference::Reference;
+use crate::inference::Sampler;
 
 /// The reference and what it was fitted to ("NUTS draws", "TMCMC draws", "Laplace
 /// approximation"), or why none could be fitted.
@@ -19,7 +20,7 @@ pub fn reference_for(
 ) -> Result<(Reference, String), String> {
     let drawn = samplers
         .iter()
-        .find(|s| s.sampler == "nuts" && !s.draws.lp.is_empty())
+        .find(|s| s.sampler == Sampler::Nuts && !s.draws.lp.is_empty())
         .or(samplers.iter().find(|s| !s.draws.lp.is_empty()));
     if let Some(s) = drawn {
         let v = &s.draws.values;
@@ -29,7 +30,10 @@ pub fn reference_for(
             .filter(|x| x.iter().all(|v| v.is_finite()))
             .collect();
         if let Ok(q) = Reference::from_draws(&x, widen, nu) {
-            return Ok((q, format!("{} {} draws", s.sampler.to_uppercase(), x.len())));
+            return Ok((
+                q,
+                format!("{} {} draws", s.sampler.name().to_uppercase(), x.len()),
+            ));
         }
     }
     let lap = &map.laplace;
@@ -73,7 +77,7 @@ pub fn tmcmc_reweighted(
 ) -> Option<Result<Reweighted, String>> {
     let s = samplers
         .iter()
-        .find(|s| s.sampler == "tmcmc" && !s.draws.lp.is_empty())?;
+        .find(|s| s.sampler == Sampler::Tmcmc && !s.draws.lp.is_empty())?;
     let t0 = std::time::Instant::now();
     let v = &s.draws.values;
     let n = v.first().map_or(0, |c| c.len());

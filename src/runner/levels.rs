@@ -13,13 +13,15 @@
 //!    (`log Z_low + log Z_high`). Laplace always (TMCMC when asked). `log B = log Z_separate -
 //!    log Z_shared > 0` favours a level-dependent (amplitude-dependent) law.
 
-use crate::common::quantile_sorted;
-use super::bayes::{build_posterior, PosteriorResult};
+use super::bayes::PosteriorResult;
+use super::posterior::build_posterior;
 use super::{LevelData, LevelResults, RunError};
+use crate::common::quantile_sorted;
 use crate::frf::FrfEngine;
 use crate::inference::joint::JointPosterior;
 use crate::inference::map::{find_map, MapParams, MapResult};
 use crate::inference::Posterior;
+use crate::inference::Sampler;
 use crate::material::ConstitutiveModel;
 use crate::study::inference::Inference;
 use crate::study::Study;
@@ -467,7 +469,7 @@ fn shared_evidence(
         let sep = |p: &PosteriorResult| {
             p.samplers
                 .iter()
-                .find(|s| s.sampler == "tmcmc")
+                .find(|s| s.sampler == Sampler::Tmcmc)
                 .and_then(|s| s.log_evidence)
         };
         if let (Some((za, sa)), Some((zb, sb)), Some(particles)) =

@@ -26,10 +26,12 @@ mod evidence_ref;
 mod leakage;
 pub mod levels;
 pub mod material;
+pub mod posterior;
 pub mod preflight;
 pub mod prepared;
 pub mod redundancy;
 mod sample;
+mod settings;
 pub mod simulate;
 pub mod terms;
 pub mod write;
@@ -159,7 +161,7 @@ pub struct LevelData {
     pub n_averages: Option<u32>,
     /// The H1 estimator's model on these lines with its grid chosen by convergence
     /// ([`crate::forward::Observation::converged_measurement`]), set with the engine; `None`
-    /// before, or without an estimator (then [`bayes::measurement_model`] uses the default
+    /// before, or without an estimator (then [`posterior::measurement_model`] uses the default
     /// grid).
     pub measurement: Option<(crate::forward::MeasurementModel, crate::forward::GridChoice)>,
 }
@@ -617,7 +619,7 @@ pub(crate) fn build_engine(
                     .map_err(|e| RunError::Engine(e.to_string()))?;
                     let chosen = obs
                         .converged_measurement(
-                            bayes::estimator_spec(est, &level.freq_hz),
+                            posterior::estimator_spec(est, &level.freq_hz),
                             &modulus,
                             crate::forward::GRID_TOLERANCE,
                         )
@@ -660,7 +662,7 @@ pub(crate) fn build_engine(
                     let mut lp: Vec<crate::rom::PencilSweep> = Vec::new();
                     for level in levels {
                         let mut grids = vec![level.column.omega_rad_s.clone()];
-                        if let Some(m) = bayes::measurement_model(study, level)? {
+                        if let Some(m) = posterior::measurement_model(study, level)? {
                             grids.push(m.fine_omega());
                         }
                         for g in grids {
@@ -857,7 +859,8 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
 
 /// The stages of a run, for [`crate::pipeline`].
 pub(crate) mod stages {
-    pub(crate) use super::compute::{analyse_level, rfm_params};
+    pub(crate) use super::compute::analyse_level;
+    pub(crate) use super::settings::rfm_params;
     pub(crate) use super::{build, build_engine, check_initial_values, load_levels, model_laws};
 }
 

@@ -103,7 +103,7 @@ impl Prepared {
             ));
         };
         let engine = self.lik_engine.as_deref().unwrap_or(self.engine.as_ref());
-        let mut post = super::bayes::build_posterior(
+        let mut post = super::posterior::build_posterior(
             study,
             inf,
             engine,

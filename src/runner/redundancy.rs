@@ -3,12 +3,13 @@
 //! identifiability (posterior sd over prior sd in unconstrained coordinates). The numerics are
 //! in [`crate::inference::identifiability`].
 
-use super::bayes::SamplerResult;
+use super::posterior::SamplerResult;
 use crate::inference::identifiability::{
     combination_text, correlation_matrix, prior_sd_x, sd, sensitivity_svd, SensitivitySvd,
 };
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::MapResult;
+use crate::inference::Sampler;
 
 /// Redundancy of one model at one level.
 #[derive(Clone, Debug)]
@@ -75,7 +76,7 @@ pub fn analyse(
         .unwrap_or_default();
     let s = samplers
         .iter()
-        .find(|s| s.sampler == "nuts")
+        .find(|s| s.sampler == Sampler::Nuts)
         .or(samplers.first())
         .ok_or("no posterior draws")?;
     let xcols: Vec<Vec<f64>> = s
@@ -91,7 +92,7 @@ pub fn analyse(
         svd,
         names: post.names.clone(),
         correlation: correlation_matrix(&xcols),
-        sampler: s.sampler.clone(),
+        sampler: s.sampler.to_string(),
         posterior_sd_x: xcols.iter().map(|c| sd(c)).collect(),
         prior_sd_x: post.priors.iter().map(prior_sd_x).collect(),
     })

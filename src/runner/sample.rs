@@ -2,11 +2,12 @@
 //! approximation) and TMCMC (from the prior), with checkpoints per level, model and sampler so
 //! that an interrupted run resumes where it stopped and ends with the same draws.
 
-use super::bayes::{Draws, SamplerResult};
+use super::posterior::{Draws, SamplerResult};
 use super::{Event, LevelData, RunError};
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::{cholesky, MapResult};
 use crate::inference::whiten::Whitened;
+use crate::inference::Sampler;
 use crate::inference::{
     sample_nuts, sample_tmcmc, unit_rng, NutsParams, Posterior, Progress, TmcmcParams,
 };
@@ -139,7 +140,7 @@ pub fn run_samplers(
                 .collect(),
             None => dispersed_starts(map, n.chains, seed),
         };
-        let dir = checkpoint_dir(study, level, model, "nuts");
+        let dir = checkpoint_dir(study, level, model, Sampler::Nuts.name());
         let t0 = Instant::now();
         let run = sample_nuts(target, &starts, &params, Some(&dir), &|p| match p {
             Progress::NutsDraws { .. } => progress(Event::Advance),
@@ -185,7 +186,7 @@ pub fn run_samplers(
         let divergent = run.n_divergent();
         let tune_div: u64 = run.chains.iter().map(|c| c.tune_divergences).sum();
         out.push(SamplerResult {
-            sampler: "nuts".into(),
+            sampler: Sampler::Nuts,
             draws,
             log_evidence: None,
             evaluations,
@@ -208,7 +209,7 @@ pub fn run_samplers(
             step: format!("{}: TMCMC on {model} ({particles} particles)", level.name),
             total: 0,
         });
-        let dir = checkpoint_dir(study, level, model, "tmcmc");
+        let dir = checkpoint_dir(study, level, model, Sampler::Tmcmc.name());
         let t0 = Instant::now();
         let run = sample_tmcmc(post, &params, Some(&dir), &|p| {
             if let Progress::TmcmcStage { .. } = p {
@@ -245,7 +246,7 @@ pub fn run_samplers(
             })
             .collect();
         out.push(SamplerResult {
-            sampler: "tmcmc".into(),
+            sampler: Sampler::Tmcmc,
             draws,
             log_evidence: Some((run.log_evidence, run.log_evidence_se)),
             evaluations: run.n_loglik() as usize,

@@ -23,7 +23,8 @@ use super::{RunError, Study};
 use crate::common::C64;
 use crate::forward::Effect;
 use crate::frf::FrfEngine;
-use crate::rom::terms::{build_term_rom, TermCertificate, TermMap, TermRom, TermSpec};
+use crate::rom::term_build::build_term_rom;
+use crate::rom::terms::{TermCertificate, TermMap, TermRom, TermSpec};
 use crate::study::build::BuiltModel;
 
 /// Loss fractions whose full-model Krylov vectors enrich the basis, and those the certificate
@@ -49,8 +50,8 @@ pub fn base_springs_term(
         .combined(normal_over_tangential)
         .map_err(|e| e.to_string())?;
     let mut m = b.free.clone();
-    m.k_b =
-        crate::rom::terms::add_scaled(&m.k_b, &g, 1.0 / BASE_V_REF).map_err(|e| e.to_string())?;
+    m.k_b = crate::rom::term_build::add_scaled(&m.k_b, &g, 1.0 / BASE_V_REF)
+        .map_err(|e| e.to_string())?;
     m.description = format!(
         "{} on base springs of compliance {BASE_V_REF:e} m^3/N",
         m.description

@@ -17,7 +17,7 @@
 use super::compute::{frf_of, LevelResults};
 use super::{LevelData, RunError};
 use crate::common::C64;
-use crate::output::{Report, Table};
+use crate::output::{Columns as Cols, Report, Table};
 use crate::plot::{Curve, CurveStyle, FrfCurve};
 use crate::study::Study;
 use std::path::Path;
@@ -69,50 +69,6 @@ struct Tables {
     svd: Table,
     modal: Table,
     sensitivity: Table,
-}
-
-/// Column builders (push rows, then turn into a Table).
-#[derive(Default)]
-pub(super) struct Cols {
-    str_cols: Vec<(String, Vec<String>)>,
-    f64_cols: Vec<(String, String, Vec<f64>)>,
-    i64_cols: Vec<(String, Vec<i64>)>,
-}
-
-impl Cols {
-    pub(super) fn s(&mut self, name: &str, v: String) {
-        match self.str_cols.iter_mut().find(|c| c.0 == name) {
-            Some(c) => c.1.push(v),
-            None => self.str_cols.push((name.to_string(), vec![v])),
-        }
-    }
-    pub(super) fn f(&mut self, name: &str, unit: &str, v: f64) {
-        match self.f64_cols.iter_mut().find(|c| c.0 == name) {
-            Some(c) => c.2.push(v),
-            None => self
-                .f64_cols
-                .push((name.to_string(), unit.to_string(), vec![v])),
-        }
-    }
-    pub(super) fn i(&mut self, name: &str, v: i64) {
-        match self.i64_cols.iter_mut().find(|c| c.0 == name) {
-            Some(c) => c.1.push(v),
-            None => self.i64_cols.push((name.to_string(), vec![v])),
-        }
-    }
-    pub(super) fn table(self, name: &str) -> Result<Table, RunError> {
-        let mut t = Table::new(name);
-        for (n, v) in self.str_cols {
-            t.push_str(n, v)?;
-        }
-        for (n, v) in self.i64_cols {
-            t.push_i64(n, "", v)?;
-        }
-        for (n, u, v) in self.f64_cols {
-            t.push_f64(n, u, v)?;
-        }
-        Ok(t)
-    }
 }
 
 fn build_tables(levels: &[LevelData], results: &[LevelResults]) -> Result<Tables, RunError> {

@@ -11,10 +11,10 @@
 //! The draws table is what `scripts/to_arviz.py` turns into an ArviZ InferenceData.
 
 use super::bayes::PosteriorResult;
-use super::write::Cols;
 use super::{LevelData, RunError};
 use crate::inference::diagnostics::{summarize_with_hdi, Summary, DEFAULT_HDI_PROB};
-use crate::output::{Report, Table};
+use crate::inference::Sampler;
+use crate::output::{Columns as Cols, Report, Table};
 
 /// The diagnostics of one sampler's draws (one Summary per parameter).
 pub fn summaries(p: &PosteriorResult) -> Vec<(String, Vec<Summary>)> {
@@ -23,7 +23,7 @@ pub fn summaries(p: &PosteriorResult) -> Vec<(String, Vec<Summary>)> {
         .map(|s| {
             let by = s.draws.by_chain();
             (
-                s.sampler.clone(),
+                s.sampler.to_string(),
                 summarize_with_hdi(&by, DEFAULT_HDI_PROB).unwrap_or_default(),
             )
         })
@@ -78,7 +78,7 @@ pub fn tables(levels: &[LevelData], posts: &[&PosteriorResult]) -> Result<Vec<Ta
             for r in 0..d.chain.len() {
                 dr.s("level", p.level.clone());
                 dr.s("model", p.model.clone());
-                dr.s("sampler", s.sampler.clone());
+                dr.s("sampler", s.sampler.to_string());
                 dr.i("chain", d.chain[r] as i64);
                 dr.i("draw", d.draw[r] as i64);
                 for n in &all_names {
@@ -105,7 +105,7 @@ pub fn tables(levels: &[LevelData], posts: &[&PosteriorResult]) -> Result<Vec<Ta
             for (k, sm) in summ.iter().enumerate() {
                 su.s("level", p.level.clone());
                 su.s("model", p.model.clone());
-                su.s("sampler", s.sampler.clone());
+                su.s("sampler", s.sampler.to_string());
                 su.s("parameter", p.names[k].clone());
                 su.s("unit", p.units[k].clone());
                 // The unit varies by row (the parameter's, in `unit`).
@@ -139,7 +139,7 @@ pub fn tables(levels: &[LevelData], posts: &[&PosteriorResult]) -> Result<Vec<Ta
                 .fold(f64::INFINITY, f64::min);
             runs.s("level", p.level.clone());
             runs.s("model", p.model.clone());
-            runs.s("sampler", s.sampler.clone());
+            runs.s("sampler", s.sampler.to_string());
             runs.f("seconds", "s", s.seconds);
             runs.i("evaluations", s.evaluations as i64);
             runs.f("ess_min", "1", ess_min);
@@ -327,7 +327,7 @@ pub fn report(
                     format!(" {u}")
                 };
                 let mut row = vec![
-                    s.sampler.clone(),
+                    s.sampler.to_string(),
                     format!(
                         "{}{}",
                         p.names[k],
@@ -351,7 +351,7 @@ pub fn report(
                 }
                 rows.push(row);
                 let _ = unit;
-                if s.sampler == "nuts" {
+                if s.sampler == Sampler::Nuts {
                     if sm.r_hat > 1.01 {
                         warnings.push(format!("R-hat of {} is {:.3} > 1.01", p.names[k], sm.r_hat));
                     }

@@ -13,9 +13,8 @@
 //! ran for every model, else TMCMC, else Laplace.
 
 use super::bayes::PosteriorResult;
-use super::write::Cols;
 use super::RunError;
-use crate::output::{Report, Table};
+use crate::output::{Columns as Cols, Report, Table};
 
 /// Estimators in order of preference for the Bayes factors.
 const PREFERENCE: [&str; 4] = ["stepping_stone", "tmcmc_is", "tmcmc", "laplace"];

@@ -10,9 +10,8 @@
 
 use super::bayes::PosteriorResult;
 use super::levels::LevelComparison;
-use super::write::Cols;
 use super::{LevelResults, RunError};
-use crate::output::{Report, Table};
+use crate::output::{Columns as Cols, Report, Table};
 
 fn union_names<'a>(names: impl Iterator<Item = &'a [String]>) -> Vec<String> {
     let mut all: Vec<String> = Vec::new();

@@ -13,7 +13,7 @@
 //! tolerance_sd = 0.1               # end points closer than this many Laplace sd (every coordinate) share a basin
 //! ```
 
-use super::validate::Ctx;
+use super::ctx::Ctx;
 use super::StudyError;
 use serde::Deserialize;
 

@@ -25,7 +25,7 @@
 //! top = 3                 # candidates refitted per round
 //! ```
 
-use super::validate::Ctx;
+use super::ctx::Ctx;
 use super::StudyError;
 use crate::inference::prior::Prior;
 use serde::Deserialize;

@@ -2,8 +2,9 @@
 //! constitutive law per level, sensor masses, shaker, channel gains and delays) and the
 //! measurement chain, validated into an [`Experiment`]. Unknown keys are rejected.
 
+use super::ctx::Ctx;
 use super::raw::RawStructure;
-use super::validate::{structure, toml_error, Ctx};
+use super::validate::{structure, toml_error};
 use super::{resolve, Structure, StudyError};
 use crate::common::C64;
 use serde::Deserialize;

@@ -45,7 +45,7 @@
 //! nu = 5.0                     # reference degrees of freedom ("inf" not allowed: use 1e9 for a Gaussian)
 //! ```
 
-use super::validate::Ctx;
+use super::ctx::Ctx;
 use super::{ModelSpec, StudyError};
 use crate::inference::likelihood::{ErrorLaw, NoiseModel, Scale, DEFAULT_COHERENCE_FLOOR};
 use crate::inference::prior::Prior;

@@ -22,51 +22,13 @@
 //! Points lie on either strip's surface: the lower strip is x in [0, L], y in [0, t1]; the
 //! upper x in [L - overlap, 2 L - overlap], y in [t1 + t_a, t1 + t_a + t2]; z in [0, w].
 
-use super::raw::{RawDamping, RawMaterial};
-use super::validate::Ctx;
+use super::ctx::Ctx;
+use super::raw::{RawLap, RawLapMesh};
 use super::StudyError;
 use crate::fe::element::Integration;
 use crate::fe::joint::{AdherendDamping, IsoMaterial};
 use crate::fe::lap::{LapGeometry, LapMeshParams, LapSpec, LapSupport};
 use crate::fe::points::PointMapping;
-use serde::Deserialize;
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RawLap {
-    pub length: f64,
-    pub thickness: f64,
-    pub thickness_upper: Option<f64>,
-    pub width: f64,
-    pub overlap: f64,
-    pub support: Option<String>,
-    pub material: RawMaterial,
-    pub adhesive: RawLapAdhesive,
-    pub damping: Option<RawDamping>,
-    pub mesh: Option<RawLapMesh>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RawLapAdhesive {
-    pub thickness: f64,
-    pub nu: f64,
-    pub rho: f64,
-}
-
-#[derive(Debug, Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub struct RawLapMesh {
-    pub element_size: Option<f64>,
-    pub y_adhesive: Option<usize>,
-    pub y_strip: Option<usize>,
-    pub z: Option<usize>,
-    pub end_aspect: Option<f64>,
-    pub max_aspect: Option<f64>,
-    pub grading_ratio: Option<f64>,
-    pub integration: Option<String>,
-    pub point_mapping: Option<String>,
-}
 
 /// Validate `[structure.lap]` into a [`LapSpec`] without points (the study's points are
 /// added when the model is built).

@@ -245,6 +245,7 @@ pub struct Study {
     pub closed_loop: Option<effects::ClosedLoopSettings>,
 }
 
+mod ctx;
 mod validate;
 
 pub use validate::{load, parse_str};

@@ -41,7 +41,7 @@ pub struct RawStructure {
     /// The meshed joint's kind: "beam_on_block" (default) or "single_lap" (with [structure.lap]).
     pub joint: Option<String>,
     /// The single-lap joint (joint = "single_lap").
-    pub lap: Option<super::lap::RawLap>,
+    pub lap: Option<RawLap>,
     pub beam: Option<RawBeam>,
     pub adhesive: Option<RawAdhesive>,
     pub mesh: Option<RawMesh>,
@@ -225,4 +225,42 @@ pub struct RawAnalyses {
 pub struct RawBand {
     pub center_hz: f64,
     pub width_hz: Option<f64>,
+}
+
+/// `[structure.lap]` (validated by [`super::lap`]).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawLap {
+    pub length: f64,
+    pub thickness: f64,
+    pub thickness_upper: Option<f64>,
+    pub width: f64,
+    pub overlap: f64,
+    pub support: Option<String>,
+    pub material: RawMaterial,
+    pub adhesive: RawLapAdhesive,
+    pub damping: Option<RawDamping>,
+    pub mesh: Option<RawLapMesh>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawLapAdhesive {
+    pub thickness: f64,
+    pub nu: f64,
+    pub rho: f64,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct RawLapMesh {
+    pub element_size: Option<f64>,
+    pub y_adhesive: Option<usize>,
+    pub y_strip: Option<usize>,
+    pub z: Option<usize>,
+    pub end_aspect: Option<f64>,
+    pub max_aspect: Option<f64>,
+    pub grading_ratio: Option<f64>,
+    pub integration: Option<String>,
+    pub point_mapping: Option<String>,
 }

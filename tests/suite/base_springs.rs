@@ -123,9 +123,13 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
     let inputs = [built.excitation];
     let (model, term) = rfmlab::runner::terms::base_springs_term(&spec, 3.5).unwrap();
     let params = crate::rom_terms::params();
-    let (rom, cert) =
-        rfmlab::rom::terms::build_term_rom(&model, &inputs, &params, std::slice::from_ref(&term))
-            .unwrap();
+    let (rom, cert) = rfmlab::rom::term_build::build_term_rom(
+        &model,
+        &inputs,
+        &params,
+        std::slice::from_ref(&term),
+    )
+    .unwrap();
     eprintln!(
         "base term ROM: n_r {} (enriched {}, compression error {:?}), certificate {:.3e} {:?}, basis {:.1} s, certify {:.1} s",
         cert.basis_size,
@@ -213,7 +217,7 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
 #[test]
 fn forward_model_column_of_the_base_springs_matches_differences() {
     use rfmlab::forward::{Effect, EffectTerm, Effects, ForwardModel};
-    use rfmlab::rom::terms::{build_term_rom, WithTerms};
+    use rfmlab::rom::{build_term_rom, WithTerms};
     use std::f64::consts::TAU;
     let spec = crate::runner_common::joint_spec();
     let built = crate::runner_common::built_structure();

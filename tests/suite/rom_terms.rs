@@ -14,7 +14,8 @@
 use rfmlab::common::C64;
 use rfmlab::fe::region::adhesive_region_stiffness;
 use rfmlab::frf::{FrfEngine, FullModel, FullParams, TermCoef};
-use rfmlab::rom::terms::{build_term_rom, model_with_term, TermSpec, WithTerms};
+use rfmlab::rom::term_build::{build_term_rom, model_with_term};
+use rfmlab::rom::terms::{TermSpec, WithTerms};
 use rfmlab::rom::{build_rom, RomParams};
 use std::f64::consts::TAU;
 
