@@ -153,7 +153,8 @@ pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
         }
         if !pf.discretisation.is_empty() {
             eprintln!(
-                "  mesh discretisation error (Richardson, mesh refined twice per direction):"
+                "  mesh discretisation error (Richardson, mesh refined twice per direction, order {}):",
+                pf.discretisation[0].order
             );
             for d in &pf.discretisation {
                 eprintln!(

@@ -829,7 +829,7 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
         for d in &pf.discretisation {
             if d.rel_error.abs() > preflight::MESH_ERROR_WARN_REL {
                 pf.warnings.push(format!(
-                    "structure.mesh: mode {} ({:.3} Hz) has an estimated discretisation error of {:+.3} Hz ({:+.2} %), more than the {:.2} % such data resolve: refine the mesh (a smaller element_size, or more divisions)",
+                    "structure.mesh: mode {} ({:.3} Hz) has an estimated discretisation error of {:+.3} Hz ({:+.2} %), more than the {:.2} % such data resolve, and the posterior's intervals do not include it: refine the mesh (a smaller element_size, or more divisions)",
                     d.mode,
                     d.freq_hz,
                     d.error_hz,

@@ -40,6 +40,7 @@ mod fixed_effects;
 mod foreign_models;
 mod frf_full;
 mod iem;
+mod independent_td_joint;
 mod inference_diagnostics;
 mod inference_grid;
 mod inference_likelihood;
