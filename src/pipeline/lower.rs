@@ -48,6 +48,7 @@ impl Plan {
         s.analyses.per_line = id.per_line;
         s.analyses.correlation = id.correlation;
         s.analyses.sensitivity = id.sensitivity;
+        s.analyses.mesh_error = id.mesh_error;
         s.analyses.band_constant = id.band_constant.clone();
         s.analyses.iem = id.iem.clone();
         s.analyses.figures = self.figures;

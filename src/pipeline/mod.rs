@@ -90,6 +90,19 @@ fn run_here(
     let mut data = stages::load_levels(study, &built)?;
     stages::check_initial_values(study, &built, &data, &laws)?;
     ex.lap("load and check data")?;
+    let mesh_error = if study.analyses.mesh_error {
+        progress(Event::Start {
+            step: "estimating the mesh's discretisation error".into(),
+            total: 0,
+        });
+        let d =
+            crate::runner::preflight::mesh_error_at_initial_values(study, &built, &data, &laws)?;
+        progress(Event::Finish);
+        ex.lap("mesh error")?;
+        d
+    } else {
+        Vec::new()
+    };
     progress(Event::Start {
         step: "building the FRF engine".into(),
         total: 0,
@@ -158,6 +171,7 @@ fn run_here(
         plan.figures,
         plan.output_dir.clone(),
         closed_loop,
+        mesh_error,
     )
 }
 

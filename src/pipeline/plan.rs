@@ -45,6 +45,8 @@ pub struct IdentificationParams {
     pub per_line: bool,
     pub correlation: bool,
     pub sensitivity: bool,
+    /// The mesh's discretisation error per mode (Richardson; meshed joints only).
+    pub mesh_error: bool,
     pub band_constant: Vec<Band>,
     pub iem: Vec<Band>,
 }
@@ -157,6 +159,7 @@ impl Plan {
                 per_line: s.analyses.per_line,
                 correlation: s.analyses.correlation,
                 sensitivity: s.analyses.sensitivity,
+                mesh_error: s.analyses.mesh_error,
                 band_constant: s.analyses.band_constant.clone(),
                 iem: s.analyses.iem.clone(),
             },

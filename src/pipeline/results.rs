@@ -47,6 +47,7 @@ pub struct Results {
     pub(crate) figures: bool,
     pub(crate) output_dir: std::path::PathBuf,
     pub(crate) closed_loop: Option<LoopOutcome>,
+    pub(crate) mesh_error: Vec<crate::runner::preflight::ModeDiscretisation>,
     /// (name = path of the parquet file without `.parquet`, table, its DataFrame).
     tables: Vec<(String, Table, DataFrame)>,
 }
@@ -64,6 +65,7 @@ impl Results {
         figures: bool,
         output_dir: std::path::PathBuf,
         closed_loop: Option<LoopOutcome>,
+        mesh_error: Vec<crate::runner::preflight::ModeDiscretisation>,
     ) -> Result<Results, RunError> {
         let mut tables = Vec::new();
         for t in crate::runner::write::tables(&levels, &level_results)? {
@@ -87,8 +89,15 @@ impl Results {
             figures,
             output_dir,
             closed_loop,
+            mesh_error,
             tables,
         })
+    }
+
+    /// The mesh's estimated discretisation error per low mode (`[analyses] mesh_error`;
+    /// empty when not asked for or not a meshed joint).
+    pub fn mesh_error(&self) -> &[crate::runner::preflight::ModeDiscretisation] {
+        &self.mesh_error
     }
 
     /// The study that ran (with the plan's parameters written in).

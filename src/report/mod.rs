@@ -9,6 +9,7 @@
 
 use crate::output::{Manifest, ResultsDir};
 use crate::pipeline::results::{Results, LOOP_DIR};
+use crate::runner::preflight::ModeDiscretisation;
 use crate::runner::{closed_loop, write, write_bayes, write_compare, write_levels};
 use crate::runner::{Event, RunError};
 use std::path::{Path, PathBuf};
@@ -85,6 +86,7 @@ fn fill(
     };
     let engine_note = results.engine_note();
     let mut report = write::build_report(study, levels, level_results, &figs, engine_note);
+    mesh_error_section(&mut report, results.mesh_error());
     write_bayes::report(&mut report, levels, &posts, &figs);
     write_compare::report(&mut report, &posts);
     write_levels::report(&mut report, level_results, &figs);
@@ -115,4 +117,42 @@ fn fill(
     let mut files = out.written().to_vec();
     files.push("manifest.json".into());
     Ok(files)
+}
+
+/// The mesh's discretisation error per low mode (`[analyses] mesh_error`), with the warnings
+/// `rfmlab check` gives.
+fn mesh_error_section(report: &mut crate::output::Report, modes: &[ModeDiscretisation]) {
+    let Some(first) = modes.first() else {
+        return;
+    };
+    report.heading(2, "Mesh discretisation error");
+    report.paragraph(&format!(
+        "Richardson extrapolation from the study's mesh and the mesh refined twice per direction (order {}), real modes at the first model's initial storage modulus. The posterior's intervals do not include this error.",
+        first.order
+    ));
+    let rows: Vec<Vec<String>> = modes
+        .iter()
+        .map(|d| {
+            vec![
+                d.mode.to_string(),
+                format!("{:.4}", d.freq_hz),
+                format!("{:.4}", d.freq_refined_hz),
+                format!("{:+.3e}", d.error_hz),
+                format!("{:+.3}", 100.0 * d.rel_error),
+            ]
+        })
+        .collect();
+    report.table(
+        &[
+            "mode",
+            "f, study mesh (Hz)",
+            "f, refined (Hz)",
+            "estimated error (Hz)",
+            "error (%)",
+        ],
+        &rows,
+    );
+    for w in crate::runner::preflight::mesh_error_warnings(modes) {
+        report.paragraph(&format!("**Warning**: {w}"));
+    }
 }

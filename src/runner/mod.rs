@@ -815,30 +815,16 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
     preflight::check_channels(&built, &levels, &mut pf.warnings);
     let lines_checked = check_initial_values(study, &built, &levels, &laws)?;
     preflight::check_first_mode(study, &built, &levels, &laws, &mut pf)?;
-    if let (Some(m), Some(law)) = (study.models.first(), laws.first()) {
-        let f = pf.first_peak_hz.unwrap_or(20.0);
-        let e = law.modulus(&m.initial, TWO_PI * f).re;
-        match preflight::discretisation_errors(study, &built, e) {
-            Ok(d) => pf.discretisation = d,
-            // a refined mesh beyond the machine, or a solver that cannot resolve it, leaves
-            // the estimate out with a warning (the study's own mesh is fine)
-            Err(err) => pf.warnings.push(format!(
-                "structure.mesh: no discretisation-error estimate ({err})"
-            )),
-        }
-        for d in &pf.discretisation {
-            if d.rel_error.abs() > preflight::MESH_ERROR_WARN_REL {
-                pf.warnings.push(format!(
-                    "structure.mesh: mode {} ({:.3} Hz) has an estimated discretisation error of {:+.3} Hz ({:+.2} %), more than the {:.2} % such data resolve, and the posterior's intervals do not include it: refine the mesh (a smaller element_size, or more divisions)",
-                    d.mode,
-                    d.freq_hz,
-                    d.error_hz,
-                    100.0 * d.rel_error,
-                    100.0 * preflight::MESH_ERROR_WARN_REL
-                ));
-            }
-        }
+    match preflight::mesh_error_at_initial_values(study, &built, &levels, &laws) {
+        Ok(d) => pf.discretisation = d,
+        // a refined mesh beyond the machine, or a solver that cannot resolve it, leaves the
+        // estimate out with a warning (the study's own mesh is fine)
+        Err(err) => pf.warnings.push(format!(
+            "structure.mesh: no discretisation-error estimate ({err})"
+        )),
     }
+    pf.warnings
+        .extend(preflight::mesh_error_warnings(&pf.discretisation));
     Ok(CheckSummary {
         preflight: pf,
         study: study.name.clone(),

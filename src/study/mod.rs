@@ -206,6 +206,9 @@ pub struct Analyses {
     pub correlation: bool,
     pub sensitivity: bool,
     pub figures: bool,
+    /// Estimate each low mode's discretisation error (Richardson, the mesh refined twice per
+    /// direction) and put it in the results and the report.
+    pub mesh_error: bool,
 }
 
 impl Default for Analyses {
@@ -217,6 +220,7 @@ impl Default for Analyses {
             correlation: true,
             sensitivity: true,
             figures: true,
+            mesh_error: false,
         }
     }
 }

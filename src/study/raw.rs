@@ -218,6 +218,8 @@ pub struct RawAnalyses {
     pub correlation: Option<bool>,
     pub sensitivity: Option<bool>,
     pub figures: Option<bool>,
+    /// The mesh's discretisation error per mode in the results and the report.
+    pub mesh_error: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]

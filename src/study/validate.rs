@@ -687,6 +687,9 @@ fn analyses(ctx: &Ctx, a: Option<&RawAnalyses>) -> Result<Analyses, StudyError> 
     if let Some(v) = a.figures {
         out.figures = v;
     }
+    if let Some(v) = a.mesh_error {
+        out.mesh_error = v;
+    }
     Ok(out)
 }
 
