@@ -129,21 +129,42 @@ pub fn format_seconds(s: f64) -> String {
     }
 }
 
-/// `Err(message)` when an allocation of `bytes` exceeds `available` memory: the message says
-/// how much is needed and how much the machine has.
-pub fn check_memory(bytes: f64, available: f64) -> Result<(), String> {
-    if bytes.is_finite() && bytes <= available {
-        Ok(())
-    } else {
-        Err(format!(
+/// A work size beyond the machine's memory: its `Display` says how much is needed and how
+/// much the machine has ("needs an estimated 9.1 GiB of memory, beyond the 4.0 GiB ...").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BeyondMemory {
+    /// Estimated bytes (infinite when unbounded).
+    pub needed_bytes: f64,
+    /// Bytes available.
+    pub available_bytes: f64,
+}
+
+impl std::fmt::Display for BeyondMemory {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
             "needs an estimated {} of memory, beyond the {} this machine has available",
-            if bytes.is_finite() {
-                format_bytes(bytes)
+            if self.needed_bytes.is_finite() {
+                format_bytes(self.needed_bytes)
             } else {
                 "unbounded amount".into()
             },
-            format_bytes(available)
-        ))
+            format_bytes(self.available_bytes)
+        )
+    }
+}
+
+impl std::error::Error for BeyondMemory {}
+
+/// Whether an allocation of `bytes` fits in `available` memory.
+pub fn check_memory(bytes: f64, available: f64) -> Result<(), BeyondMemory> {
+    if bytes.is_finite() && bytes <= available {
+        Ok(())
+    } else {
+        Err(BeyondMemory {
+            needed_bytes: bytes,
+            available_bytes: available,
+        })
     }
 }
 

@@ -86,3 +86,20 @@ impl FeError {
         }
     }
 }
+
+/// Errors of the model's copy-with-an-effect methods (point masses, a shaker, a degraded bond
+/// region): programming or input errors of the caller, named with the value at fault.
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum ModelEditError {
+    /// A point index beyond the model's observation points.
+    #[error("point index {index} is out of range ({n_points} points)")]
+    PointOutOfRange { index: usize, n_points: usize },
+
+    /// A physical parameter of the effect outside its admissible range.
+    #[error("{0}")]
+    InvalidParameter(String),
+
+    /// The sparse matrix with the effect could not be formed.
+    #[error("cannot form {what}: {detail}")]
+    Sparse { what: &'static str, detail: String },
+}

@@ -29,5 +29,5 @@ pub mod model;
 pub mod points;
 pub mod region;
 
-pub use error::FeError;
+pub use error::{FeError, ModelEditError};
 pub use model::{ObservationPoint, StructuralModel};

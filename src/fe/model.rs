@@ -1,6 +1,7 @@
 //! The assembled structural model: sparse M, K_b, S (and optional adherend damping) over the
 //! free DOFs, plus the observation points (measurement and excitation DOFs).
 
+use super::error::ModelEditError;
 use crate::common::Direction;
 use faer::sparse::SparseColMat;
 
@@ -61,7 +62,10 @@ impl StructuralModel {
     /// with w_k the point's DOF weights (the mass acts in the point's measured direction only;
     /// cross-axis mass and rotary inertia of the sensor are neglected). `masses` holds
     /// (point index, kg) pairs.
-    pub fn with_point_masses(&self, masses: &[(usize, f64)]) -> Result<StructuralModel, String> {
+    pub fn with_point_masses(
+        &self,
+        masses: &[(usize, f64)],
+    ) -> Result<StructuralModel, ModelEditError> {
         use faer::sparse::Triplet;
         let n = self.n_dof();
         let mut trip: Vec<Triplet<usize, usize, f64>> = Vec::new();
@@ -74,11 +78,9 @@ impl StructuralModel {
             }
         }
         for &(k, mass) in masses {
-            let pt = self.points.get(k).ok_or_else(|| {
-                format!(
-                    "point index {k} is out of range ({} points)",
-                    self.points.len()
-                )
+            let pt = self.points.get(k).ok_or(ModelEditError::PointOutOfRange {
+                index: k,
+                n_points: self.points.len(),
             })?;
             for &(a, wa) in &pt.dofs {
                 for &(b, wb) in &pt.dofs {
@@ -86,8 +88,10 @@ impl StructuralModel {
                 }
             }
         }
-        let m = SpMat::try_new_from_triplets(n, n, &trip)
-            .map_err(|e| format!("cannot add point masses: {e:?}"))?;
+        let m = SpMat::try_new_from_triplets(n, n, &trip).map_err(|e| ModelEditError::Sparse {
+            what: "the mass matrix with point masses",
+            detail: format!("{e:?}"),
+        })?;
         let mut out = self.clone();
         out.m = m;
         out.description = format!("{} + point masses {:?}", self.description, masses);
@@ -97,7 +101,7 @@ impl StructuralModel {
 
 /// Copy of `a` padded with `extra` zero rows and columns, plus the `(row, col, value)` entries
 /// of `add` (duplicates summed).
-fn padded(a: &SpMat, extra: usize, add: &[(usize, usize, f64)]) -> Result<SpMat, String> {
+fn padded(a: &SpMat, extra: usize, add: &[(usize, usize, f64)]) -> Result<SpMat, ModelEditError> {
     use faer::sparse::Triplet;
     let n = a.nrows();
     let sym = a.symbolic();
@@ -109,7 +113,10 @@ fn padded(a: &SpMat, extra: usize, add: &[(usize, usize, f64)]) -> Result<SpMat,
         }
     }
     trip.extend(add.iter().map(|&(i, j, v)| Triplet::new(i, j, v)));
-    SpMat::try_new_from_triplets(n + extra, n + extra, &trip).map_err(|e| format!("{e:?}"))
+    SpMat::try_new_from_triplets(n + extra, n + extra, &trip).map_err(|e| ModelEditError::Sparse {
+        what: "a matrix padded with the shaker's DOF",
+        detail: format!("{e:?}"),
+    })
 }
 
 impl StructuralModel {
@@ -125,17 +132,18 @@ impl StructuralModel {
         m_s: f64,
         k_s: f64,
         armature_id: u32,
-    ) -> Result<(StructuralModel, usize), String> {
-        let pt = self.points.get(drive).ok_or_else(|| {
-            format!(
-                "point index {drive} is out of range ({} points)",
-                self.points.len()
-            )
-        })?;
+    ) -> Result<(StructuralModel, usize), ModelEditError> {
+        let pt = self
+            .points
+            .get(drive)
+            .ok_or(ModelEditError::PointOutOfRange {
+                index: drive,
+                n_points: self.points.len(),
+            })?;
         if !(m_s.is_finite() && m_s >= 0.0 && k_s.is_finite() && k_s > 0.0) {
-            return Err(format!(
+            return Err(ModelEditError::InvalidParameter(format!(
                 "shaker: moving mass {m_s} kg must be >= 0 and stinger stiffness {k_s} N/m > 0"
-            ));
+            )));
         }
         let n = self.n_dof();
         // b = b_d - e_s

@@ -12,7 +12,7 @@
 //! mesh's element boundaries.
 
 use super::assembly::{Assembler, DofMap};
-use super::error::FeError;
+use super::error::{FeError, ModelEditError};
 use super::geometry::Elasticity;
 use super::joint::{joint_mesh_from_spec, JointSpec};
 use super::mesh::Region;
@@ -128,18 +128,20 @@ impl StructuralModel {
         &self,
         s_region: &SpMat,
         loss: f64,
-    ) -> Result<StructuralModel, String> {
+    ) -> Result<StructuralModel, ModelEditError> {
         if !(0.0..1.0).contains(&loss) {
-            return Err(format!("bond loss fraction {loss} must be in [0, 1)"));
+            return Err(ModelEditError::InvalidParameter(format!(
+                "bond loss fraction {loss} must be in [0, 1)"
+            )));
         }
         let same = s_region.nrows() == self.s.nrows()
             && s_region.symbolic().col_ptr() == self.s.symbolic().col_ptr()
             && s_region.symbolic().row_idx() == self.s.symbolic().row_idx();
         if !same {
-            return Err(
+            return Err(ModelEditError::InvalidParameter(
                 "S_region does not have the pattern of S (assemble it from the same structure)"
                     .into(),
-            );
+            ));
         }
         let mut out = self.clone();
         for (v, r) in out.s.val_mut().iter_mut().zip(s_region.val()) {

@@ -8,7 +8,7 @@ use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::{Curve, CurveStyle, FigureFiles, PlotError, PlotParams};
+use super::{Curve, CurveStyle, DrawError, FigureFiles, PlotError, PlotParams};
 use crate::output::{check_parent, commit, temp_sibling, write_atomic_bytes};
 
 /// The embedded font (DejaVu Sans, freely licensed), registered as "sans-serif".
@@ -356,7 +356,7 @@ pub(crate) fn figure(
 
 /// Something that can draw itself on any plotters backend (PNG and SVG share one renderer).
 pub(crate) trait Render {
-    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String>;
+    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError>;
 }
 
 /// Renders `job` to `<stem>.png` and `<stem>.svg` of `size` pixels, each written atomically.
@@ -375,10 +375,9 @@ pub(crate) fn write_png_svg<R: Render>(
     let tmp = temp_sibling(&png)?;
     let result = {
         let root = BitMapBackend::new(&tmp, size).into_drawing_area();
-        job.render(&root)
-            .and_then(|()| root.present().map_err(|e| e.to_string()))
+        job.render(&root).and_then(|()| root.present().map_err(err))
     };
-    if let Err(message) = result {
+    if let Err(DrawError(message)) = result {
         let _ = std::fs::remove_file(&tmp);
         return Err(PlotError::Render { path: png, message });
     }
@@ -388,10 +387,9 @@ pub(crate) fn write_png_svg<R: Render>(
     let mut text = String::new();
     let result = {
         let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
-        job.render(&root)
-            .and_then(|()| root.present().map_err(|e| e.to_string()))
+        job.render(&root).and_then(|()| root.present().map_err(err))
     };
-    if let Err(message) = result {
+    if let Err(DrawError(message)) = result {
         return Err(PlotError::Render { path: svg, message });
     }
     write_atomic_bytes(&svg, text.as_bytes())?;
@@ -407,12 +405,12 @@ struct Job<'a> {
     font_px: u32,
 }
 
-pub(crate) fn err<E: std::fmt::Display>(e: E) -> String {
-    e.to_string()
+pub(crate) fn err<E: std::fmt::Display>(e: E) -> DrawError {
+    DrawError(e.to_string())
 }
 
 impl Render for Job<'_> {
-    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         let fs = f64::from(self.font_px);
         root.fill(&WHITE).map_err(err)?;
         let area = root
@@ -446,7 +444,7 @@ impl Job<'_> {
         x_label: &str,
         xs: XS,
         ys: YS,
-    ) -> Result<(), String>
+    ) -> Result<(), DrawError>
     where
         DB: DrawingBackend,
         XS: AsRangedCoord<Value = f64>,

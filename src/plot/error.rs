@@ -28,3 +28,9 @@ pub enum PlotError {
     #[error(transparent)]
     Output(#[from] OutputError),
 }
+
+/// A drawing backend's failure while rendering, with its message; the caller attaches the
+/// figure's path ([`PlotError::Render`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct DrawError(pub String);

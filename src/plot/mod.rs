@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use crate::common::C64;
 
-pub use error::PlotError;
+pub use error::{DrawError, PlotError};
 
 /// How a curve is drawn.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]

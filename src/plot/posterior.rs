@@ -16,7 +16,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::draw::{self, err, Render, PALETTE};
-use super::PlotError;
+use super::{DrawError, PlotError};
 
 /// Base font size (tick labels), as the other figures.
 const FS: f64 = 15.0;
@@ -744,7 +744,7 @@ fn draw_markers<DB: DrawingBackend>(
     shape: Shape,
     r: i32,
     color: RGBColor,
-) -> Result<(), String> {
+) -> Result<(), DrawError> {
     let style = color.filled();
     let at = |q: (f64, f64)| EmptyElement::at(q);
     match shape {
@@ -784,7 +784,7 @@ fn area_marker<DB: DrawingBackend>(
     shape: Shape,
     r: i32,
     color: RGBColor,
-) -> Result<(), String> {
+) -> Result<(), DrawError> {
     let style = color.filled();
     let e = EmptyElement::at(at);
     match shape {
@@ -816,7 +816,7 @@ struct LegendEntry {
 fn legend_strip<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     entries: &[LegendEntry],
-) -> Result<DrawingArea<DB, Shift>, String> {
+) -> Result<DrawingArea<DB, Shift>, DrawError> {
     if entries.is_empty() {
         return Ok(area.clone());
     }
@@ -918,7 +918,7 @@ fn mesh<DB: DrawingBackend>(
     y_desc: &str,
     n_ticks: (usize, usize),
     font: f64,
-) -> Result<(), String> {
+) -> Result<(), DrawError> {
     let mut m = chart.configure_mesh();
     m.label_style(("sans-serif", font))
         .axis_desc_style(("sans-serif", 1.1 * FS))
@@ -967,7 +967,7 @@ fn chain_color(c: usize) -> RGBColor {
 }
 
 impl Render for TraceJob<'_> {
-    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         root.fill(&WHITE).map_err(err)?;
         let area = root
             .titled(self.title, ("sans-serif", 1.4 * FS))
@@ -1089,7 +1089,7 @@ const LAPLACE_COLOR: RGBColor = RGBColor(255, 127, 14);
 const MAP_COLOR: RGBColor = RGBColor(214, 39, 40);
 
 impl Render for PairJob<'_> {
-    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         root.fill(&WHITE).map_err(err)?;
         let area = root
             .titled(self.title, ("sans-serif", 1.4 * FS))
@@ -1336,7 +1336,7 @@ fn band_polygon(seg: &[LineQuantiles], lo: usize, hi: usize, x_span: f64) -> Vec
 }
 
 impl Render for BandJob<'_> {
-    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), String> {
+    fn render<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), DrawError> {
         root.fill(&WHITE).map_err(err)?;
         let area = root
             .titled(self.title, ("sans-serif", 1.4 * FS))

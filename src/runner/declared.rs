@@ -142,7 +142,7 @@ pub fn deterministic_view<'a>(
     let mut model = built
         .model
         .with_point_masses(&wrapped.masses())
-        .map_err(fail)?;
+        .map_err(|e| fail(e.to_string()))?;
     let s = 1.0 + wrapped.beam_factor();
     model.k_b.val_mut().iter_mut().for_each(|v| *v *= s);
     if let Some(d) = model.d_b.as_mut() {

@@ -105,7 +105,7 @@ pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyE
         "(syntax)".into()
     };
     let fix = if msg.starts_with("unknown field") {
-        " — remove or rename the key (see studies/paper_geometry.toml for every key)"
+        " — remove or rename the key (docs/study-files.md lists every key)"
     } else if msg.starts_with("missing field") {
         " — add the key"
     } else {

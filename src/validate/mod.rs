@@ -143,7 +143,7 @@ impl Setup {
             built
                 .model
                 .with_point_masses(&masses)
-                .map_err(ValidateError::Setup)?
+                .map_err(|e| ValidateError::Setup(e.to_string()))?
         };
         let lv = &ex.levels[spec.level];
         let mut chain = ex.chain.clone();

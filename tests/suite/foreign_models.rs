@@ -11,7 +11,7 @@
 //! Python: env RFMLAB_PYTHON (numpy, scipy, scikit-fem); skipped with a notice when missing,
 //! unless env CI is set.
 
-use crate::python_checks::{interpreter, script};
+use crate::python_checks::{python_with, script};
 use rfmlab::common::C64;
 use rfmlab::fe::foreign::{import_model_files, ImportFiles, ImportFormat, Units};
 use rfmlab::fe::harwell_boeing::{format_hb, parse_hb};
@@ -27,22 +27,7 @@ const TRUTH: [f64; 4] = [7.2e6, 1.1e6, 2.8e6, 5.0e3];
 
 /// Run scripts/foreign_joint.py into `dir`; None (skip) when Python with scikit-fem is absent.
 fn generate(dir: &Path, test: &str) -> Option<serde_json::Value> {
-    let py = interpreter();
-    let ok = Command::new(&py)
-        .args(["-c", "import numpy, scipy, skfem"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !ok {
-        if std::env::var_os("CI").is_some() {
-            panic!(
-                "CI is set but {} cannot import numpy, scipy and skfem",
-                py.display()
-            );
-        }
-        eprintln!("SKIP {test}: no Python with numpy, scipy and scikit-fem (set RFMLAB_PYTHON)");
-        return None;
-    }
+    let py = python_with(&["numpy", "scipy", "skfem"], test)?;
     let out = Command::new(&py)
         .arg(script("foreign_joint.py"))
         .arg(dir)

@@ -18,7 +18,7 @@
 //! Python: env RFMLAB_PYTHON (numpy, scipy, scikit-fem, pyuff); skipped with a notice when
 //! missing, unless env CI is set.
 
-use crate::python_checks::{interpreter, script};
+use crate::python_checks::{python_with, script};
 use std::path::Path;
 use std::process::Command;
 
@@ -27,24 +27,7 @@ const TRUTH: [f64; 4] = [7.2e6, 1.1e6, 2.8e6, 5.0e3];
 
 /// Run the generator into `dir`; None (skip) when Python lacks its packages.
 fn generate(dir: &Path, seed: u64, test: &str) -> Option<serde_json::Value> {
-    let py = interpreter();
-    let ok = Command::new(&py)
-        .args(["-c", "import numpy, scipy, skfem, pyuff"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if !ok {
-        if std::env::var_os("CI").is_some() {
-            panic!(
-                "CI is set but {} cannot import numpy, scipy, skfem and pyuff",
-                py.display()
-            );
-        }
-        eprintln!(
-            "SKIP {test}: no Python with numpy, scipy, scikit-fem and pyuff (set RFMLAB_PYTHON)"
-        );
-        return None;
-    }
+    let py = python_with(&["numpy", "scipy", "skfem", "pyuff"], test)?;
     let out = Command::new(&py)
         .arg(script("independent_td_joint.py"))
         .arg(dir)

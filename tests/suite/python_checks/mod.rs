@@ -59,9 +59,15 @@ pub fn scipy_round_trip(py: &Path, model: &StructuralModel) -> StructuralModel {
 /// The interpreter for the Parquet read-back, when it imports polars, pandas and pyarrow. None
 /// (with a skip notice naming `test`) when it does not; panics instead when `CI` is set.
 pub fn python_for_parquet(test: &str) -> Option<PathBuf> {
+    python_with(&["polars", "pandas", "pyarrow"], test)
+}
+
+/// The interpreter when it imports every module of `modules`. None (with a skip notice naming
+/// `test`) when it does not; panics instead when `CI` is set.
+pub fn python_with(modules: &[&str], test: &str) -> Option<PathBuf> {
     let py = interpreter();
     let ok = Command::new(&py)
-        .args(["-c", "import polars, pandas, pyarrow"])
+        .args(["-c", &format!("import {}", modules.join(", "))])
         .output()
         .map(|o| o.status.success())
         .unwrap_or(false);
@@ -69,8 +75,8 @@ pub fn python_for_parquet(test: &str) -> Option<PathBuf> {
         return Some(py);
     }
     let msg = format!(
-        "Python with polars, pandas and pyarrow not found at '{}' (set RFMLAB_PYTHON, or: \
-         python3 -m venv .venv && .venv/bin/pip install polars pandas pyarrow)",
+        "Python with {} not found at '{}' (set RFMLAB_PYTHON, or run scripts/setup_python.sh)",
+        modules.join(", "),
         py.display()
     );
     if std::env::var_os("CI").is_some() {
