@@ -5,11 +5,12 @@ use super::leakage::{fixed_point, Leakage};
 use super::settings::rfm_params;
 use super::{Event, LevelData, RunError};
 use crate::common::{C64, J};
+use crate::forward::Observation;
 use crate::frf::FrfEngine;
 use crate::iem::{AnalyticalMode, ExperimentalMode, IemParams, IemResult};
 use crate::material::ConstitutiveModel;
 use crate::modal::circle_fit::{circle_fit, CircleFitParams, CircleFitResult};
-use crate::rfm::{BandResult, MeasuredColumn, PerLineEstimate, RfmResult};
+use crate::rfm::{BandResult, PerLineEstimate, RfmResult};
 use crate::study::build::BuiltModel;
 use crate::study::Study;
 
@@ -103,35 +104,6 @@ fn analysis(name: impl Into<String>, e: impl std::fmt::Display) -> RunError {
         analysis: name.into(),
         message: e.to_string(),
     }
-}
-
-/// Analytical accelerance -w^2 H_ij on the column's lines and outputs at `moduli` (one per
-/// line), `[line][k]` flattened; with `derivs`, also -w^2 dH_ij/dE'.
-pub fn analytical_column(
-    engine: &dyn FrfEngine,
-    col: &MeasuredColumn,
-    moduli: &[C64],
-    derivs: bool,
-) -> Result<(Vec<C64>, Vec<C64>), crate::frf::FrfError> {
-    let sw = engine.sweep(&col.omega_rad_s, moduli, derivs)?;
-    let jpos = engine
-        .inputs()
-        .iter()
-        .position(|&j| j == col.input)
-        .ok_or(crate::frf::FrfError::BadInput(col.input))?;
-    let n_out = col.outputs.len();
-    let mut h = Vec::with_capacity(col.n_lines() * n_out);
-    let mut dh = Vec::new();
-    for (l, &w) in col.omega_rad_s.iter().enumerate() {
-        for &i in &col.outputs {
-            let idx = sw.idx(l, i, jpos);
-            h.push(-w * w * sw.h[idx]);
-            if derivs {
-                dh.push(-w * w * sw.dh_de[idx]);
-            }
-        }
-    }
-    Ok((h, dh))
 }
 
 /// Rows `[line][k]` of a flattened column.
@@ -399,8 +371,10 @@ pub fn analyse_level(
         // (predicted measurement, its leakage bias: empty without a leakage model)
         let predicted =
             |p: &[f64], modulus: &[C64], what: &str| -> Result<(Vec<C64>, Vec<C64>), RunError> {
-                let (mut h, _) = analytical_column(engine, col, modulus, false)
-                    .map_err(|e| analysis(format!("FRFs of {} {what}", m.name), e))?;
+                let (mut h, _) =
+                    Observation::new(engine, &col.omega_rad_s, col.input, &col.outputs, None)
+                        .and_then(|o| o.accelerance_with(&col.omega_rad_s, modulus, false))
+                        .map_err(|e| analysis(format!("FRFs of {} {what}", m.name), e))?;
                 let bias = match leak {
                     Some(l) => l.bias(col, &|w| law.modulus(p, w))?,
                     None => Vec::new(),
@@ -465,7 +439,8 @@ pub fn analyse_level(
             ),
             None => ("initial modulus".to_string(), e_start.clone()),
         };
-        let (h, dh) = analytical_column(engine, col, &modulus, true)
+        let (h, dh) = Observation::new(engine, &col.omega_rad_s, col.input, &col.outputs, None)
+            .and_then(|o| o.accelerance_with(&col.omega_rad_s, &modulus, true))
             .map_err(|e| analysis(format!("sensitivities at level {lname}"), e))?;
         let mut storage = Vec::new();
         let mut loss = Vec::new();
