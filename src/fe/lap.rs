@@ -167,68 +167,7 @@ fn positive(key: &str, v: f64) -> Result<(), FeError> {
     }
 }
 
-/// Partition of [a, b] graded towards its ends: from a graded end the element sizes are
-/// h_e, r h_e, r^2 h_e, ... (geometric growth) up to the element size h; the rest is divided
-/// into equal elements of at most h. `grade_a`, `grade_b`: the end sizes h_e at a and b (None:
-/// no grading there). When the graded runs do not fit, they are shortened; a leftover too short
-/// for a cell of its own is spread over the others.
-pub fn graded_partition(
-    a: f64,
-    b: f64,
-    grade_a: Option<f64>,
-    grade_b: Option<f64>,
-    h: f64,
-    r: f64,
-) -> Vec<f64> {
-    let len = b - a;
-    let run = |he: f64| {
-        let mut v = Vec::new();
-        let mut s = he.min(h);
-        while s < h * (1.0 - 1e-9) && v.len() < 10_000 {
-            v.push(s);
-            if r <= 1.0 {
-                break;
-            }
-            s *= r;
-        }
-        v
-    };
-    let mut left = grade_a.map(run).unwrap_or_default();
-    let mut right = grade_b.map(run).unwrap_or_default();
-    let sum = |v: &[f64]| v.iter().sum::<f64>();
-    while sum(&left) + sum(&right) > len && !(left.is_empty() && right.is_empty()) {
-        let (l, r_) = (left.last().copied(), right.last().copied());
-        if l.unwrap_or(0.0) >= r_.unwrap_or(0.0) {
-            left.pop();
-        } else {
-            right.pop();
-        }
-    }
-    let mid = len - sum(&left) - sum(&right);
-    let mut sizes = left.clone();
-    let smallest_neighbour = left
-        .last()
-        .copied()
-        .unwrap_or(h)
-        .min(right.last().copied().unwrap_or(h));
-    if mid > 1e-12 * len {
-        let n = super::mesh::segment_divisions(mid, h);
-        let s = mid / n as f64;
-        if s >= 0.5 * smallest_neighbour || (left.is_empty() && right.is_empty()) {
-            sizes.extend(std::iter::repeat_n(s, n));
-        }
-    }
-    sizes.extend(right.iter().rev());
-    let k = len / sum(&sizes);
-    let mut out = Vec::with_capacity(sizes.len() + 1);
-    out.push(a);
-    let mut acc = a;
-    for (i, s) in sizes.iter().enumerate() {
-        acc += s * k;
-        out.push(if i + 1 == sizes.len() { b } else { acc });
-    }
-    out
-}
+pub use super::mesh::graded_partition;
 
 /// Cell boundaries of the lap mesh along x, y, z, and the index ranges of the overlap cells
 /// along x and of the three layers along y.

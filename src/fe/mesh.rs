@@ -108,6 +108,69 @@ pub fn segment_divisions(len: f64, h: f64) -> usize {
     ((r - 1e-9 * r.max(1.0)).ceil() as usize).max(1)
 }
 
+/// Partition of [a, b] graded towards its ends: from a graded end the element sizes are
+/// h_e, r h_e, r^2 h_e, ... (geometric growth) up to the element size h; the rest is divided
+/// into equal elements of at most h. `grade_a`, `grade_b`: the end sizes h_e at a and b (None:
+/// no grading there). When the graded runs do not fit, they are shortened; a leftover too short
+/// for a cell of its own is spread over the others.
+pub fn graded_partition(
+    a: f64,
+    b: f64,
+    grade_a: Option<f64>,
+    grade_b: Option<f64>,
+    h: f64,
+    r: f64,
+) -> Vec<f64> {
+    let len = b - a;
+    let run = |he: f64| {
+        let mut v = Vec::new();
+        let mut s = he.min(h);
+        while s < h * (1.0 - 1e-9) && v.len() < 10_000 {
+            v.push(s);
+            if r <= 1.0 {
+                break;
+            }
+            s *= r;
+        }
+        v
+    };
+    let mut left = grade_a.map(run).unwrap_or_default();
+    let mut right = grade_b.map(run).unwrap_or_default();
+    let sum = |v: &[f64]| v.iter().sum::<f64>();
+    while sum(&left) + sum(&right) > len && !(left.is_empty() && right.is_empty()) {
+        let (l, r_) = (left.last().copied(), right.last().copied());
+        if l.unwrap_or(0.0) >= r_.unwrap_or(0.0) {
+            left.pop();
+        } else {
+            right.pop();
+        }
+    }
+    let mid = len - sum(&left) - sum(&right);
+    let mut sizes = left.clone();
+    let smallest_neighbour = left
+        .last()
+        .copied()
+        .unwrap_or(h)
+        .min(right.last().copied().unwrap_or(h));
+    if mid > 1e-12 * len {
+        let n = segment_divisions(mid, h);
+        let s = mid / n as f64;
+        if s >= 0.5 * smallest_neighbour || (left.is_empty() && right.is_empty()) {
+            sizes.extend(std::iter::repeat_n(s, n));
+        }
+    }
+    sizes.extend(right.iter().rev());
+    let k = len / sum(&sizes);
+    let mut out = Vec::with_capacity(sizes.len() + 1);
+    out.push(a);
+    let mut acc = a;
+    for (i, s) in sizes.iter().enumerate() {
+        acc += s * k;
+        out.push(if i + 1 == sizes.len() { b } else { acc });
+    }
+    out
+}
+
 /// `n` equal cells on [a, b] appended to `out` (which already ends with `a` unless empty).
 fn push_segment(out: &mut Vec<f64>, a: f64, b: f64, n: usize) {
     if out.is_empty() {
@@ -253,31 +316,144 @@ pub struct JointLayout {
     pub adhesive_thickness_m: f64,
 }
 
+/// Cell boundaries of the joint's tensor grid along x, y and z, with the adhesive's cells along
+/// x (`adh_cells.0..adh_cells.1`) and the adhesive's layers along y (`0..ny_a`; the beam's
+/// follow).
+#[derive(Clone, Debug, PartialEq)]
+pub struct JointGrid {
+    pub xs: Vec<f64>,
+    pub ys: Vec<f64>,
+    pub zs: Vec<f64>,
+    pub adh_cells: (usize, usize),
+    pub ny_a: usize,
+}
+
+impl JointGrid {
+    /// Equal cells per segment: the divisions `div` of [0, x0], [x0, x1], [x1, L], the adhesive's
+    /// and the beam's thickness, and the width.
+    pub fn uniform(layout: &JointLayout, div: &JointDivisions) -> JointGrid {
+        let l = layout;
+        let x0 = l.adhesive_x_start_m;
+        let x1 = x0 + l.adhesive_length_m;
+        let bounds = [(0.0, x0), (x0, x1), (x1, l.beam_length_m)];
+        let mut xs = Vec::new();
+        let mut adh_cells = (0usize, 0usize);
+        for (s, &(a, b)) in bounds.iter().enumerate() {
+            if div.x[s] == 0 || b <= a {
+                continue;
+            }
+            let start = xs.len().saturating_sub(1);
+            push_segment(&mut xs, a, b, div.x[s]);
+            if s == 1 {
+                adh_cells = (start, start + div.x[s]);
+            }
+        }
+        let mut ys = Vec::new();
+        push_segment(&mut ys, -l.adhesive_thickness_m, 0.0, div.y_adhesive);
+        push_segment(&mut ys, 0.0, l.beam_thickness_m, div.y_beam);
+        let mut zs = Vec::new();
+        push_segment(&mut zs, 0.0, l.width_m, div.z);
+        JointGrid {
+            xs,
+            ys,
+            zs,
+            adh_cells,
+            ny_a: div.y_adhesive,
+        }
+    }
+
+    /// Cells graded towards the bond line's edges, where its stresses are singular: along x
+    /// towards both ends of the adhesive (inside it and in the beam beside it), along y
+    /// towards both faces of the bond line, along z towards both sides. From an edge the sizes
+    /// are `h_edge`, `r h_edge`, `r^2 h_edge`, ... up to `h` (in the bond line's thickness up to
+    /// half of it); the beam's thickness gets `y_beam` equal cells.
+    pub fn graded(layout: &JointLayout, h: f64, h_edge: f64, r: f64, y_beam: usize) -> JointGrid {
+        let l = layout;
+        let x0 = l.adhesive_x_start_m;
+        let x1 = x0 + l.adhesive_length_m;
+        let t_a = l.adhesive_thickness_m;
+        let he = Some(h_edge.min(h));
+        let mut xs: Vec<f64> = Vec::new();
+        let append = |part: Vec<f64>, xs: &mut Vec<f64>| {
+            let skip = usize::from(!xs.is_empty());
+            xs.extend(part.into_iter().skip(skip));
+        };
+        if x0 > 0.0 {
+            append(graded_partition(0.0, x0, None, he, h, r), &mut xs);
+        }
+        let start = xs.len().saturating_sub(1);
+        append(graded_partition(x0, x1, he, he, h, r), &mut xs);
+        let adh_cells = (start, xs.len() - 1);
+        if x1 < l.beam_length_m {
+            append(
+                graded_partition(x1, l.beam_length_m, he, None, h, r),
+                &mut xs,
+            );
+        }
+        let mut ys = graded_partition(-t_a, 0.0, he, he, (0.5 * t_a).min(h), r);
+        let ny_a = ys.len() - 1;
+        push_segment(&mut ys, 0.0, l.beam_thickness_m, y_beam);
+        let zs = graded_partition(0.0, l.width_m, he, he, h, r);
+        JointGrid {
+            xs,
+            ys,
+            zs,
+            adh_cells,
+            ny_a,
+        }
+    }
+
+    /// Every cell split into `f` equal parts per direction.
+    pub fn split(&self, f: usize) -> JointGrid {
+        let f = f.max(1);
+        let split = |v: &[f64]| {
+            let mut out = vec![v[0]];
+            for w in v.windows(2) {
+                for i in 1..=f {
+                    out.push(if i == f {
+                        w[1]
+                    } else {
+                        w[0] + (w[1] - w[0]) * i as f64 / f as f64
+                    });
+                }
+            }
+            out
+        };
+        JointGrid {
+            xs: split(&self.xs),
+            ys: split(&self.ys),
+            zs: split(&self.zs),
+            adh_cells: (self.adh_cells.0 * f, self.adh_cells.1 * f),
+            ny_a: self.ny_a * f,
+        }
+    }
+
+    /// Cell counts per segment (for the cost estimate).
+    pub fn divisions(&self) -> JointDivisions {
+        let nx = self.xs.len() - 1;
+        JointDivisions {
+            x: [
+                self.adh_cells.0,
+                self.adh_cells.1 - self.adh_cells.0,
+                nx - self.adh_cells.1,
+            ],
+            y_adhesive: self.ny_a,
+            y_beam: self.ys.len() - 1 - self.ny_a,
+            z: self.zs.len() - 1,
+        }
+    }
+}
+
 /// Mesh of the bonded joint: beam + adhesive, nodes merged on y = 0, every node of the
 /// adhesive's lower face y = -t_a fixed.
 pub fn joint_mesh(layout: &JointLayout, div: &JointDivisions) -> HexMesh {
-    let l = layout;
-    let x0 = l.adhesive_x_start_m;
-    let x1 = x0 + l.adhesive_length_m;
-    let bounds = [(0.0, x0), (x0, x1), (x1, l.beam_length_m)];
-    let mut xs = Vec::new();
-    let mut adh_cells = (0usize, 0usize);
-    for (s, &(a, b)) in bounds.iter().enumerate() {
-        if div.x[s] == 0 || b <= a {
-            continue;
-        }
-        let start = xs.len().saturating_sub(1);
-        push_segment(&mut xs, a, b, div.x[s]);
-        if s == 1 {
-            adh_cells = (start, start + div.x[s]);
-        }
-    }
-    let mut ys = Vec::new();
-    push_segment(&mut ys, -l.adhesive_thickness_m, 0.0, div.y_adhesive);
-    let ny_a = div.y_adhesive;
-    push_segment(&mut ys, 0.0, l.beam_thickness_m, div.y_beam);
-    let mut zs = Vec::new();
-    push_segment(&mut zs, 0.0, l.width_m, div.z);
+    joint_mesh_on(&JointGrid::uniform(layout, div))
+}
+
+/// [`joint_mesh`] on a given grid.
+pub fn joint_mesh_on(grid: &JointGrid) -> HexMesh {
+    let (xs, ys, zs) = (grid.xs.clone(), grid.ys.clone(), grid.zs.clone());
+    let (adh_cells, ny_a) = (grid.adh_cells, grid.ny_a);
     structured_mesh(
         xs,
         ys,

@@ -51,6 +51,10 @@ pub const MESH_ERROR_WARN_REL: f64 = 1e-3;
 pub const FIRST_MODE_RATIO_WARN: f64 = 1.5;
 /// Modes in the discretisation-error table.
 pub const N_MODES_CHECKED: usize = 6;
+/// Largest refined mesh (free DOFs) the discretisation-error estimate solves; beyond it the
+/// estimate is left out with a message (a graded mesh refined twice per direction can reach
+/// a million DOFs and minutes of work).
+pub const MAX_REFINED_DOFS: usize = 400_000;
 
 /// One mode's discretisation error estimate.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -306,6 +310,16 @@ pub fn discretisation_errors(
     let Some(spec) = crate::study::build::joint_spec(&study.structure) else {
         return Ok(Vec::new());
     };
+    // the refined mesh has about 8 times the study mesh's DOFs
+    let refined_dofs = 8 * built.model.n_dof();
+    if refined_dofs > MAX_REFINED_DOFS {
+        return Err(RunError::Analysis {
+            analysis: "the discretisation-error estimate".into(),
+            message: format!(
+                "the mesh refined twice per direction would have about {refined_dofs} DOFs, more than the {MAX_REFINED_DOFS} it solves: compare two meshes with `rfmlab convergence` instead"
+            ),
+        });
+    }
     let (fine, _) = crate::fe::joint::build_joint_model_refined(&spec, 2)
         .map_err(|e| study_err(study, e.key().to_string(), e.to_string()))?;
     let n = N_MODES_CHECKED.min(built.model.n_dof() / 3).max(1);
@@ -315,10 +329,17 @@ pub fn discretisation_errors(
         ..crate::modes::EigenParams::default()
     };
     let freqs = |m: &crate::fe::StructuralModel| -> Result<Vec<f64>, RunError> {
-        let k = crate::modes::real::sp_add(&m.k_b, &m.s, e_storage_pa)
-            .map_err(|e| RunError::Engine(format!("discretisation error: {e}")))?;
-        let (lam, _) = crate::modes::real_modes(&k, &m.m, n, &params)
-            .map_err(|e| RunError::Engine(format!("discretisation error: {e}")))?;
+        let k = crate::modes::real::sp_add(&m.k_b, &m.s, e_storage_pa).map_err(|e| {
+            RunError::Analysis {
+                analysis: "the discretisation-error estimate".into(),
+                message: e.to_string(),
+            }
+        })?;
+        let (lam, _) =
+            crate::modes::real_modes(&k, &m.m, n, &params).map_err(|e| RunError::Analysis {
+                analysis: "the discretisation-error estimate".into(),
+                message: e.to_string(),
+            })?;
         Ok(lam
             .iter()
             .map(|l| l.max(0.0).sqrt() / std::f64::consts::TAU)

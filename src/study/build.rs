@@ -52,6 +52,7 @@ pub fn joint_spec(s: &Structure) -> Option<JointSpec> {
                     z,
                 }),
             },
+            grading: j.mesh_grading,
             integration: if j.full_integration {
                 crate::fe::element::Integration::Full
             } else {

@@ -66,6 +66,8 @@ pub struct Joint {
     pub full_integration: bool,
     /// true: snap points to the nearest node; false: interpolate with shape functions.
     pub snap_points: bool,
+    /// Growth ratio of a mesh graded towards the bond line's edges (`structure.mesh.grading`).
+    pub mesh_grading: Option<f64>,
 }
 
 /// Matrix files of an externally assembled model (Matrix Market, Harwell-Boeing or Abaqus,

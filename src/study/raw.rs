@@ -102,6 +102,8 @@ pub struct RawMesh {
     pub integration: Option<String>,
     /// "interpolate" (default) or "snap".
     pub point_mapping: Option<String>,
+    /// Growth ratio of a mesh graded towards the bond line's edges.
+    pub grading_ratio: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -444,6 +444,7 @@ fn joint(
         mesh: size,
         full_integration,
         snap_points,
+        mesh_grading: m.grading_ratio,
     })
 }
 

@@ -264,6 +264,68 @@ fn points_on_nodes_between_nodes_and_snapped() {
     assert_eq!(snap.points[1].dofs[0].1, -1.0);
 }
 
+#[test]
+fn graded_mesh_refines_the_bond_line_edges_and_refuses_bad_input() {
+    // the paper's joint with a 3 mm bond line, graded at 1.5 from 3 / 8 mm cells
+    let mut s = spec(0.005);
+    s.geometry.adhesive_thickness_m = 0.003;
+    s.mesh.grading = Some(1.5);
+    let (mesh, _) = joint_mesh_from_spec(&s).unwrap();
+    let (xs, ys, zs) = (&mesh.grid.xs, &mesh.grid.ys, &mesh.grid.zs);
+    let edge = 0.003 / 8.0;
+    let sizes = |v: &[f64]| v.windows(2).map(|w| w[1] - w[0]).collect::<Vec<f64>>();
+    // x: the adhesive's ends (0 and 50 mm) are nodes, with edge-sized cells at 0 and on both
+    // sides of 50 mm; z: both sides; y: both faces of the bond line (y = -3 mm and 0)
+    let j = xs
+        .iter()
+        .position(|&x| (x - 0.05).abs() < 1e-12)
+        .expect("x = 50 mm is a node");
+    let near = |v: f64| (v - edge).abs() < 0.15 * edge;
+    let (dx, dy, dz) = (sizes(xs), sizes(ys), sizes(zs));
+    assert!(
+        near(dx[0]) && near(dx[j - 1]) && near(dx[j]),
+        "x cells {dx:?}"
+    );
+    assert!(near(dz[0]) && near(dz[dz.len() - 1]), "z cells {dz:?}");
+    let k = ys
+        .iter()
+        .position(|&y| y.abs() < 1e-15)
+        .expect("y = 0 is a node");
+    assert!(k >= 4, "{k} cells through the bond line");
+    assert!(near(dy[0]) && near(dy[k - 1]), "y cells {dy:?}");
+    // sizes never grow faster than the ratio (within the partition's rescaling) nor beyond 5 mm
+    // (through the thickness within the bond line: the beam above keeps its equal cells)
+    for d in [&dx[..], &dy[..k], &dz[..]] {
+        assert!(d.iter().all(|&v| v <= 0.005 * (1.0 + 1e-9)));
+        assert!(d
+            .windows(2)
+            .all(|w| w[1] / w[0] <= 1.5 * 1.1 && w[0] / w[1] <= 1.5 * 1.1));
+    }
+    // the model builds, with more DOFs than the uniform mesh
+    let (_, graded) = build_joint_model(&s).unwrap();
+    s.mesh.grading = None;
+    let (_, uniform) = build_joint_model(&s).unwrap();
+    assert!(graded.n_dof > uniform.n_dof);
+    // a ratio out of (1, 3], or grading with divisions, names the key
+    let divisions = MeshSize::Divisions(Divisions {
+        x_adhesive: 10,
+        x_outside: 50,
+        y_beam: 2,
+        y_adhesive: 2,
+        z: 4,
+    });
+    for (r, size) in [
+        (1.0, MeshSize::ElementSize(0.005)),
+        (f64::NAN, MeshSize::ElementSize(0.005)),
+        (1.5, divisions),
+    ] {
+        s.mesh.grading = Some(r);
+        s.mesh.size = size;
+        let (key, msg) = err_key(&s);
+        assert_eq!(key, "structure.mesh.grading_ratio", "{msg}");
+    }
+}
+
 fn err_key(s: &JointSpec) -> (String, String) {
     match build_joint_model(s) {
         Ok(_) => panic!("expected an error"),
