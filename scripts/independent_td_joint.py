@@ -613,37 +613,28 @@ def write_uff(path, lines, H1, coh, segments):
         "id5": "NONE",
         "x": lines,
     }
+    # (title, units line, function type, ordinate data type, ordinate, denominator, values)
+    acc = ("accelerance H{i},{d}", "Units SI: (m/s^2)/N", 4, 6,
+           (12, 1, 0, "Acceleration", "m/s^2"), (13, 0, 1, "Force", "N"), H1.astype(complex))
+    cohs = ("coherence {i},{d}", "Ordinary coherence (-)", 6, 4,
+            (1, 0, 0, "Coherence", "none"), (0, 0, 0, "NONE", "none"), coh.astype(float))
     sets = []
-    for i in range(4):
-        d = dict(common)
-        d.update({
-            "id1": f"Independent bonded joint: accelerance H{i + 1},{DRIVE}",
-            "id4": "Units SI: (m/s^2)/N",
-            "func_type": 4, "rsp_node": i + 1, "ord_data_type": 6,
-            "ordinate_spec_data_type": 12, "ordinate_len_unit_exp": 1,
-            "ordinate_force_unit_exp": 0, "ordinate_temp_unit_exp": 0,
-            "ordinate_axis_lab": "Acceleration", "ordinate_axis_units_lab": "m/s^2",
-            "orddenom_spec_data_type": 13, "orddenom_len_unit_exp": 0,
-            "orddenom_force_unit_exp": 1, "orddenom_temp_unit_exp": 0,
-            "orddenom_axis_lab": "Force", "orddenom_axis_units_lab": "N",
-            "data": H1[i].astype(complex),
-        })
-        sets.append(d)
-    for i in range(4):
-        d = dict(common)
-        d.update({
-            "id1": f"Independent bonded joint: coherence {i + 1},{DRIVE}",
-            "id4": "Ordinary coherence (-)",
-            "func_type": 6, "rsp_node": i + 1, "ord_data_type": 4,
-            "ordinate_spec_data_type": 1, "ordinate_len_unit_exp": 0,
-            "ordinate_force_unit_exp": 0, "ordinate_temp_unit_exp": 0,
-            "ordinate_axis_lab": "Coherence", "ordinate_axis_units_lab": "none",
-            "orddenom_spec_data_type": 0, "orddenom_len_unit_exp": 0,
-            "orddenom_force_unit_exp": 0, "orddenom_temp_unit_exp": 0,
-            "orddenom_axis_lab": "NONE", "orddenom_axis_units_lab": "none",
-            "data": coh[i].astype(float),
-        })
-        sets.append(d)
+    for title, units, func, dtype, (o_spec, o_len, o_force, o_lab, o_unit), \
+            (d_spec, d_len, d_force, d_lab, d_unit), values in (acc, cohs):
+        for i in range(4):
+            d = dict(common)
+            d.update({
+                "id1": "Independent bonded joint: " + title.format(i=i + 1, d=DRIVE),
+                "id4": units, "func_type": func, "rsp_node": i + 1, "ord_data_type": dtype,
+                "ordinate_spec_data_type": o_spec, "ordinate_len_unit_exp": o_len,
+                "ordinate_force_unit_exp": o_force, "ordinate_temp_unit_exp": 0,
+                "ordinate_axis_lab": o_lab, "ordinate_axis_units_lab": o_unit,
+                "orddenom_spec_data_type": d_spec, "orddenom_len_unit_exp": d_len,
+                "orddenom_force_unit_exp": d_force, "orddenom_temp_unit_exp": 0,
+                "orddenom_axis_lab": d_lab, "orddenom_axis_units_lab": d_unit,
+                "data": values[i],
+            })
+            sets.append(d)
     if os.path.exists(path):
         os.remove(path)
     pyuff.UFF(path).write_sets(sets, mode="add")
