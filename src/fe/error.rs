@@ -70,6 +70,15 @@ pub enum FeError {
 }
 
 impl FeError {
+    /// The message without its leading `key: ` (for errors that name the key themselves).
+    pub fn detail(&self) -> String {
+        let msg = self.to_string();
+        match msg.strip_prefix(&format!("{}: ", self.key())) {
+            Some(rest) => rest.to_string(),
+            None => msg,
+        }
+    }
+
     /// The study key this error concerns, e.g. `structure.adhesive.length`.
     pub fn key(&self) -> &str {
         match self {

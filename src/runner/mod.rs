@@ -796,7 +796,7 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
     let cost = match &spec {
         Some(spec) => Some(
             crate::fe::joint::joint_cost_estimate(spec)
-                .map_err(|e| study_err(study, e.key().to_string(), e.to_string()))?,
+                .map_err(|e| study_err(study, e.key().to_string(), e.detail()))?,
         ),
         None => None,
     };

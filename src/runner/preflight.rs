@@ -321,7 +321,7 @@ pub fn discretisation_errors(
         });
     }
     let (fine, _) = crate::fe::joint::build_joint_model_refined(&spec, 2)
-        .map_err(|e| study_err(study, e.key().to_string(), e.to_string()))?;
+        .map_err(|e| study_err(study, e.key().to_string(), e.detail()))?;
     let n = N_MODES_CHECKED.min(built.model.n_dof() / 3).max(1);
     // the frequencies converge as the square of the residual: 1e-6 gives them to ~1e-12
     let params = crate::modes::EigenParams {

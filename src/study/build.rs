@@ -95,7 +95,7 @@ pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> 
             let (m, info) = build_joint_model(&spec).map_err(|e| StudyError {
                 file: file.to_string(),
                 key: e.key().to_string(),
-                message: e.to_string(),
+                message: e.detail(),
             })?;
             (m, Some(info))
         }
@@ -113,7 +113,7 @@ pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> 
             let (m, info) = crate::fe::lap::build_lap_model(&spec).map_err(|e| StudyError {
                 file: file.to_string(),
                 key: e.key().to_string(),
-                message: e.to_string(),
+                message: e.detail(),
             })?;
             (m, Some(info))
         }

@@ -480,7 +480,7 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
                 tangential_n_m3: b.tangential,
             };
             crate::fe::base::check_springs(&springs, "base_springs")
-                .map_err(|e| ctx.err(e.key().to_string(), e.to_string()))?;
+                .map_err(|e| ctx.err(e.key().to_string(), e.detail()))?;
             Some(springs)
         }
     };
