@@ -380,9 +380,9 @@ fn resolve_divisions(l: &JointLayout, size: &MeshSize) -> Result<JointDivisions,
 /// Cells of the graded mesh at the bond line's edges, as a fraction of its thickness.
 pub const GRADED_EDGE_FRACTION: f64 = 0.125;
 
-/// The joint's grid: [`resolve_divisions`]' equal cells, or with `grading`, `structure.mesh.grading_ratio`, the cells graded
-/// towards the bond line's edges (edge cells [`GRADED_EDGE_FRACTION`] of its thickness),
-/// its cost checked against the machine's memory.
+/// The joint's grid: [`resolve_divisions`]' equal cells, or with a grading ratio
+/// (`structure.mesh.grading_ratio`) the cells graded towards the bond line's edges (edge cells
+/// [`GRADED_EDGE_FRACTION`] of its thickness), its cost checked against the machine's memory.
 fn resolve_grid(l: &JointLayout, mesh: &MeshParams) -> Result<JointGrid, FeError> {
     let Some(r) = mesh.grading else {
         let div = resolve_divisions(l, &mesh.size)?;
@@ -403,6 +403,7 @@ fn resolve_grid(l: &JointLayout, mesh: &MeshParams) -> Result<JointGrid, FeError
                     .into(),
         });
     };
+    // the element size is validated (key `structure.mesh.element_size`) as for a uniform mesh
     resolve_divisions(l, &mesh.size)?;
     let grid = JointGrid::graded(
         l,
@@ -483,7 +484,7 @@ pub fn build_joint_model_refined(
             ),
         });
     }
-    let mesh = joint_mesh_on(&fine);
+    let mesh = joint_mesh_on(fine);
     let (model, info, _) = assemble_joint(spec, &mesh, &layout)?;
     Ok((model, info))
 }
@@ -504,7 +505,7 @@ pub fn joint_mesh_from_spec(spec: &JointSpec) -> Result<(HexMesh, JointLayout), 
         spec.adhesive_rho_kg_m3,
     )?;
     let grid = resolve_grid(&layout, &spec.mesh)?;
-    Ok((joint_mesh_on(&grid), layout))
+    Ok((joint_mesh_on(grid), layout))
 }
 
 fn check_damping(d: &AdherendDamping) -> Result<(), FeError> {

@@ -447,13 +447,18 @@ impl JointGrid {
 /// Mesh of the bonded joint: beam + adhesive, nodes merged on y = 0, every node of the
 /// adhesive's lower face y = -t_a fixed.
 pub fn joint_mesh(layout: &JointLayout, div: &JointDivisions) -> HexMesh {
-    joint_mesh_on(&JointGrid::uniform(layout, div))
+    joint_mesh_on(JointGrid::uniform(layout, div))
 }
 
 /// [`joint_mesh`] on a given grid.
-pub fn joint_mesh_on(grid: &JointGrid) -> HexMesh {
-    let (xs, ys, zs) = (grid.xs.clone(), grid.ys.clone(), grid.zs.clone());
-    let (adh_cells, ny_a) = (grid.adh_cells, grid.ny_a);
+pub fn joint_mesh_on(grid: JointGrid) -> HexMesh {
+    let JointGrid {
+        xs,
+        ys,
+        zs,
+        adh_cells,
+        ny_a,
+    } = grid;
     structured_mesh(
         xs,
         ys,

@@ -310,15 +310,16 @@ pub fn discretisation_errors(
     let Some(spec) = crate::study::build::joint_spec(&study.structure) else {
         return Ok(Vec::new());
     };
+    let fail = |message: String| RunError::Analysis {
+        analysis: "the discretisation-error estimate".into(),
+        message,
+    };
     // the refined mesh has about 8 times the study mesh's DOFs
     let refined_dofs = 8 * built.model.n_dof();
     if refined_dofs > MAX_REFINED_DOFS {
-        return Err(RunError::Analysis {
-            analysis: "the discretisation-error estimate".into(),
-            message: format!(
-                "the mesh refined twice per direction would have about {refined_dofs} DOFs, more than the {MAX_REFINED_DOFS} it solves: compare two meshes with `rfmlab convergence` instead"
-            ),
-        });
+        return Err(fail(format!(
+            "the mesh refined twice per direction would have about {refined_dofs} DOFs, more than the {MAX_REFINED_DOFS} it solves: compare two meshes with `rfmlab convergence` instead"
+        )));
     }
     let (fine, _) = crate::fe::joint::build_joint_model_refined(&spec, 2)
         .map_err(|e| study_err(study, e.key().to_string(), e.detail()))?;
@@ -329,17 +330,10 @@ pub fn discretisation_errors(
         ..crate::modes::EigenParams::default()
     };
     let freqs = |m: &crate::fe::StructuralModel| -> Result<Vec<f64>, RunError> {
-        let k = crate::modes::real::sp_add(&m.k_b, &m.s, e_storage_pa).map_err(|e| {
-            RunError::Analysis {
-                analysis: "the discretisation-error estimate".into(),
-                message: e.to_string(),
-            }
-        })?;
+        let k = crate::modes::real::sp_add(&m.k_b, &m.s, e_storage_pa)
+            .map_err(|e| fail(e.to_string()))?;
         let (lam, _) =
-            crate::modes::real_modes(&k, &m.m, n, &params).map_err(|e| RunError::Analysis {
-                analysis: "the discretisation-error estimate".into(),
-                message: e.to_string(),
-            })?;
+            crate::modes::real_modes(&k, &m.m, n, &params).map_err(|e| fail(e.to_string()))?;
         Ok(lam
             .iter()
             .map(|l| l.max(0.0).sqrt() / std::f64::consts::TAU)

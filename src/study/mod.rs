@@ -66,7 +66,7 @@ pub struct Joint {
     pub full_integration: bool,
     /// true: snap points to the nearest node; false: interpolate with shape functions.
     pub snap_points: bool,
-    /// Growth ratio of a mesh graded towards the bond line's edges (`structure.mesh.grading`).
+    /// Growth ratio of a mesh graded towards the bond line's edges (`structure.mesh.grading_ratio`).
     pub mesh_grading: Option<f64>,
 }
 

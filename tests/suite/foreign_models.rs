@@ -11,7 +11,7 @@
 //! Python: env RFMLAB_PYTHON (numpy, scipy, scikit-fem); skipped with a notice when missing,
 //! unless env CI is set.
 
-use crate::python_checks::{python_with, script};
+use crate::python_checks::{python_with, run_script};
 use rfmlab::common::C64;
 use rfmlab::fe::foreign::{import_model_files, ImportFiles, ImportFormat, Units};
 use rfmlab::fe::harwell_boeing::{format_hb, parse_hb};
@@ -28,16 +28,7 @@ const TRUTH: [f64; 4] = [7.2e6, 1.1e6, 2.8e6, 5.0e3];
 /// Run scripts/foreign_joint.py into `dir`; None (skip) when Python with scikit-fem is absent.
 fn generate(dir: &Path, test: &str) -> Option<serde_json::Value> {
     let py = python_with(&["numpy", "scipy", "skfem"], test)?;
-    let out = Command::new(&py)
-        .arg(script("foreign_joint.py"))
-        .arg(dir)
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "foreign_joint.py failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_script(&py, "foreign_joint.py", &[dir], &[]);
     let text = std::fs::read_to_string(dir.join("modes.json")).unwrap();
     Some(serde_json::from_str(&text).unwrap())
 }

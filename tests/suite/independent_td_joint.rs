@@ -18,9 +18,8 @@
 //! Python: env RFMLAB_PYTHON (numpy, scipy, scikit-fem, pyuff); skipped with a notice when
 //! missing, unless env CI is set.
 
-use crate::python_checks::{python_with, script};
+use crate::python_checks::{python_with, run_script};
 use std::path::Path;
-use std::process::Command;
 
 /// Model 4 truth (E0, h, E1, eta1), SI, as the script's truth.json states it.
 const TRUTH: [f64; 4] = [7.2e6, 1.1e6, 2.8e6, 5.0e3];
@@ -28,24 +27,15 @@ const TRUTH: [f64; 4] = [7.2e6, 1.1e6, 2.8e6, 5.0e3];
 /// Run the generator into `dir`; None (skip) when Python lacks its packages.
 fn generate(dir: &Path, seed: u64, test: &str) -> Option<serde_json::Value> {
     let py = python_with(&["numpy", "scipy", "skfem", "pyuff"], test)?;
-    let out = Command::new(&py)
-        .arg(script("independent_td_joint.py"))
-        .arg(dir)
-        .args([
-            "--mesh",
-            "matched",
-            "--seed",
-            &seed.to_string(),
-            "--jobs",
-            "1",
-        ])
-        .env("OMP_NUM_THREADS", "1")
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "independent_td_joint.py failed: {}",
-        String::from_utf8_lossy(&out.stderr)
+    let dir_arg = dir.display().to_string();
+    let seed = seed.to_string();
+    run_script(
+        &py,
+        "independent_td_joint.py",
+        &[
+            &dir_arg, "--mesh", "matched", "--seed", &seed, "--jobs", "1",
+        ],
+        &[("OMP_NUM_THREADS", "1")],
     );
     let text = std::fs::read_to_string(dir.join("truth.json")).unwrap();
     Some(serde_json::from_str(&text).unwrap())

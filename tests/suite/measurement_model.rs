@@ -9,13 +9,12 @@
 //! The plant is the script's: accelerance `-w^2 sum_r c_ir / (w_r^2 (1 + j eta_r) - w^2)`, a
 //! heavily damped mode (22 Hz, eta 0.2) and a lighter one (390 Hz, eta 0.08), two channels.
 
-use crate::python_checks::{python_for_scipy, script};
+use crate::python_checks::{python_for_scipy, run_script};
 use rfmlab::common::C64;
 use rfmlab::experiment::{ExperimentError, Plant, Window};
 use rfmlab::forward::{EstimatorSpec, MeasurementModel, MeasurementParams};
 use rfmlab::study::Estimator;
 use std::f64::consts::PI;
-use std::process::Command;
 
 struct ModalPlant {
     /// (f_r Hz, eta_r, modal constant per channel 1/kg)
@@ -68,16 +67,11 @@ fn run_mc(test: &str) -> Option<Reference> {
     let py = python_for_scipy(test)?;
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("mc.json");
-    let run = Command::new(&py)
-        .arg(script("welch_h1_mc.py"))
-        .arg("--out")
-        .arg(&out)
-        .output()
-        .expect("run python");
-    assert!(
-        run.status.success(),
-        "welch_h1_mc.py failed: {}",
-        String::from_utf8_lossy(&run.stderr)
+    run_script(
+        &py,
+        "welch_h1_mc.py",
+        &[std::ffi::OsStr::new("--out"), out.as_os_str()],
+        &[],
     );
     let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
     let v = |x: &serde_json::Value| -> Vec<f64> {

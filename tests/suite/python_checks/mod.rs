@@ -22,6 +22,28 @@ pub fn script(name: &str) -> PathBuf {
         .join(name)
 }
 
+/// `py scripts/<name> args...` with the environment `envs`; asserts that it succeeded (its
+/// stderr in the message) and returns its output.
+pub fn run_script<S: AsRef<std::ffi::OsStr>>(
+    py: &Path,
+    name: &str,
+    args: &[S],
+    envs: &[(&str, &str)],
+) -> std::process::Output {
+    let out = Command::new(py)
+        .arg(script(name))
+        .args(args)
+        .envs(envs.iter().copied())
+        .output()
+        .expect("run python");
+    assert!(
+        out.status.success(),
+        "{name} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// The interpreter for the SciPy round trips, when it exists. None (with a skip notice naming
 /// `test`) when it does not; panics instead when `CI` is set.
 pub fn python_for_scipy(test: &str) -> Option<PathBuf> {
@@ -42,17 +64,7 @@ pub fn scipy_round_trip(py: &Path, model: &StructuralModel) -> StructuralModel {
     let ours = tempfile::tempdir().unwrap();
     let theirs = tempfile::tempdir().unwrap();
     export_model(model, ours.path()).unwrap();
-    let out = Command::new(py)
-        .arg(script("mm_roundtrip.py"))
-        .arg(ours.path())
-        .arg(theirs.path())
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "mm_roundtrip.py failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    run_script(py, "mm_roundtrip.py", &[ours.path(), theirs.path()], &[]);
     import_model(&MmPaths::in_dir(theirs.path())).unwrap()
 }
 
@@ -108,25 +120,7 @@ pub fn check_parquet(py: &Path, dir: &Path) -> (serde_json::Value, String) {
 /// The interpreter for the ArviZ reference of the MCMC diagnostics, when it imports arviz. None
 /// (with a skip notice naming `test`) when it does not; panics instead when `CI` is set.
 pub fn python_for_arviz(test: &str) -> Option<PathBuf> {
-    let py = interpreter();
-    let ok = Command::new(&py)
-        .args(["-c", "import arviz"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if ok {
-        return Some(py);
-    }
-    let msg = format!(
-        "Python with arviz not found at '{}' (set RFMLAB_PYTHON, or: \
-         .venv/bin/pip install -r scripts/requirements.txt)",
-        py.display()
-    );
-    if std::env::var_os("CI").is_some() {
-        panic!("{msg}");
-    }
-    eprintln!("SKIPPED {test}: {msg}");
-    None
+    python_with(&["arviz"], test)
 }
 
 /// scripts/arviz_reference.py on `input` (written to a temporary JSON file): ArviZ's report.
@@ -134,15 +128,6 @@ pub fn arviz_reference(py: &Path, input: &serde_json::Value) -> serde_json::Valu
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("draws.json");
     std::fs::write(&path, serde_json::to_vec(input).unwrap()).unwrap();
-    let out = Command::new(py)
-        .arg(script("arviz_reference.py"))
-        .arg(&path)
-        .output()
-        .expect("run python");
-    assert!(
-        out.status.success(),
-        "arviz_reference.py failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = run_script(py, "arviz_reference.py", &[&path], &[]);
     serde_json::from_slice(&out.stdout).expect("arviz_reference.py printed JSON")
 }
