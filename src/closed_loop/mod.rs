@@ -33,8 +33,11 @@
 //!    place of the current law and it competes with the round's effects by Laplace evidence.
 
 pub mod alternative;
+pub mod conclude;
 pub mod confounding;
+pub mod null;
 pub mod signatures;
+pub mod verdict;
 
 use crate::common::C64;
 use crate::forward::{Effect, EffectTerm, Effects, ForwardError};
@@ -229,6 +232,12 @@ pub struct Fit {
     pub values: Vec<f64>,
     pub sd: Vec<f64>,
     pub log_evidence: f64,
+    /// Log likelihood plus log prior at the MAP.
+    pub log_posterior: f64,
+    /// Whether the Laplace Hessian was positive definite.
+    pub positive_definite: bool,
+    /// Laplace covariance of the physical values (row-major, the order of `names`).
+    pub cov: Vec<f64>,
     pub residuals: Residuals,
 }
 
@@ -553,7 +562,7 @@ fn install(
     Ok(())
 }
 
-fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
+pub(crate) fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
     Ok(Fit {
         law: post.likelihood.forward.law.name().to_string(),
         n_law: post.likelihood.forward.law.n_params(),
@@ -561,6 +570,9 @@ fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
         values: r.map_physical.clone(),
         sd: r.laplace.sd_physical(),
         log_evidence: r.laplace.log_evidence,
+        log_posterior: r.laplace.log_likelihood + r.laplace.log_prior,
+        positive_definite: r.laplace.positive_definite,
+        cov: r.laplace.cov_physical.clone(),
         residuals: residuals(post, &r.map_physical)?,
     })
 }

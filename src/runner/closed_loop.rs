@@ -32,6 +32,13 @@ pub struct DiagnoseSummary {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct DiagnoseLevel {
     pub level: String,
+    /// `nothing_missing`, `explained`, `unexplained` or `confounded`
+    /// ([`crate::closed_loop::verdict`]).
+    pub status: String,
+    /// The verdict behind the status (null level, where the residual is, tentative effects).
+    pub verdict: crate::closed_loop::verdict::Verdict,
+    /// The calibrated null level of the normalised chi-square.
+    pub null: crate::closed_loop::null::NullCalibration,
     pub conclusion: String,
     pub chi2_normalised_before: f64,
     pub chi2_normalised_after: f64,
@@ -301,6 +308,7 @@ pub fn diagnose_into(
         };
     let mut summary = Vec::new();
     let mut results = Vec::new();
+    let mut verdicts = Vec::new();
     for level in levels.iter().filter(|l| inf.levels.contains(&l.name)) {
         let mut post = bayes::build_posterior(study, inf, engine, level, law.as_ref(), &name)?;
         let x0 = bayes::initial_x(&post, &spec.initial);
@@ -339,14 +347,23 @@ pub fn diagnose_into(
                 analysis: format!("closed loop of {name} at {}", level.name),
                 message: e.to_string(),
             })?;
+        let (res, verdict, null) = verdict_of(study, level, &mut post, res, params)?;
+        params.progress.say(&format!(
+            "{}: {} (null level {:.3}, threshold {:.3}, {:.1} s)",
+            level.name, verdict.status, null.mean, null.threshold, null.seconds
+        ));
         // The truth of the final law (the study's, or the alternative that replaced it).
         let truth = level
             .truth
             .as_ref()
             .filter(|t| t.model.name() == res.after.law)
             .map(|t| t.params.clone());
+        verdicts.push(verdict.clone());
         summary.push(DiagnoseLevel {
             level: level.name.clone(),
+            status: verdict.status.to_string(),
+            verdict,
+            null,
             conclusion: res.conclusion.clone(),
             chi2_normalised_before: res.before.residuals.chi2_normalised,
             chi2_normalised_after: res.after.residuals.chi2_normalised,
@@ -386,7 +403,9 @@ pub fn diagnose_into(
         .map_err(out_err)?;
     dir.write_table(&candidates_table(&results)?)
         .map_err(out_err)?;
-    dir.write_table(&closed_loop_table(&results)?)
+    dir.write_table(&closed_loop_table(&results, &verdicts)?)
+        .map_err(out_err)?;
+    dir.write_table(&verdict_table(&results, &verdicts, &summary)?)
         .map_err(out_err)?;
     dir.write_table(&signatures_table(&results)?)
         .map_err(out_err)?;
@@ -409,6 +428,7 @@ pub fn diagnose_into(
         &study.name,
         &name,
         &results,
+        &verdicts,
         term_rom.as_ref().map(|(t, c)| (t.names.as_slice(), c)),
     );
     dir.write_bytes("closed_loop.md", md.as_bytes())
@@ -707,12 +727,34 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
 
 /// `closed_loop`: per level and quantity, before and after (parameters with sds, and the
 /// residual statistics), and the truth where the data are simulated.
-fn closed_loop_table(results: &[LevelResult]) -> Result<Table, RunError> {
+/// Every row carries the level's `status`; the law's parameters of an `unexplained` level
+/// carry its warning, those of a `confounded` level their range over the effect's plausible
+/// sizes.
+fn closed_loop_table(
+    results: &[LevelResult],
+    verdicts: &[crate::closed_loop::verdict::Verdict],
+) -> Result<Table, RunError> {
     let (mut lv, mut q) = (Vec::new(), Vec::new());
     let (mut b, mut bs, mut a, mut as_, mut tr) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for (level, _, ids, res, truth) in results {
+    let (mut status, mut warning) = (Vec::new(), Vec::new());
+    for ((level, _, ids, res, truth), v) in results.iter().zip(verdicts) {
+        let n_rows = q.len();
         for pc in parameter_changes(res, truth.as_deref()) {
+            let law_param = res.after.names[..res.after.n_law].contains(&pc.name);
+            let range = v.confounded.first().and_then(|c| {
+                c.ranges.iter().find(|r| r.0 == pc.name).map(|(_, lo, hi)| {
+                    format!(
+                        "confounded with {} (correlation {:.4}): range [{lo:.4e}, {hi:.4e}]",
+                        c.effect, c.correlation
+                    )
+                })
+            });
+            warning.push(match (law_param, &v.warning, range) {
+                (true, Some(w), _) => w.clone(),
+                (true, None, Some(r)) => r,
+                _ => String::new(),
+            });
             lv.push(level.clone());
             q.push(pc.name);
             b.push(pc.before);
@@ -744,16 +786,20 @@ fn closed_loop_table(results: &[LevelResult]) -> Result<Table, RunError> {
             a.push(Some(y));
             as_.push(None);
             tr.push(None);
+            warning.push(String::new());
         }
+        status.extend(std::iter::repeat_n(v.status.to_string(), q.len() - n_rows));
     }
     let mut t = Table::new("closed_loop");
     t.push_str("level", lv)
+        .and_then(|t| t.push_str("status", status))
         .and_then(|t| t.push_str("quantity", q))
         .and_then(|t| t.push_opt_f64("before", "SI", b))
         .and_then(|t| t.push_opt_f64("before_sd", "SI", bs))
         .and_then(|t| t.push_opt_f64("after", "SI", a))
         .and_then(|t| t.push_opt_f64("after_sd", "SI", as_))
         .and_then(|t| t.push_opt_f64("truth", "SI", tr))
+        .and_then(|t| t.push_str("warning", warning))
         .map_err(out_err)?;
     Ok(t)
 }
@@ -762,10 +808,22 @@ fn markdown(
     study: &str,
     model: &str,
     results: &[LevelResult],
+    verdicts: &[crate::closed_loop::verdict::Verdict],
     term: Option<(&[String], &crate::rom::TermCertificate)>,
 ) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "# Closed loop: {study}, {model}\n");
+    // The first line: the status of every level.
+    let status = results
+        .iter()
+        .zip(verdicts)
+        .map(|(r, v)| format!("{} `{}`", r.0, v.status))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let _ = writeln!(s, "# Closed loop: {study}, {model}: {status}\n");
+    let _ = writeln!(
+        s,
+        "Status per level: `nothing_missing` (the residual is consistent with noise, nothing accepted), `explained` (effects accepted, the final residual consistent with noise), `unexplained` (the residual stays above the calibrated null level: the effects accepted on the way are tentative and the adhesive's parameters carry a warning), `confounded` (an effect the data cannot separate from the adhesive's parameters: they are given as a range). Consistent with noise: the normalised chi-square at most the threshold of its null level, calibrated on replicates of the fitted model through the same measurement chain.\n"
+    );
     if let Some((names, c)) = term {
         let _ = writeln!(
             s,
@@ -779,8 +837,29 @@ fn markdown(
             c.n_lines
         );
     }
-    for (level, _, ids, res, truth) in results {
-        let _ = writeln!(s, "## Level {level}\n\n**{}**\n", res.conclusion);
+    for ((level, _, ids, res, truth), v) in results.iter().zip(verdicts) {
+        let _ = writeln!(
+            s,
+            "## Level {level}: `{}`\n\n**{}**\n\n{}\n",
+            v.status, v.sentence, res.conclusion
+        );
+        if let Some(w) = &v.warning {
+            let _ = writeln!(s, "**Warning on the adhesive's parameters:** {w}.\n");
+        }
+        for d in &v.drop_one {
+            let _ = writeln!(
+                s,
+                "- drop-one check of {}: {:.1} nats in the final model, {:.1} once widened by kappa = {:.2}: {}",
+                d.effect,
+                d.gain,
+                d.scaled_gain,
+                d.kappa,
+                if d.kept { "kept (tentative)" } else { "dropped" }
+            );
+        }
+        if !v.drop_one.is_empty() {
+            s.push('\n');
+        }
         let _ = writeln!(
             s,
             "| round | rank | effect | score T | p | evidence gain (nat) | size +- sd | 95 % interval | verdict |\n|---|---|---|---|---|---|---|---|---|"
@@ -933,4 +1012,218 @@ fn signatures_markdown(
             let _ = writeln!(s, "\nSignatures beyond 5 sd {when}: {}.", f.join("; "));
         }
     }
+}
+
+/// The null level of the level's measurement chain ([`crate::closed_loop::null`]: replicate
+/// Welch experiments of the fitted model through the declared estimator, else the noise
+/// model's own errors), then the drop-one check and the verdict
+/// ([`crate::closed_loop::conclude`]).
+fn verdict_of(
+    study: &Study,
+    level: &super::LevelData,
+    post: &mut crate::inference::likelihood::FrfPosterior<'_>,
+    res: ClosedLoopResult,
+    params: &ClosedLoopParams,
+) -> Result<
+    (
+        ClosedLoopResult,
+        crate::closed_loop::verdict::Verdict,
+        crate::closed_loop::null::NullCalibration,
+    ),
+    RunError,
+> {
+    use crate::closed_loop::null::{calibrate, Chain, NullParams};
+    let fail = |m: String| RunError::Analysis {
+        analysis: format!("verdict of the closed loop at {}", level.name),
+        message: m,
+    };
+    let est = study
+        .measurements
+        .as_ref()
+        .and_then(|m| m.estimator.as_ref());
+    let chain = match est {
+        Some(e) => {
+            let nb = (e.fs_hz * e.block_s).round() as usize;
+            let n_d = match &post.likelihood.noise.scale {
+                crate::inference::likelihood::Scale::Coherence { n_averages, .. } => *n_averages,
+                _ => 0.0,
+            };
+            // Blocks: the file's count, else the count whose Welch equivalent is n_d.
+            let blocks = level.n_averages.map(|n| n as usize).unwrap_or_else(|| {
+                (1..=20_000)
+                    .min_by(|&a, &b| {
+                        let f = |n| {
+                            (crate::experiment::estimator::effective_averages(
+                                e.window,
+                                nb,
+                                nb / 2,
+                                n,
+                            ) - n_d)
+                                .abs()
+                        };
+                        f(a).total_cmp(&f(b))
+                    })
+                    .unwrap_or(200)
+            });
+            let spec = super::bayes::estimator_spec(e, &level.freq_hz);
+            let force = study
+                .measurements
+                .as_ref()
+                .and_then(|m| m.levels.iter().find(|l| l.name == level.name))
+                .and_then(|l| l.force_rms_n)
+                .unwrap_or(1.0);
+            Chain::Welch(crate::experiment::ChainParams {
+                force_rms_n: force,
+                band_hz: spec.force_band_hz,
+                fs_hz: e.fs_hz,
+                block_s: e.block_s,
+                n_averages: blocks,
+                window: e.window,
+                shaker: e.shaker,
+                lines_hz: level.freq_hz.clone(),
+                mode: crate::experiment::Mode::FrequencyDomain,
+                ..Default::default()
+            })
+        }
+        None => Chain::NoiseModel,
+    };
+    params
+        .progress
+        .say(&format!("{}: null level of the residual", level.name));
+    let np = NullParams {
+        seed: study.seed,
+        ..NullParams::default()
+    };
+    let null = calibrate(post, &res.after.values, &chain, &level.response_ids, &np)
+        .map_err(|e| fail(e.to_string()))?;
+    let vp = crate::closed_loop::verdict::VerdictParams {
+        threshold_nats: params.threshold_nats,
+        p_threshold: params.p_threshold,
+        ..Default::default()
+    };
+    let (res, v) = crate::closed_loop::conclude::conclude(
+        post,
+        res,
+        &null,
+        &level.freq_hz,
+        &level.response_ids,
+        params,
+        &vp,
+    )
+    .map_err(|e| fail(e.to_string()))?;
+    Ok((res, v, null))
+}
+
+/// `verdict`: one row per level: the status, the null level and threshold, where the residual
+/// is, the tentative, dropped and confounded effects, and the sentence of the report.
+fn verdict_table(
+    results: &[LevelResult],
+    verdicts: &[crate::closed_loop::verdict::Verdict],
+    summary: &[DiagnoseLevel],
+) -> Result<Table, RunError> {
+    let mut t = Table::new("verdict");
+    let lv: Vec<String> = results.iter().map(|r| r.0.clone()).collect();
+    let st: Vec<String> = verdicts.iter().map(|v| v.status.to_string()).collect();
+    let f = |g: &dyn Fn(&crate::closed_loop::verdict::Verdict) -> f64| -> Vec<f64> {
+        verdicts.iter().map(g).collect()
+    };
+    let text = |g: &dyn Fn(&crate::closed_loop::verdict::Verdict) -> String| -> Vec<String> {
+        verdicts.iter().map(g).collect()
+    };
+    let join = |v: Vec<String>| v.join("; ");
+    t.push_str("level", lv)
+        .and_then(|t| t.push_str("status", st))
+        .and_then(|t| t.push_f64("chi2_before", "1", f(&|v| v.chi2_before)))
+        .and_then(|t| t.push_f64("chi2_after", "1", f(&|v| v.chi2_after)))
+        .and_then(|t| t.push_f64("null_mean", "1", f(&|v| v.null_mean)))
+        .and_then(|t| t.push_f64("null_sd", "1", f(&|v| v.null_sd)))
+        .and_then(|t| t.push_f64("threshold", "1", f(&|v| v.threshold)))
+        .and_then(|t| t.push_f64("false_alarm", "1", f(&|v| v.false_alarm)))
+        .and_then(|t| t.push_f64("excess", "1", f(&|v| v.excess)))
+        .and_then(|t| {
+            t.push_str(
+                "null_method",
+                summary.iter().map(|s| s.null.method.clone()).collect(),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "worst_bands",
+                text(&|v| {
+                    join(
+                        v.bands
+                            .iter()
+                            .map(|b| {
+                                format!(
+                                    "{:.0}-{:.0} Hz: {:.3}",
+                                    b.lo_hz, b.hi_hz, b.chi2_normalised
+                                )
+                            })
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "channels",
+                text(&|v| {
+                    join(
+                        v.channels
+                            .iter()
+                            .map(|c| {
+                                format!(
+                                    "ch{}: {:.3} (null {:.3})",
+                                    c.id, c.chi2_normalised, c.null_mean
+                                )
+                            })
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "closest",
+                text(&|v| {
+                    join(
+                        v.closest
+                            .iter()
+                            .map(|c| format!("{}: {:.2} nats", c.name, c.gain))
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| t.push_str("tentative", text(&|v| join(v.tentative.clone()))))
+        .and_then(|t| {
+            t.push_str(
+                "dropped",
+                text(&|v| {
+                    join(
+                        v.drop_one
+                            .iter()
+                            .filter(|d| !d.kept)
+                            .map(|d| d.effect.clone())
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "confounded",
+                text(&|v| {
+                    join(
+                        v.confounded
+                            .iter()
+                            .map(|c| format!("{} (correlation {:.4})", c.effect, c.correlation))
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| t.push_str("sentence", text(&|v| v.sentence.clone())))
+        .map_err(out_err)?;
+    Ok(t)
 }

@@ -22,6 +22,7 @@ mod closed_loop_alt;
 mod closed_loop_fast;
 mod closed_loop_independent;
 mod closed_loop_td;
+mod closed_loop_verdict;
 mod correlation;
 mod csv_io;
 mod data_checks;
