@@ -642,7 +642,9 @@ pub fn run_closed_loop_with_laws<'a>(
         let mut scored = Vec::new();
         let mut starts: Vec<(String, Vec<f64>)> = Vec::new();
         for c in candidates {
-            if accepted.iter().any(|(e, _, _)| e == c)
+            if accepted
+                .iter()
+                .any(|(e, _, _)| e == c || same_mass_point(e, c))
                 || post
                     .likelihood
                     .forward
@@ -1052,6 +1054,16 @@ pub(crate) fn evidence_gain(r: &MapResult, current: &MapResult, extra: i64, n_da
         let lp = |l: &crate::inference::map::Laplace| l.log_likelihood + l.log_prior;
         lp(&r.laplace) - lp(&current.laplace) - 0.5 * extra as f64 * (2.0 * n_data as f64).ln()
     }
+}
+
+/// Whether `a` and `b` are masses (a point mass or a sensor mass) at the same point: once one
+/// is accepted the other is not tried.
+fn same_mass_point(a: &Effect, b: &Effect) -> bool {
+    let id = |e: &Effect| match e {
+        Effect::PointMass { id, .. } | Effect::SensorMass { id, .. } => Some(*id),
+        _ => None,
+    };
+    id(a).is_some() && id(a) == id(b)
 }
 
 /// Whether `e` changes the constitutive law (a Maxwell branch) rather than the structure or

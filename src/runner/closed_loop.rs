@@ -195,6 +195,11 @@ pub fn diagnose_into(
     if !needs_all_inputs(&with_loop) {
         with_loop.closed_loop = Some(crate::study::effects::ClosedLoopSettings::default());
     }
+    // A sensor's mass acts in x, y and z: the other two directions of every measured point
+    // of a meshed joint become model points (and engine inputs) for the sensor-mass candidate.
+    if crate::study::build::joint_spec(&with_loop.structure).is_some() {
+        with_loop.structure.points = with_all_directions(&with_loop.structure.points);
+    }
     let study = &with_loop;
     let Some(inf) = &study.inference else {
         return Err(super::study_err(
@@ -321,6 +326,11 @@ pub fn diagnose_into(
             .map(|(o, id)| (*o, *id))
             .collect();
         let mut candidates = default_candidates(&level.response_ids, &mass_points);
+        candidates.extend(sensor_mass_candidates(
+            &built.model.points,
+            engine.inputs(),
+            &level.response_ids,
+        ));
         let band = (
             level.freq_hz.first().copied().unwrap_or(0.0),
             level.freq_hz.last().copied().unwrap_or(0.0),
@@ -1226,4 +1236,46 @@ fn verdict_table(
         .and_then(|t| t.push_str("sentence", text(&|v| v.sentence.clone())))
         .map_err(out_err)?;
     Ok(t)
+}
+
+/// `points` with, for every point, the two other axes' directions at the same position (same
+/// id, after the declared points so that a point's id still names its measured direction).
+fn with_all_directions(points: &[crate::study::Point]) -> Vec<crate::study::Point> {
+    use crate::common::{Axis, Direction};
+    let mut out = points.to_vec();
+    for p in points {
+        for axis in [Axis::X, Axis::Y, Axis::Z] {
+            if !out.iter().any(|q| q.id == p.id && q.direction.axis == axis) {
+                out.push(crate::study::Point {
+                    direction: Direction::new(axis, 1),
+                    ..p.clone()
+                });
+            }
+        }
+    }
+    out
+}
+
+/// A sensor-mass candidate (x, y and z) at every measured point whose three directions are
+/// engine inputs.
+fn sensor_mass_candidates(
+    points: &[crate::fe::ObservationPoint],
+    inputs: &[usize],
+    ids: &[u32],
+) -> Vec<crate::forward::Effect> {
+    use crate::common::Axis;
+    ids.iter()
+        .filter_map(|&id| {
+            let at = |axis: Axis| {
+                points
+                    .iter()
+                    .position(|p| p.id == id && p.direction.axis == axis)
+                    .filter(|k| inputs.contains(k))
+            };
+            Some(crate::forward::Effect::SensorMass {
+                points: [at(Axis::X)?, at(Axis::Y)?, at(Axis::Z)?],
+                id,
+            })
+        })
+        .collect()
 }

@@ -58,6 +58,7 @@ mod rom;
 mod rom_joint;
 mod rom_terms;
 mod runner;
+mod sensor_mass;
 mod structural_effects;
 mod uff_fuzz;
 mod uff_real_files;
