@@ -65,7 +65,7 @@ impl Default for NullParams {
 pub enum Chain {
     /// A Welch H1 estimator: window, block, rate, force band, number of blocks and force RMS
     /// as declared (`lines_hz` must be the data's lines); response noise from the coherence.
-    Welch(ChainParams),
+    Welch(Box<ChainParams>),
     /// The noise model's own Gaussian errors around the fitted prediction.
     NoiseModel,
 }
@@ -115,8 +115,11 @@ struct ModelPlant<'m, 'a> {
     fm: &'m ForwardModel<'a>,
     p: Vec<f64>,
     drive: usize,
-    cache: std::sync::Mutex<Option<(Vec<f64>, Vec<Vec<C64>>)>>,
+    cache: std::sync::Mutex<Option<Grid>>,
 }
+
+/// A frequency grid (Hz) and the plant's accelerance on it, `[channel][line]`.
+type Grid = (Vec<f64>, Vec<Vec<C64>>);
 
 impl Plant for ModelPlant<'_, '_> {
     fn n_channels(&self) -> usize {

@@ -1082,7 +1082,7 @@ fn verdict_of(
                 .and_then(|m| m.levels.iter().find(|l| l.name == level.name))
                 .and_then(|l| l.force_rms_n)
                 .unwrap_or(1.0);
-            Chain::Welch(crate::experiment::ChainParams {
+            Chain::Welch(Box::new(crate::experiment::ChainParams {
                 force_rms_n: force,
                 band_hz: spec.force_band_hz,
                 fs_hz: e.fs_hz,
@@ -1093,7 +1093,7 @@ fn verdict_of(
                 lines_hz: level.freq_hz.clone(),
                 mode: crate::experiment::Mode::FrequencyDomain,
                 ..Default::default()
-            })
+            }))
         }
         None => Chain::NoiseModel,
     };
