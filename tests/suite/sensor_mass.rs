@@ -54,6 +54,7 @@ fn sensor_mass_on_the_rom_equals_the_full_model_with_the_mass_on() {
     let params = RomParams {
         n_cert_moduli_per_axis: 2,
         n_cert_lines: 10,
+        reference: rfmlab::rom::Reference::SparseLu,
         ..RomParams::default()
     };
     let (rom, cert) = build_rom(&model, &inputs, &params).unwrap();
