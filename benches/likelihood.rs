@@ -5,7 +5,7 @@
 //! runner chooses by convergence; and its bias linearised at the point, what the samplers
 //! evaluate), side by side
 //! with the ROM sweep of the same 4 FRFs x 500 lines with derivatives that it is measured
-//! against (issue 11: at most twice the sweep).
+//! against (the target: at most twice the sweep).
 //! Run: `cargo bench --bench likelihood`.
 
 use criterion::{criterion_group, criterion_main, Criterion};

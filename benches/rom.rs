@@ -1,4 +1,4 @@
-//! Criterion benches of issue 3 on the paper's joint with 5 mm elements (10 248 free DOFs,
+//! Criterion benches of the certified ROM on the paper's joint with 5 mm elements (10 248 free DOFs,
 //! excitation at point 2, the 4 measured points): one pencil sweep of 4 FRFs x 500 lines
 //! (1-500 Hz) for the Model 4 E*(w) curve, with and without derivatives; the per-line
 //! dense LU sweep of the same ROM; the pencil preparation. The full-model sweep of the same

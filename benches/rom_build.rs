@@ -1,4 +1,4 @@
-//! Criterion bench of issue 3's build acceptance: assembly, basis and certificate of the ROM
+//! Criterion bench of the ROM build: assembly, basis and certificate of the ROM
 //! of the paper's joint on the 2.5 mm mesh (67 224 free DOFs), excitation at point 2 and the
 //! 4 measured points (4 FRFs), default settings: E' 0.5-50 MPa, E'' 0.01-20 MPa, 1-500 Hz,
 //! tolerance 1e-6, 9 moduli x 25 lines, GMRES reference. Ten samples of about 30 s each:

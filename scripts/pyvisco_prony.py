@@ -1,6 +1,6 @@
 """Generalized Maxwell (Prony series) fit of a storage/loss master curve by pyvisco.
 
-The independent reference for `rfmlab material` (issue 13 item 5): pyvisco's own pipeline on
+The independent reference for `rfmlab material`: pyvisco's own pipeline on
 the same curve (load.user_master, master.smooth, prony.discretize with one term per decade,
 prony.fit, then opt.nprony, which refits with N = n-1 ... 3 terms whose relaxation times are
 optimised). For every N it prints the Prony parameters and the RMS log10 errors of E' and E''

@@ -26,6 +26,41 @@
 //! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
 //!
 //! Numerical modules never import `study`, `output`, `plot` or the CLI.
+//!
+//! # The public API
+//! A study file -> [`Study::load`] -> [`Study::plan`] (typed `*Params` per stage) ->
+//! [`pipeline::run`] with a [`pipeline::Executor`] (ROM cache, progress observers,
+//! cancellation, timings) -> [`Results`] in memory -> [`report::write`] (parquet, figures,
+//! report.md, manifest.json, swapped into place as one folder). The CLI's `rfmlab run` is
+//! this path.
+//!
+//! ```
+//! use rfmlab::{pipeline, Study};
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let study = Study::load("studies/default.toml")?;
+//! let mut plan = study.plan()?;
+//! // A plan can be edited before it runs: here Model 4 at Level 1 only, without the
+//! // per-line estimates, sensitivities and figures.
+//! plan.identification.models.retain(|m| m.name == "model4");
+//! plan.data.levels.retain(|l| l.name == "L1");
+//! plan.identification.per_line = false;
+//! plan.identification.sensitivity = false;
+//! plan.figures = false;
+//! let results = pipeline::run(&plan, &mut pipeline::Executor::new())?;
+//! let m4 = results.identified_at("L1", "model4").expect("model4 ran at L1");
+//! assert!(m4.frac_updated.iter().all(|&f| f > 0.99));
+//! // The data were simulated with E0 = 6.67 MPa (studies/data/paper_virtual.truth.json).
+//! let e0 = m4.identified[m4.names.iter().position(|n| n == "E0").unwrap()];
+//! assert!((e0 / 6.67e6 - 1.0).abs() < 0.03, "E0 = {e0} Pa");
+//! // Every table of the results folder, in memory (polars DataFrames).
+//! assert!(results.table("parameters").unwrap().height() == 4);
+//! let dir = std::env::temp_dir().join(format!("rfmlab-doc-{}", std::process::id()));
+//! let written = rfmlab::report::write(&results, dir.join("default"))?;
+//! assert!(written.files.iter().any(|f| f == "parameters.parquet"));
+//! # std::fs::remove_dir_all(&dir)?;
+//! # Ok(())
+//! # }
+//! ```
 
 // Index loops are the clearest form of many linear-algebra kernels here, and `!(x > 0.0)` is
 // the deliberate NaN-rejecting form of a positivity check.
@@ -47,10 +82,15 @@ pub mod material_fit;
 pub mod modal;
 pub mod modes;
 pub mod output;
+pub mod pipeline;
 pub mod plot;
+pub mod report;
 pub mod rfm;
 #[allow(clippy::needless_borrow)]
 pub mod rom;
 pub mod runner;
 pub mod study;
 pub mod validate;
+
+pub use pipeline::Results;
+pub use study::Study;

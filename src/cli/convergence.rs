@@ -61,6 +61,7 @@ pub fn run(a: &ConvergenceArgs, g: &Global) -> anyhow::Result<()> {
         let mut s = study.structure.clone();
         match &mut s.source {
             StructureSource::Mesher(j) => j.mesh = MeshSize::ElementSize(h),
+            StructureSource::Lap(l) => l.mesh.element_size_m = h,
             StructureSource::MatrixMarket(_) => {
                 return Err(InputError(
                     "convergence needs a meshed structure (structure.source = \"mesher\")".into(),

@@ -16,6 +16,10 @@ pub struct DiagnoseArgs {
     /// `[closed_loop] evidence_threshold`, else 5).
     #[arg(long)]
     pub threshold_nats: Option<f64>,
+    /// Results folder of the loop (default: the study's output folder with `.diagnose`
+    /// appended, e.g. `results/<name>.diagnose`, relative to the current directory).
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: Option<PathBuf>,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
@@ -58,8 +62,28 @@ pub fn run(a: &DiagnoseArgs, g: &Global) -> anyhow::Result<()> {
         },
         ..from_study
     };
-    let summary = rfmlab::runner::closed_loop::diagnose_study(&study, a.model.as_deref(), &params)
-        .map_err(wrap)?;
+    let summary = match &a.output {
+        None => rfmlab::runner::closed_loop::diagnose_study(&study, a.model.as_deref(), &params),
+        Some(o) => {
+            let parent = o
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(std::path::Path::new("."));
+            let name = o
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .ok_or_else(|| InputError(format!("-o {}: give a folder name", o.display())))?;
+            rfmlab::runner::closed_loop::diagnose_into(
+                &study,
+                a.model.as_deref(),
+                &params,
+                parent,
+                &name,
+                true,
+            )
+        }
+    }
+    .map_err(wrap)?;
     sp.finish_and_clear();
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;

@@ -27,8 +27,9 @@ pub struct FrfArgs {
     /// Also write dH'/dE' (sensitivity, (m/s^2)/N/Pa).
     #[arg(long)]
     pub derivatives: bool,
-    /// Parquet file to write (columns documented in the README).
-    #[arg(long)]
+    /// Parquet file to write (columns in docs/outputs.md); default: none, the peaks are
+    /// printed only.
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "FILE")]
     pub out: Option<PathBuf>,
     /// Print JSON for scripts (summary: peaks per channel).
     #[arg(long)]
@@ -39,9 +40,10 @@ pub struct FrfArgs {
 pub struct ExportMmArgs {
     /// Study file (its [structure] section is used).
     pub study: PathBuf,
-    /// Folder to write M.mtx, K_b.mtx, S.mtx (C_b.mtx, D_b.mtx) and dofmap.csv into.
-    #[arg(long)]
-    pub dir: PathBuf,
+    /// Folder to write M.mtx, K_b.mtx, S.mtx (C_b.mtx, D_b.mtx) and dofmap.csv into
+    /// (default: `results/<study name>.matrices`, relative to the current directory).
+    #[arg(short = 'o', long = "output", alias = "dir", value_name = "DIR")]
+    pub dir: Option<PathBuf>,
 }
 
 pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
@@ -173,14 +175,17 @@ pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
 pub fn run_export(a: &ExportMmArgs, g: &Global) -> anyhow::Result<()> {
     let study = load_study(&a.study)?;
     let b = build_model(g, &study)?;
-    std::fs::create_dir_all(&a.dir)
-        .map_err(|e| InputError(format!("cannot create {}: {e}", a.dir.display())))?;
-    rfmlab::fe::matrix_market::export_model(&b.model, &a.dir)?;
+    let dir = a.dir.clone().unwrap_or_else(|| {
+        std::path::Path::new("results").join(format!("{}.matrices", study.name))
+    });
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| InputError(format!("cannot create {}: {e}", dir.display())))?;
+    rfmlab::fe::matrix_market::export_model(&b.model, &dir)?;
     if !g.quiet {
         println!(
             "wrote M.mtx, K_b.mtx, S.mtx and dofmap.csv ({} free DOFs) to {}",
             b.model.n_dof(),
-            a.dir.display()
+            dir.display()
         );
     }
     Ok(())

@@ -8,13 +8,20 @@ use std::path::PathBuf;
 pub struct MaterialArgs {
     /// The material study file (TOML with a [material_data] section).
     pub study: PathBuf,
+    /// Results folder (default: the study's `output_dir`, else `results/<name>`, relative to
+    /// the current directory).
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: Option<PathBuf>,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(a: &MaterialArgs, g: &Global) -> anyhow::Result<()> {
-    let study = rfmlab::study::material::load_material(&a.study)?;
+    let mut study = rfmlab::study::material::load_material(&a.study)?;
+    if let Some(o) = &a.output {
+        study.output_dir = o.clone();
+    }
     let sp = super::common::spinner(g, "material loop");
     let summary = rfmlab::runner::material::run_material(&study)?;
     sp.finish_and_clear();

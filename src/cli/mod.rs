@@ -35,31 +35,91 @@ struct Cli {
 #[derive(Subcommand, Debug)]
 enum Command {
     /// Lowest complex modes of the structure of a study file.
+    #[command(
+        after_help = "Prints each mode's frequency, loss factor, phi^T S phi and y-dominance (--json for scripts); writes nothing.\nDocs: docs/study-files.md (the [structure] section), docs/method.md (IEM)."
+    )]
     Modes(modes::ModesArgs),
     /// FRFs of the structure at a given modulus, on the full model.
+    #[command(
+        after_help = "Writes: --out FILE.parquet, one row per line and FRF (accelerance, optionally dH'/dE').\nDocs: docs/outputs.md (section rfmlab frf: every column with units)."
+    )]
     Frf(frf::FrfArgs),
     /// Mesh convergence table (the paper's Table 1): elements, DOFs, y-mode frequencies, loss factors, time.
+    #[command(
+        after_help = "Prints the table (--json for scripts); writes nothing.\nDocs: docs/validation.md (the mesh study against the paper), docs/performance.md."
+    )]
     Convergence(convergence::ConvergenceArgs),
     /// Export the structure's M, K_b, S as Matrix Market files with a DOF map.
+    #[command(
+        after_help = "Writes: DIR/M.mtx, DIR/K_b.mtx, DIR/S.mtx (DIR/C_b.mtx, DIR/D_b.mtx with damping) and DIR/dofmap.csv.\nDocs: docs/data.md (the Matrix Market files), docs/study-files.md ([structure.import])."
+    )]
     ExportMm(frf::ExportMmArgs),
     /// Build and certify the reduced-order model of a study's structure.
+    #[command(
+        after_help = "Prints the ROM's size, certificate and timings (--json for scripts); writes nothing.\nDocs: docs/method.md (the certified reduced-order model), docs/performance.md."
+    )]
     Rom(rom::RomArgs),
     /// List datasets, channels, grids, quantities, units and levels of UFF58 / CSV files.
+    #[command(
+        after_help = "Prints one row per dataset (--json for scripts); writes nothing.\nDocs: docs/data.md (UFF58 and CSV formats)."
+    )]
     Inspect(inspect::InspectArgs),
     /// Run a virtual experiment and write UFF58 data plus a truth sidecar.
+    #[command(
+        after_help = "Writes: one UFF58 file per level, <output stem>_<level>.uff, and <output stem>.truth.json beside them.\nDocs: docs/study-files.md (experiment files), docs/data.md."
+    )]
     Simulate(simulate::SimulateArgs),
     /// Run a study: identification, correlation, results, figures and report.
+    #[command(
+        after_help = RUN_HELP
+    )]
     Run(run::RunArgs),
     /// Validate a study file (and its data) without running it.
+    #[command(
+        after_help = "Prints OK with the model size, levels and models (--json for scripts); writes nothing. Errors name the file, the key and the fix (exit code 2).\nDocs: docs/study-files.md (every key with units and defaults)."
+    )]
     Check(run::CheckArgs),
     /// Fit relaxation laws to measured E'(w), E''(w) (a DMA master curve): evidence loop, residual tests, Kramers-Kronig check.
+    #[command(
+        after_help = MATERIAL_HELP
+    )]
     Material(material::MaterialArgs),
     /// Statistical validation of the Bayesian layer (SBC, coverage, model selection, evidence
     /// against quadrature), shardable with --shard i/n; --merge combines the shards.
+    #[command(
+        after_help = VALIDATE_HELP
+    )]
     Validate(validate::ValidateArgs),
     /// Close the loop: residuals of the fit, score tests of candidate effects, refits, before/after.
+    #[command(
+        after_help = DIAGNOSE_HELP
+    )]
     Diagnose(diagnose::DiagnoseArgs),
 }
+
+/// `rfmlab run --help`: what it writes (tests/suite/docs.rs checks the tables against docs/outputs.md).
+const RUN_HELP: &str = "Writes results/<name>/ (or [study] output_dir): report.md, manifest.json, figures fig_*.png/.svg and parquet tables:
+  frf, parameters, iterations, correlation, correlation_curves, modulus, svd, modal, sensitivity;
+  with [inference]: draws, summary, starts, laplace, sampler_runs, evidence, model_comparison, ppc, predictive,
+  pointwise_loglik, level_change, level_evidence, redundancy, basins;
+  with [closed_loop]: closed_loop/ (residuals, candidates, closed_loop, verdict, signatures, closed_loop.md).
+Docs: docs/outputs.md (every table, column and figure), docs/study-files.md (every key), docs/method.md.";
+
+/// `rfmlab material --help`.
+const MATERIAL_HELP: &str = "Writes results/<name>/ (or [study] output_dir): report.md, manifest.json, figures and parquet tables
+  steps, parameters, residuals, kk.
+Docs: docs/outputs.md (section rfmlab material), docs/study-files.md (material studies).";
+
+/// `rfmlab validate --help`.
+const VALIDATE_HELP: &str = "Writes DIR/ (or the file's output_dir): summary.md, sbc_ranks.png and parquet tables
+  sbc, coverage, selection, quadrature (each shard's part as DIR/<table>/shard=<i>/part.parquet),
+  sbc_summary, sbc_histogram, coverage_summary, selection_summary, quadrature_summary.
+Docs: docs/outputs.md (section rfmlab validate), docs/validation.md, docs/study-files.md (validation files).";
+
+/// `rfmlab diagnose --help`.
+const DIAGNOSE_HELP: &str = "Writes results/<name>.diagnose/: closed_loop.md, residuals_<level>.png and parquet tables
+  residuals, candidates, closed_loop, verdict, signatures; closed_loop.md's first line is the status per level.
+Docs: docs/closed-loop.md (what each status means and what to do next), docs/outputs.md (closed-loop tables).";
 
 /// Parse arguments, run, print the error chain, return the exit code.
 pub fn run() -> i32 {

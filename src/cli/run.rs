@@ -1,14 +1,19 @@
 //! `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (the study runner, [`rfmlab::runner`]).
 
 use super::common::{print_json, Global, InputError};
-use rfmlab::runner::{Event, RunError, RunOptions};
+use rfmlab::pipeline::{self, Event, Executor, RunError};
+use rfmlab::runner::RunSummary;
 use std::path::PathBuf;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 
 #[derive(clap::Args, Debug)]
 pub struct RunArgs {
     /// The study file (TOML).
     pub study: PathBuf,
+    /// Results folder, replaced as a whole (default: the study's `output_dir`, else
+    /// `results/<study name>`, relative to the current directory).
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: Option<PathBuf>,
     /// Print a JSON summary (identified parameters, FRACs, files) on stdout.
     #[arg(long)]
     pub json: bool,
@@ -41,39 +46,59 @@ fn wrap(e: RunError) -> anyhow::Error {
 
 pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
     let study = super::common::load_study(&a.study)?;
-    let bar: Mutex<Option<indicatif::ProgressBar>> = Mutex::new(None);
-    let progress = |ev: Event| match ev {
-        Event::Start { step, total } => {
-            let pb = if total > 0 {
-                super::common::progress(g, total, &step)
-            } else {
-                super::common::spinner(g, &step)
-            };
-            if let Some(old) = bar.lock().unwrap_or_else(|e| e.into_inner()).replace(pb) {
-                old.finish_and_clear();
+    let mut plan = study.plan().map_err(wrap)?;
+    plan.figures &= !a.no_figures;
+    if let Some(o) = &a.output {
+        plan.output_dir = o.clone();
+    }
+    let bar: Arc<Mutex<Option<indicatif::ProgressBar>>> = Arc::new(Mutex::new(None));
+    let on_event = {
+        let bar = bar.clone();
+        let g = g.clone();
+        Arc::new(move |ev: &Event| match ev {
+            Event::Start { step, total } => {
+                let pb = if *total > 0 {
+                    super::common::progress(&g, *total, step)
+                } else {
+                    super::common::spinner(&g, step)
+                };
+                if let Some(old) = bar.lock().unwrap_or_else(|e| e.into_inner()).replace(pb) {
+                    old.finish_and_clear();
+                }
             }
-        }
-        Event::Advance => {
-            if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
-                pb.inc(1);
+            Event::Advance => {
+                if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).as_ref() {
+                    pb.inc(1);
+                }
             }
-        }
-        Event::Finish => {
-            if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
-                pb.finish_and_clear();
+            Event::Finish => {
+                if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
+                    pb.finish_and_clear();
+                }
             }
-        }
+        })
     };
-    let rom_cache = (!a.no_cache).then(|| rfmlab::runner::rom_cache_dir(&study));
-    let opts = RunOptions {
-        no_figures: a.no_figures,
-        output_dir: None,
-        rom_cache,
+    let mut ex = {
+        let on_event = on_event.clone();
+        Executor::new().observer(move |e| on_event(e))
     };
-    let summary = rfmlab::runner::run_study(&study, &opts, &progress).map_err(wrap)?;
+    if !a.no_cache {
+        ex = ex.rom_cache(rfmlab::runner::rom_cache_dir(&study));
+    }
+    let results = pipeline::run(&plan, &mut ex).map_err(wrap)?;
+    let written =
+        rfmlab::report::write_with(&results, &plan.output_dir, &|e| on_event(&e)).map_err(wrap)?;
+    let files = written.files;
     if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
         pb.finish_and_clear();
     }
+    let summary = RunSummary {
+        study: study.name.clone(),
+        output_dir: plan.output_dir.clone(),
+        files,
+        models: results.model_summaries(),
+        seconds: results.seconds() + written.seconds,
+    };
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;
     } else if !g.quiet {
@@ -104,12 +129,13 @@ pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
         print_json(&serde_json::to_value(&summary)?)?;
     } else if !g.quiet {
         eprintln!(
-            "{}: OK ({} DOFs, {} levels, {} models, initial values evaluated at {} lines)",
+            "{}: OK ({} DOFs, {} levels, {} models, initial values evaluated at {} lines); `rfmlab run` writes its results to {} (change with -o/--output)",
             a.study.display(),
             summary.n_dof,
             summary.levels.len(),
             summary.models.len(),
-            summary.lines_checked
+            summary.lines_checked,
+            study.output_dir.display()
         );
     }
     Ok(())

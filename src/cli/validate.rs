@@ -15,8 +15,9 @@ pub struct ValidateArgs {
     /// Run only the units k with k mod n = i (0 <= i < n), e.g. --shard 2/8.
     #[arg(long, default_value = "0/1")]
     pub shard: String,
-    /// Output folder (default: the file's `validation.output_dir`).
-    #[arg(long)]
+    /// Output folder (default: the file's `validation.output_dir`, else
+    /// `results/<name>`, relative to the current directory).
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Do not run units: merge the parts every shard wrote and summarise.
     #[arg(long)]

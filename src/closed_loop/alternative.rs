@@ -1,5 +1,5 @@
-//! Alternative-law candidates of the closed loop (issue 13, item 1: "a fractional Zener law as
-//! an alternative law").
+//! Alternative-law candidates of the closed loop: a law not nested in the current one, such as the
+//! fractional Zener law.
 //!
 //! A Maxwell branch is nested in the current law (zero modulus gives it back), so the score
 //! test at zero ranks it. Another law is not nested: there is no point of it that is the

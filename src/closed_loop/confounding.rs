@@ -1,6 +1,6 @@
-//! Confounding of a candidate effect with the model's own parameters (issue 13: "base springs
-//! soften the joint much as a softer adhesive does ... the loop either names them or reports
-//! them as confounded with the adhesive's stiffness, never silently").
+//! Confounding of a candidate effect with the model's own parameters: base springs
+//! soften the joint much as a softer adhesive does, so the loop either names such an effect or
+//! reports it as confounded with the adhesive's stiffness, never silently.
 //!
 //! From the score test's Fisher information at the MAP (the law's parameters `p` as nuisance,
 //! their columns scaled by `|p|`, so in relative units):

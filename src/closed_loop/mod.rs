@@ -1,4 +1,4 @@
-//! Closing the loop (issue 13, items 2-3): the residual of the best fit, a score test per
+//! Closing the loop: the residual of the best fit, a score test per
 //! candidate effect, refits of the top candidates with the effect free, and a decision by
 //! evidence; repeated on the new residual until nothing passes.
 //!

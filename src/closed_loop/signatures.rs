@@ -1,4 +1,4 @@
-//! Residual signatures per resonance (issue 13, item 2): what a residual looks like, in the
+//! Residual signatures per resonance: what a residual looks like, in the
 //! modal terms an engineer reads it in: a resonance whose frequency moved, a resonance whose
 //! damping changed, and a trend below the first resonance (a quasi-static stiffness or
 //! calibration offset). Per-channel gain and phase slope are in [`super::ChannelResidual`].

@@ -1,4 +1,4 @@
-//! A compliant base (issue 13, item 1): distributed normal and tangential springs under the
+//! A compliant base: distributed normal and tangential springs under the
 //! adhesive's lower face instead of a fixed face (a Winkler foundation; the block the joint
 //! is bonded to, or its clamping, is not rigid).
 //!

@@ -405,7 +405,14 @@ fn scaled(a: &SpMat, s: f64) -> SpMat {
     b
 }
 
-fn lin_comb(a: &SpMat, alpha: f64, b: &SpMat, beta: f64, what: &str) -> Result<SpMat, FeError> {
+fn lin_comb(
+    a: &SpMat,
+    alpha: f64,
+    b: &SpMat,
+    beta: f64,
+    key: &str,
+    what: &str,
+) -> Result<SpMat, FeError> {
     faer::sparse::ops::binary_op(
         a.as_ref(),
         b.as_ref(),
@@ -414,8 +421,76 @@ fn lin_comb(a: &SpMat, alpha: f64, b: &SpMat, beta: f64, what: &str) -> Result<S
         },
     )
     .map_err(|_| FeError::OutOfMemory {
-        key: "structure.mesh".into(),
+        key: key.into(),
         what: what.into(),
+    })
+}
+
+/// The matrices of a mesh of adherend (`Region::Beam`) and adhesive elements.
+pub(crate) struct JointMatrices {
+    pub m: SpMat,
+    pub k_b: SpMat,
+    pub s: SpMat,
+    pub c_b: Option<SpMat>,
+    pub d_b: Option<SpMat>,
+}
+
+/// M (all elements at their region's density), K_b (adherend elements at the adherend's E,
+/// nu), S (adhesive elements at E = 1 Pa and the adhesive's nu), C_b = alpha M + beta K_b and
+/// D_b = eta K_b when non-zero. `mesh_key` is the study key an out-of-memory error names.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn assemble_joint_matrices(
+    asm: &Assembler,
+    mesh: &HexMesh,
+    adherend: &IsoMaterial,
+    adhesive_nu: f64,
+    adhesive_rho_kg_m3: f64,
+    rule: Integration,
+    damping: &AdherendDamping,
+    mesh_key: &str,
+) -> Result<JointMatrices, FeError> {
+    let all: Vec<usize> = (0..mesh.n_elements()).collect();
+    let adherend_el = mesh.elements_in(Region::Beam);
+    let adh_el = mesh.elements_in(Region::Adhesive);
+    let (rho_b, rho_a) = (adherend.rho_kg_m3, adhesive_rho_kg_m3);
+    let regions = &mesh.regions;
+    let m = asm.mass(&asm.pattern(&all), |e| {
+        if regions[e] == Region::Beam {
+            rho_b
+        } else {
+            rho_a
+        }
+    })?;
+    let mat = Elasticity {
+        e_pa: adherend.e_pa,
+        nu: adherend.nu,
+    };
+    let k_b = asm.stiffness(&asm.pattern(&adherend_el), |_| mat, rule)?;
+    let unit = Elasticity {
+        e_pa: 1.0,
+        nu: adhesive_nu,
+    };
+    let s = asm.stiffness(&asm.pattern(&adh_el), |_| unit, rule)?;
+    let d = damping;
+    let c_b = if d.rayleigh_alpha_per_s != 0.0 || d.rayleigh_beta_s != 0.0 {
+        Some(lin_comb(
+            &m,
+            d.rayleigh_alpha_per_s,
+            &k_b,
+            d.rayleigh_beta_s,
+            mesh_key,
+            "C_b = alpha M + beta K_b",
+        )?)
+    } else {
+        None
+    };
+    let d_b = (d.structural_loss_factor != 0.0).then(|| scaled(&k_b, d.structural_loss_factor));
+    Ok(JointMatrices {
+        m,
+        k_b,
+        s,
+        c_b,
+        d_b,
     })
 }
 
@@ -459,42 +534,23 @@ pub(crate) fn assemble_joint(
     let t0 = Instant::now();
     let dofs = DofMap::new(mesh);
     let asm = Assembler::new(mesh, &dofs);
-    let all: Vec<usize> = (0..mesh.n_elements()).collect();
-    let beam_el = mesh.elements_in(Region::Beam);
-    let adh_el = mesh.elements_in(Region::Adhesive);
-    let rule = spec.mesh.integration;
-    let (rho_b, rho_a) = (spec.beam.rho_kg_m3, spec.adhesive_rho_kg_m3);
-    let regions = &mesh.regions;
-    let m = asm.mass(&asm.pattern(&all), |e| {
-        if regions[e] == Region::Beam {
-            rho_b
-        } else {
-            rho_a
-        }
-    })?;
-    let beam_mat = Elasticity {
-        e_pa: spec.beam.e_pa,
-        nu: spec.beam.nu,
-    };
-    let k_b = asm.stiffness(&asm.pattern(&beam_el), |_| beam_mat, rule)?;
-    let unit = Elasticity {
-        e_pa: 1.0,
-        nu: spec.adhesive_nu,
-    };
-    let s = asm.stiffness(&asm.pattern(&adh_el), |_| unit, rule)?;
-    let d = &spec.damping;
-    let c_b = if d.rayleigh_alpha_per_s != 0.0 || d.rayleigh_beta_s != 0.0 {
-        Some(lin_comb(
-            &m,
-            d.rayleigh_alpha_per_s,
-            &k_b,
-            d.rayleigh_beta_s,
-            "C_b = alpha M + beta K_b",
-        )?)
-    } else {
-        None
-    };
-    let d_b = (d.structural_loss_factor != 0.0).then(|| scaled(&k_b, d.structural_loss_factor));
+    let JointMatrices {
+        m,
+        k_b,
+        s,
+        c_b,
+        d_b,
+    } = assemble_joint_matrices(
+        &asm,
+        mesh,
+        &spec.beam,
+        spec.adhesive_nu,
+        spec.adhesive_rho_kg_m3,
+        spec.mesh.integration,
+        &spec.damping,
+        "structure.mesh",
+    )?;
+    let n_adhesive_elements = mesh.elements_in(Region::Adhesive).len();
     let assembly_seconds = t0.elapsed().as_secs_f64();
 
     let lo = [0.0, 0.0, 0.0];
@@ -519,7 +575,7 @@ pub(crate) fn assemble_joint(
     }
     let info = MeshInfo {
         n_elements: mesh.n_elements(),
-        n_adhesive_elements: adh_el.len(),
+        n_adhesive_elements,
         n_nodes: mesh.n_nodes(),
         n_dof: dofs.n_free,
         element_size_m: mesh.max_cell_size(),
@@ -535,7 +591,7 @@ pub(crate) fn assemble_joint(
         h[0] * 1e3,
         h[1] * 1e3,
         h[2] * 1e3,
-        rule
+        spec.mesh.integration
     );
     Ok((
         StructuralModel {

@@ -1,5 +1,5 @@
 //! A region of the adhesive (an x-range of the block) and its share of the adhesive
-//! stiffness, for a degraded bond (issue 13, item 1):
+//! stiffness, for a degraded bond:
 //!
 //! ```text
 //!   S = S_rest + S_region,    E* S -> E* (S - d S_region),   d in [0, 1) the loss fraction

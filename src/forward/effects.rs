@@ -1,5 +1,5 @@
 //! Effects the structure-and-law model may lack: named one-parameter extensions of the forward
-//! model (issue 13, item 1), each with its physics, SI unit, default prior and analytic
+//! model, each with its physics, SI unit, default prior and analytic
 //! derivative.
 //!
 //! ```text

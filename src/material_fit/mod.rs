@@ -1,5 +1,5 @@
 //! Material-level identification on measured complex-modulus data (a DMA master curve): the
-//! observations are E'(w) and E''(w) themselves, no structure (issue 13 item 5).
+//! observations are E'(w) and E''(w) themselves, no structure.
 //!
 //! * [`law`]: the relaxation laws the loop moves through (Model 4, fractional Zener, Maxwell
 //!   branches) in one parametrisation with analytic Jacobians;

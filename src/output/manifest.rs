@@ -42,6 +42,10 @@ pub struct Manifest {
     /// Start of the run, UTC, RFC 3339 (`2025-01-31T12:00:00Z`).
     pub started_utc: String,
     pub timings: Vec<StepTiming>,
+    /// Counts of costly steps beside the timings (e.g. `rom builds`: ROMs built and
+    /// certified by the run, 0 when loaded from the cache).
+    #[serde(default)]
+    pub counters: std::collections::BTreeMap<String, u64>,
     pub files: Vec<FileEntry>,
     pub notes: Vec<String>,
 }
@@ -67,6 +71,7 @@ impl Manifest {
             seed,
             started_utc: utc_now_rfc3339(),
             timings: Vec::new(),
+            counters: Default::default(),
             files: Vec::new(),
             notes,
         }
@@ -90,6 +95,10 @@ impl Manifest {
         let name = name.into();
         self.files.retain(|f| f.name != name);
         self.files.push(FileEntry { name, sha256 });
+    }
+    /// Adds `n` to the counter `name`.
+    pub fn add_count(&mut self, name: impl Into<String>, n: u64) {
+        *self.counters.entry(name.into()).or_insert(0) += n;
     }
     pub fn add_note(&mut self, note: impl Into<String>) {
         self.notes.push(note.into());

@@ -35,3 +35,5 @@ pub use report::Report;
 pub use results_dir::ResultsDir;
 pub use table::{ColumnData, Table};
 pub mod shards;
+pub mod swap;
+pub use swap::replace_dir;

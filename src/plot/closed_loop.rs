@@ -1,4 +1,4 @@
-//! The closed loop's residual figure (issue 13, item 4): the standardised residual magnitude
+//! The closed loop's residual figure: the standardised residual magnitude
 //! `|z|` of every channel against frequency, before (upper panel) and after (lower panel) the
 //! accepted effects. Under a correct model `|z|^2` is chi-square with 2 degrees of freedom
 //! (mean 1), so a residual consistent with noise scatters around 1; a missing effect shows as

@@ -130,7 +130,7 @@ pub enum Denominator {
 }
 
 /// Tuning knobs of the RFM iterations.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RfmParams {
     /// Stop when the largest relative parameter (or modulus) change falls below this. Default 1e-8.
     pub tol_rel_change: f64,

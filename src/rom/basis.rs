@@ -1,4 +1,4 @@
-//! Reduced basis for the family Z(w, E*) (issue 3, "Reduced basis").
+//! Reduced basis for the family Z(w, E*).
 //!
 //! For each real E_ref, with K = K_b + E_ref S (SPD, sparse Cholesky, symbolic analysis
 //! shared), the block Krylov (load-dependent Ritz) sequence

@@ -1,4 +1,4 @@
-//! ROM build with its error certificate (issue 3, "Error certificate").
+//! ROM build with its error certificate.
 //!
 //! Reference: full-model receptances H = B^T Z(w, E*)^-1 B by sparse complex LU on a
 //! validation set: moduli on a log-spaced grid over [E'min, E'max] x [E''min, E''max]

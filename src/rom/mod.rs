@@ -1,4 +1,4 @@
-//! Certified reduced-order FRF engine and the pencil sweep (issue 3).
+//! Certified reduced-order FRF engine and the pencil sweep.
 //!
 //! The dynamic stiffness (method.md) is Z(w, E*) = -w^2 M + K_b + j w C_b + j D_b + E* S:
 //! the adhesive enters through one complex scalar per frequency line. The ROM projects Z
@@ -42,7 +42,7 @@ pub struct ModulusRange {
 }
 
 impl Default for ModulusRange {
-    /// Issue 3's acceptance range: E' in [0.5, 50] MPa, E'' in [0.01, 20] MPa.
+    /// The default modulus range: E' in [0.5, 50] MPa, E'' in [0.01, 20] MPa.
     fn default() -> Self {
         ModulusRange {
             e_storage_pa: (0.5e6, 50e6),
@@ -158,7 +158,7 @@ impl Default for RomParams {
     }
 }
 
-/// Outcome of the certificate (issue 3, "Error certificate").
+/// Outcome of the certificate.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Certificate {
     /// Largest error over the validation set, relative to the peak |H_full| of each FRF.

@@ -1,4 +1,4 @@
-//! A reduced model with extra structural terms (issue 13, item 1): effects that need new
+//! A reduced model with extra structural terms: effects that need new
 //! matrices in the ROM (a degraded bond region, a structural damping of the beam).
 //!
 //! ```text

@@ -1,4 +1,4 @@
-//! Initial-value sensitivity (issue 12, item 5): the argmin search of the MAP and the
+//! Initial-value sensitivity: the argmin search of the MAP and the
 //! deterministic global RFM from the same space-filling starts over the prior box (a Latin
 //! hypercube in prior quantiles, plus the study's initial values = the paper's Table 4), end
 //! points clustered into basins ([`crate::inference::basins`]).

@@ -84,7 +84,7 @@ pub struct PosteriorResult {
     pub notes: Vec<String>,
     /// Evidence, predictive criteria and checks for model comparison ([`super::compare`]).
     pub compare: super::compare::Comparison,
-    /// Parameter redundancy at the MAP (issue 12 item 4); the error says why it is missing.
+    /// Parameter redundancy at the MAP; the error says why it is missing.
     pub redundancy: Result<super::redundancy::Redundancy, String>,
     /// The basin study (`[inference.basins]`), filled in after the level's inference.
     pub basins: Option<super::basins::BasinStudy>,

@@ -3,9 +3,12 @@
 //! candidates: a point mass at every measured point, a gain and a delay per channel, the beam
 //! modulus factor (left out when the adherend has viscous damping `C_b`, where its exact
 //! scaling does not hold), the Maxwell branches, and the fractional Zener law as an alternative
-//! law ([`crate::closed_loop::alternative`]; opt-out in `[closed_loop] candidates`). Writes the
-//! parquet tables `residuals`, `candidates`, `closed_loop` and a markdown summary
-//! `closed_loop.md` into `<output_dir>.diagnose/`.
+//! law ([`crate::closed_loop::alternative`]; opt-out in `[closed_loop] candidates`); on a
+//! meshed joint also a sensor mass (x, y and z) at every measured point. Each level ends with a
+//! verdict ([`crate::closed_loop::verdict`]) against a null level calibrated on replicates of
+//! the fitted model. Writes the parquet tables `residuals`, `candidates`, `closed_loop`,
+//! `verdict`, `signatures` and a markdown summary `closed_loop.md` (its first line the status
+//! per level) into `<output_dir>.diagnose/`.
 
 use super::{bayes, RunError};
 use crate::closed_loop::{
@@ -120,64 +123,19 @@ pub fn diagnose_study(
     diagnose_into(study, model, params, parent, &dir_name, true)
 }
 
-/// `rfmlab run`'s hook: when the study has `[closed_loop]` (enabled) and `[inference]`, run the
-/// loop with its settings into `<out_dir>/closed_loop/` and append its summary to
-/// `<out_dir>/report.md`. Returns the files written (relative to `out_dir`).
-pub fn run_hook(study: &Study, out_dir: &std::path::Path) -> Result<Vec<String>, RunError> {
-    let enabled = study.closed_loop.as_ref().is_some_and(|c| c.enabled);
-    if !enabled || study.inference.is_none() {
-        return Ok(Vec::new());
-    }
-    let s = diagnose_into(study, None, &params_of(study), out_dir, "closed_loop", true)?;
-    let md_path = s.output_dir.join("closed_loop.md");
-    let md = std::fs::read_to_string(&md_path).unwrap_or_default();
-    let report = out_dir.join("report.md");
-    if report.is_file() {
-        let mut text = std::fs::read_to_string(&report).map_err(|e| {
-            RunError::Output(crate::output::OutputError::io(&report, "read report", e))
-        })?;
-        // The loop's markdown, its headings one level down and its figures under closed_loop/.
-        let _ = writeln!(text, "\n## Closed loop (`[closed_loop]`)\n");
-        for line in md.lines().skip(1) {
-            let line = line.replace("](residuals_", "](closed_loop/residuals_");
-            if line.starts_with('#') {
-                let _ = writeln!(text, "#{line}");
-            } else {
-                let _ = writeln!(text, "{line}");
-            }
+/// The loop's markdown as a section of the run's report: its headings one level down, its
+/// figures under `sub/`.
+pub(crate) fn report_section(md: &str, sub: &str) -> String {
+    let mut text = String::from("## Closed loop (`[closed_loop]`)\n");
+    for line in md.lines().skip(1) {
+        let line = line.replace("](residuals_", &format!("]({sub}/residuals_"));
+        if line.starts_with('#') {
+            let _ = writeln!(text, "#{line}");
+        } else {
+            let _ = writeln!(text, "{line}");
         }
-        // Atomically: a temporary file next to it, then a rename.
-        let tmp = out_dir.join(".report.md.tmp");
-        std::fs::write(&tmp, text)
-            .and_then(|_| std::fs::rename(&tmp, &report))
-            .map_err(|e| {
-                RunError::Output(crate::output::OutputError::io(&report, "write report", e))
-            })?;
     }
-    // Every file the loop wrote (tables, its markdown, figures), listed in the manifest that
-    // the study's run wrote before the loop, and report.md hashed again (the loop appended).
-    let mut files: Vec<String> = std::fs::read_dir(&s.output_dir)
-        .map_err(|e| RunError::Output(crate::output::OutputError::io(&s.output_dir, "list", e)))?
-        .filter_map(|e| e.ok())
-        .filter(|e| e.path().is_file())
-        .filter_map(|e| e.file_name().to_str().map(String::from))
-        .filter(|n| !n.starts_with('.'))
-        .map(|n| format!("closed_loop/{n}"))
-        .collect();
-    files.sort();
-    let manifest_path = out_dir.join("manifest.json");
-    if manifest_path.is_file() {
-        use crate::output::{sha256_file, Manifest};
-        let mut m = Manifest::read(&manifest_path).map_err(RunError::Output)?;
-        m.files.retain(|f| f.name != "report.md");
-        for name in std::iter::once("report.md".to_string()).chain(files.iter().cloned()) {
-            let hash = sha256_file(out_dir.join(&name)).ok();
-            m.add_file(name, hash);
-        }
-        m.add_timing("closed loop", s.seconds);
-        m.write(&manifest_path).map_err(RunError::Output)?;
-    }
-    Ok(files)
+    text
 }
 
 /// [`diagnose_study`] into `<parent>/<dir_name>/`, with the residual figures when `figures`.
@@ -201,12 +159,59 @@ pub fn diagnose_into(
         with_loop.structure.points = with_all_directions(&with_loop.structure.points);
     }
     let study = &with_loop;
+    if study.inference.is_none() {
+        return Err(no_inference(study));
+    }
+    let laws = super::model_laws(study)?;
+    let built = super::build(study)?;
+    let mut levels = super::load_levels(study, &built)?;
+    let engines = super::build_engine(study, &built, &mut levels, &laws, None)?;
+    let engine = engines
+        .likelihood
+        .as_deref()
+        .unwrap_or(engines.engine.as_ref());
+    let mut outcome = loop_stage(study, &built, &levels, &laws, engine, model, params)?;
+    let mut dir = ResultsDir::create(parent, dir_name).map_err(out_err)?;
+    write_loop(&mut dir, &outcome, &study.name, figures)?;
+    outcome.summary.output_dir = dir.path().to_path_buf();
+    outcome.summary.seconds = t0.elapsed().as_secs_f64();
+    Ok(outcome.summary)
+}
+
+fn no_inference(study: &Study) -> RunError {
+    super::study_err(
+        study,
+        "inference",
+        "diagnose needs an [inference] section (its noise model and priors define the likelihood the loop tests); add one as in studies/bayes.toml",
+    )
+}
+
+/// The loop's outcome (nothing written): per level its result, the summary and the markdown.
+#[derive(Clone, Debug)]
+pub struct LoopOutcome {
+    /// The summary (`output_dir` empty until written).
+    pub summary: DiagnoseSummary,
+    /// Per level: name, lines (Hz), response ids, the loop's result and the truth of the
+    /// final law when simulated.
+    pub levels: Vec<LevelResult>,
+    /// The loop's section of the report (markdown, its own level-1 heading).
+    pub markdown: String,
+}
+
+/// The closed loop of `model` (else the first `[inference]` model) at every inference level,
+/// on `engine` (inputs at every measured point).
+pub(crate) fn loop_stage(
+    study: &Study,
+    built: &crate::study::build::BuiltModel,
+    levels: &[super::LevelData],
+    laws: &[Box<dyn crate::material::ConstitutiveModel>],
+    engine: &dyn crate::frf::FrfEngine,
+    model: Option<&str>,
+    params: &ClosedLoopParams,
+) -> Result<LoopOutcome, RunError> {
+    let t0 = std::time::Instant::now();
     let Some(inf) = &study.inference else {
-        return Err(super::study_err(
-            study,
-            "inference",
-            "diagnose needs an [inference] section (its noise model and priors define the likelihood the loop tests); add one as in studies/bayes.toml",
-        ));
+        return Err(no_inference(study));
     };
     let name = match model {
         Some(m) => m.to_string(),
@@ -214,11 +219,10 @@ pub fn diagnose_into(
             super::study_err(study, "inference.models", "list at least one model")
         })?,
     };
-    let laws = super::model_laws(study)?;
     let Some((spec, law)) = study
         .models
         .iter()
-        .zip(&laws)
+        .zip(laws)
         .find(|(m, _)| m.name.eq_ignore_ascii_case(&name))
     else {
         return Err(super::study_err(
@@ -227,12 +231,8 @@ pub fn diagnose_into(
             format!("model {name} is not a model of the study"),
         ));
     };
-    let built = super::build(study)?;
-    let mut levels = super::load_levels(study, &built)?;
-    let (engine, _, lik_engine) = super::build_engine(study, &built, &mut levels, &laws, None)?;
-    let engine = lik_engine.as_deref().unwrap_or(engine.as_ref());
     // Degraded-bond and adherend-damping candidates and declared ones need a ROM with their
-    // terms (issue 13).
+    // terms.
     // Opt-in: only when `[closed_loop] candidates` names them ("degraded_bond" or a strip's
     // name). Each evaluation with a bond is a dense LU of the term ROM per line (on the paper's
     // 5 mm joint with both strips, 219 unknowns after the compression: 1-2 s per forward
@@ -269,10 +269,10 @@ pub fn diagnose_into(
     let t_terms = std::time::Instant::now();
     let term_rom = super::terms::term_rom_for(
         study,
-        &built,
+        built,
         engine,
         &super::terms::with_declared(study, &bonds),
-        super::terms::band_of(&levels),
+        super::terms::band_of(levels),
         Some(&term_cache),
     )?;
     if let Some((_, c)) = &term_rom {
@@ -296,8 +296,7 @@ pub fn diagnose_into(
         Some(w) => w,
         None => engine,
     };
-    let mut dir = ResultsDir::create(parent, dir_name).map_err(out_err)?;
-    // The alternative law (issue 13): the fractional Zener, unless `[closed_loop] candidates`
+    // The alternative law: the fractional Zener, unless `[closed_loop] candidates`
     // leaves it out (names "fractional_zener" / type "alternative_law").
     let fractional = crate::material::FractionalZener;
     let alt_laws: Vec<&dyn crate::material::ConstitutiveModel> =
@@ -313,7 +312,6 @@ pub fn diagnose_into(
         };
     let mut summary = Vec::new();
     let mut results = Vec::new();
-    let mut verdicts = Vec::new();
     for level in levels.iter().filter(|l| inf.levels.contains(&l.name)) {
         let mut post = bayes::build_posterior(study, inf, engine, level, law.as_ref(), &name)?;
         let x0 = bayes::initial_x(&post, &spec.initial);
@@ -368,7 +366,6 @@ pub fn diagnose_into(
             .as_ref()
             .filter(|t| t.model.name() == res.after.law)
             .map(|t| t.params.clone());
-        verdicts.push(verdict.clone());
         summary.push(DiagnoseLevel {
             level: level.name.clone(),
             status: verdict.status.to_string(),
@@ -397,7 +394,7 @@ pub fn diagnose_into(
                     law.as_ref(),
                     &res.after.values[..n.min(res.after.values.len())],
                     &level.freq_hz,
-                    &super::terms::term_modulus_range(study, super::terms::band_of(&levels)),
+                    &super::terms::term_modulus_range(study, super::terms::band_of(levels)),
                 )
             }),
         });
@@ -409,23 +406,60 @@ pub fn diagnose_into(
             truth,
         ));
     }
-    dir.write_table(&residuals_table(&results)?)
-        .map_err(out_err)?;
-    dir.write_table(&candidates_table(&results)?)
-        .map_err(out_err)?;
-    dir.write_table(&closed_loop_table(&results, &verdicts)?)
-        .map_err(out_err)?;
-    dir.write_table(&verdict_table(&results, &verdicts, &summary)?)
-        .map_err(out_err)?;
-    dir.write_table(&signatures_table(&results)?)
-        .map_err(out_err)?;
+    let markdown = markdown(
+        &study.name,
+        &name,
+        &results,
+        &summary,
+        term_rom.as_ref().map(|(t, c)| (t.names.as_slice(), c)),
+    );
+    Ok(LoopOutcome {
+        summary: DiagnoseSummary {
+            study: study.name.clone(),
+            model: name,
+            output_dir: PathBuf::new(),
+            levels: summary,
+            seconds: t0.elapsed().as_secs_f64(),
+            term_rom: term_rom.map(|(_, c)| {
+                (
+                    c,
+                    super::terms::term_modulus_range(study, super::terms::band_of(levels)),
+                )
+            }),
+        },
+        levels: results,
+        markdown,
+    })
+}
+
+/// The loop's tables: `residuals`, `candidates`, `closed_loop`, `verdict`, `signatures`.
+pub(crate) fn loop_tables(o: &LoopOutcome) -> Result<Vec<Table>, RunError> {
+    Ok(vec![
+        residuals_table(&o.levels)?,
+        candidates_table(&o.levels)?,
+        closed_loop_table(&o.levels, &o.summary.levels)?,
+        verdict_table(&o.levels, &o.summary.levels)?,
+        signatures_table(&o.levels)?,
+    ])
+}
+
+/// Write the loop's tables, residual figures (when `figures`) and `closed_loop.md` into `dir`.
+pub(crate) fn write_loop(
+    dir: &mut ResultsDir,
+    o: &LoopOutcome,
+    study_name: &str,
+    figures: bool,
+) -> Result<(), RunError> {
+    for t in loop_tables(o)? {
+        dir.write_table(&t).map_err(out_err)?;
+    }
     if figures {
-        for (level, freq, ids, res, _) in &results {
+        for (level, freq, ids, res, _) in &o.levels {
             crate::plot::closed_loop::residual_figure(
                 dir.file_path(&format!("residuals_{level}")),
                 &format!(
-                    "{}: standardised residuals of {name} at {level}, before and after",
-                    study.name
+                    "{study_name}: standardised residuals of {} at {level}, before and after",
+                    o.summary.model
                 ),
                 freq,
                 ids,
@@ -434,28 +468,9 @@ pub fn diagnose_into(
             )?;
         }
     }
-    let md = markdown(
-        &study.name,
-        &name,
-        &results,
-        &verdicts,
-        term_rom.as_ref().map(|(t, c)| (t.names.as_slice(), c)),
-    );
-    dir.write_bytes("closed_loop.md", md.as_bytes())
+    dir.write_bytes("closed_loop.md", o.markdown.as_bytes())
         .map_err(out_err)?;
-    Ok(DiagnoseSummary {
-        study: study.name.clone(),
-        model: name,
-        output_dir: dir.path().to_path_buf(),
-        levels: summary,
-        seconds: t0.elapsed().as_secs_f64(),
-        term_rom: term_rom.map(|(_, c)| {
-            (
-                c,
-                super::terms::term_modulus_range(study, super::terms::band_of(&levels)),
-            )
-        }),
-    })
+    Ok(())
 }
 
 /// Correlated channels (`inference.noise.channel_correlation`): the correlation per line from
@@ -562,7 +577,8 @@ fn parameter_changes(res: &ClosedLoopResult, truth: Option<&[f64]>) -> Vec<Param
     v
 }
 
-type LevelResult = (
+/// One level of the loop: name, lines (Hz), response ids, result, truth of the final law.
+pub type LevelResult = (
     String,
     Vec<f64>,
     Vec<u32>,
@@ -742,13 +758,14 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
 /// sizes.
 fn closed_loop_table(
     results: &[LevelResult],
-    verdicts: &[crate::closed_loop::verdict::Verdict],
+    summary: &[DiagnoseLevel],
 ) -> Result<Table, RunError> {
     let (mut lv, mut q) = (Vec::new(), Vec::new());
     let (mut b, mut bs, mut a, mut as_, mut tr) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut status, mut warning) = (Vec::new(), Vec::new());
-    for ((level, _, ids, res, truth), v) in results.iter().zip(verdicts) {
+    for ((level, _, ids, res, truth), l) in results.iter().zip(summary) {
+        let v = &l.verdict;
         let n_rows = q.len();
         for pc in parameter_changes(res, truth.as_deref()) {
             let law_param = res.after.names[..res.after.n_law].contains(&pc.name);
@@ -814,22 +831,30 @@ fn closed_loop_table(
     Ok(t)
 }
 
+/// The status of every level, `L1 `explained`, L2 `unexplained``: the first line of the
+/// loop's markdown and of the run's report.
+pub fn status_line(levels: &[DiagnoseLevel]) -> String {
+    levels
+        .iter()
+        .map(|l| format!("{} `{}`", l.level, l.status))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 fn markdown(
     study: &str,
     model: &str,
     results: &[LevelResult],
-    verdicts: &[crate::closed_loop::verdict::Verdict],
+    summary: &[DiagnoseLevel],
     term: Option<(&[String], &crate::rom::TermCertificate)>,
 ) -> String {
     let mut s = String::new();
     // The first line: the status of every level.
-    let status = results
-        .iter()
-        .zip(verdicts)
-        .map(|(r, v)| format!("{} `{}`", r.0, v.status))
-        .collect::<Vec<_>>()
-        .join(", ");
-    let _ = writeln!(s, "# Closed loop: {study}, {model}: {status}\n");
+    let _ = writeln!(
+        s,
+        "# Closed loop: {study}, {model}: {}\n",
+        status_line(summary)
+    );
     let _ = writeln!(
         s,
         "Status per level: `nothing_missing` (the residual is consistent with noise, nothing accepted), `explained` (effects accepted, the final residual consistent with noise), `unexplained` (the residual stays above the calibrated null level: the effects accepted on the way are tentative and the adhesive's parameters carry a warning), `confounded` (an effect the data cannot separate from the adhesive's parameters: they are given as a range). Consistent with noise: the normalised chi-square at most the threshold of its null level, calibrated on replicates of the fitted model through the same measurement chain.\n"
@@ -847,7 +872,8 @@ fn markdown(
             c.n_lines
         );
     }
-    for ((level, _, ids, res, truth), v) in results.iter().zip(verdicts) {
+    for ((level, _, ids, res, truth), l) in results.iter().zip(summary) {
+        let v = &l.verdict;
         let _ = writeln!(
             s,
             "## Level {level}: `{}`\n\n**{}**\n\n{}\n",
@@ -1126,19 +1152,17 @@ fn verdict_of(
 
 /// `verdict`: one row per level: the status, the null level and threshold, where the residual
 /// is, the tentative, dropped and confounded effects, and the sentence of the report.
-fn verdict_table(
-    results: &[LevelResult],
-    verdicts: &[crate::closed_loop::verdict::Verdict],
-    summary: &[DiagnoseLevel],
-) -> Result<Table, RunError> {
+fn verdict_table(results: &[LevelResult], summary: &[DiagnoseLevel]) -> Result<Table, RunError> {
+    let verdicts: Vec<&crate::closed_loop::verdict::Verdict> =
+        summary.iter().map(|l| &l.verdict).collect();
     let mut t = Table::new("verdict");
     let lv: Vec<String> = results.iter().map(|r| r.0.clone()).collect();
     let st: Vec<String> = verdicts.iter().map(|v| v.status.to_string()).collect();
     let f = |g: &dyn Fn(&crate::closed_loop::verdict::Verdict) -> f64| -> Vec<f64> {
-        verdicts.iter().map(g).collect()
+        verdicts.iter().map(|v| g(v)).collect()
     };
     let text = |g: &dyn Fn(&crate::closed_loop::verdict::Verdict) -> String| -> Vec<String> {
-        verdicts.iter().map(g).collect()
+        verdicts.iter().map(|v| g(v)).collect()
     };
     let join = |v: Vec<String>| v.join("; ");
     t.push_str("level", lv)

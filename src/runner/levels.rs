@@ -1,4 +1,4 @@
-//! Across excitation levels (issue 12, item 3): the level-to-level change of E' and E'' with
+//! Across excitation levels: the level-to-level change of E' and E'' with
 //! credible intervals, and whether the law's parameters differ between levels at all.
 //!
 //! 1. **Change**: at the first two bending modes of the joint (from the lower level's MAP: the
@@ -582,11 +582,11 @@ mod study_run {
     fn bayes_study_with_comparison() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let study = crate::study::load(&root.join("studies/bayes_compare.toml")).unwrap();
-        let opts = super::super::RunOptions {
+        let opts = crate::pipeline::RunOptions {
             output_dir: Some(root.join("results/bayes_compare")),
             ..Default::default()
         };
-        let s = super::super::run_study(&study, &opts, &|_| ()).unwrap();
+        let s = crate::pipeline::run_study(&study, &opts, &|_| ()).unwrap();
         println!("total {:.1} s, files {:?}", s.seconds, s.files);
         let m = std::fs::read_to_string(root.join("results/bayes_compare/manifest.json")).unwrap();
         println!("{m}");

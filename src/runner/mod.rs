@@ -1,5 +1,6 @@
-//! The study runner: `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (issue 4, items 5-6).
-//! It sits outside the numerical core (like `study`, `output`, `plot`) and wires them together:
+//! The stages of a study's run, sequenced by [`crate::pipeline`] (`rfmlab run STUDY.toml`) and
+//! `rfmlab check STUDY.toml`. It sits outside the numerical core (like `study`, `output`,
+//! `plot`) and wires them together:
 //!
 //! 1. load the measured data of every level (UFF58, [`crate::data::frf_set_from_uff`]) and check
 //!    it ([`crate::data::check_level`]: excitation channel present, band covered);
@@ -12,13 +13,8 @@
 //!    and the analyses: per-line RFM (paper eq. 10-11, Fig. 13/18), Model 1 over bands (case
 //!    study 1), circle fit (Table 2) and IEM (eq. 20, Table 3), global RFM per model (eq. 37,
 //!    Tables 4-5), correlation (FRAC eq. 38, SCC eq. 39, ACC eq. 40) and sensitivities (Fig. 9);
-//! 4. results in `study.output_dir` (see [`write`] for the tables, their columns and units).
-//!
-//! # Atomicity
-//! Everything is written into a fresh temporary sibling folder `<output_dir>.tmp-<pid>`; only when
-//! every file (manifest last) is written is the old folder renamed away and the new one renamed
-//! into place (then the old one is deleted). A failed or interrupted run therefore leaves the
-//! earlier results untouched (at worst a stray `.tmp-*` folder).
+//! 4. the tables, figures and report sections of the results ([`write`] lists the tables, their
+//!    columns and units), written by [`crate::report::write`] in one atomic folder swap.
 
 pub mod basins;
 pub mod bayes;
@@ -34,9 +30,9 @@ pub mod redundancy;
 mod sample;
 pub mod terms;
 pub mod write;
-mod write_bayes;
-mod write_compare;
-mod write_levels;
+pub(crate) mod write_bayes;
+pub(crate) mod write_compare;
+pub(crate) mod write_levels;
 
 pub use compute::{
     BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,
@@ -48,7 +44,6 @@ use crate::frf::{FrfEngine, FrfError, Sweep};
 use crate::study::build::BuiltModel;
 use crate::study::{Engine, Study, StudyError};
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 /// Options of a run (beyond the study file).
 #[derive(Clone, Debug, Default)]
@@ -88,6 +83,9 @@ pub enum RunError {
     Output(#[from] crate::output::OutputError),
     #[error("figure: {0}")]
     Plot(#[from] crate::plot::PlotError),
+    /// The executor's cancellation flag was set; nothing was written.
+    #[error("the run was cancelled")]
+    Cancelled,
 }
 
 impl RunError {
@@ -125,6 +123,8 @@ pub struct ModelSummary {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CheckSummary {
     pub study: String,
+    /// Where `rfmlab run` writes the results (without `-o/--output`).
+    pub output_dir: PathBuf,
     pub n_dof: usize,
     /// Per level: name, number of lines in the band, channel (response) ids used.
     pub levels: Vec<(String, usize, Vec<u32>)>,
@@ -492,12 +492,21 @@ fn modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange
     r
 }
 
-/// The run's FRF engine, its description, and the likelihood's engine (the excitation column
-/// only, when the study has an `[inference]` section and uses the ROM).
-type Engines = (Box<dyn FrfEngine>, String, Option<Box<dyn FrfEngine>>);
+/// The run's FRF engines.
+pub(crate) struct Engines {
+    /// Inputs at every measured point.
+    pub engine: Box<dyn FrfEngine>,
+    /// Its description for the report and manifest.
+    pub note: String,
+    /// The likelihood's engine (the excitation column only, or every measured point for the
+    /// closed loop), when the study has an `[inference]` section and uses the ROM.
+    pub likelihood: Option<Box<dyn FrfEngine>>,
+    /// ROMs built and certified (0: full model, or loaded from the cache).
+    pub rom_builds: u64,
+}
 
 /// Build the FRF engine with inputs = all measured points of every level.
-fn build_engine(
+pub(crate) fn build_engine(
     study: &Study,
     built: &BuiltModel,
     levels: &mut [LevelData],
@@ -527,8 +536,8 @@ fn build_engine(
     }
     inputs.sort_unstable();
     match study.solver.engine {
-        Engine::Full => Ok((
-            Box::new(
+        Engine::Full => Ok(Engines {
+            engine: Box::new(
                 crate::frf::FullModel::new(
                     &built.model,
                     &inputs,
@@ -536,9 +545,10 @@ fn build_engine(
                 )
                 .map_err(|e| RunError::Engine(e.to_string()))?,
             ),
-            format!("engine: full model, {} DOFs", built.model.n_dof()),
-            None,
-        )),
+            note: format!("engine: full model, {} DOFs", built.model.n_dof()),
+            likelihood: None,
+            rom_builds: 0,
+        }),
         Engine::Rom => {
             let lo = levels
                 .iter()
@@ -680,13 +690,18 @@ fn build_engine(
                 (Some(f), true) => format!(" (loaded from the ROM cache {})", f.display()),
                 _ => String::new(),
             } + &grid_note;
-            Ok((Box::new(RomEngine { rom, pencils }), note, lik_engine))
+            Ok(Engines {
+                engine: Box::new(RomEngine { rom, pencils }),
+                note,
+                likelihood: lik_engine,
+                rom_builds: u64::from(!from_cache),
+            })
         }
     }
 }
 
 /// Build the model of a study (errors name the study file).
-fn build(study: &Study) -> Result<BuiltModel, RunError> {
+pub(crate) fn build(study: &Study) -> Result<BuiltModel, RunError> {
     Ok(crate::study::build::build_model(
         &study.structure,
         &study.file.display().to_string(),
@@ -694,7 +709,9 @@ fn build(study: &Study) -> Result<BuiltModel, RunError> {
 }
 
 /// Check every model spec: known name, parameters in range (the study validation does most).
-fn model_laws(study: &Study) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
+pub(crate) fn model_laws(
+    study: &Study,
+) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
     let mut laws = Vec::new();
     for (i, m) in study.models.iter().enumerate() {
         let law = crate::material::model_from_name(&m.name, m.branches)
@@ -708,7 +725,7 @@ fn model_laws(study: &Study) -> Result<Vec<Box<dyn crate::material::Constitutive
 
 /// Evaluate the full model at every model's initial E*(w) on 3 lines of each level
 /// (both band ends included): a singular or ill-conditioned Z is an input error naming the model.
-fn check_initial_values(
+pub(crate) fn check_initial_values(
     study: &Study,
     built: &BuiltModel,
     levels: &[LevelData],
@@ -772,6 +789,7 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
     let lines_checked = check_initial_values(study, &built, &levels, &laws)?;
     Ok(CheckSummary {
         study: study.name.clone(),
+        output_dir: study.output_dir.clone(),
         n_dof: built.model.n_dof(),
         levels: levels
             .iter()
@@ -786,140 +804,10 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
     })
 }
 
-/// Run a study: identification, correlation, tables, figures, report and manifest in
-/// `study.output_dir` (or `opts.output_dir`), replaced atomically as a whole (module doc).
-pub fn run_study(
-    study: &Study,
-    opts: &RunOptions,
-    progress: &(dyn Fn(Event) + Sync),
-) -> Result<RunSummary, RunError> {
-    // `solver.threads`: a pool of that size for the whole run (results do not depend on it).
-    if let Some(t) = study.solver.threads {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build()
-            .map_err(|e| RunError::Engine(format!("thread pool of {t} threads: {e}")))?;
-        return pool.install(|| run_study_here(study, opts, progress));
-    }
-    run_study_here(study, opts, progress)
-}
-
-fn run_study_here(
-    study: &Study,
-    opts: &RunOptions,
-    progress: &(dyn Fn(Event) + Sync),
-) -> Result<RunSummary, RunError> {
-    let t0 = Instant::now();
-    let mut timings: Vec<(String, f64)> = Vec::new();
-    let mut lap = |name: &str, t: &mut Instant| {
-        timings.push((name.to_string(), t.elapsed().as_secs_f64()));
-        *t = Instant::now();
-    };
-    let mut t = Instant::now();
-    let laws = model_laws(study)?;
-    progress(Event::Start {
-        step: "assembling the FE model".into(),
-        total: 0,
-    });
-    let built = build(study)?;
-    progress(Event::Finish);
-    lap("build model", &mut t);
-    let mut levels = load_levels(study, &built)?;
-    check_initial_values(study, &built, &levels, &laws)?;
-    lap("load and check data", &mut t);
-    progress(Event::Start {
-        step: "building the FRF engine".into(),
-        total: 0,
-    });
-    let (engine, engine_note, lik_engine) =
-        build_engine(study, &built, &mut levels, &laws, opts.rom_cache.as_deref())?;
-    progress(Event::Finish);
-    lap("engine", &mut t);
-    let mut results = Vec::new();
-    for level in &levels {
-        // Declared point masses and beam factor change the deterministic analyses' structure.
-        let view = declared::deterministic_view(study, engine.as_ref(), &built, level)?;
-        let (det_engine, det_built): (&dyn FrfEngine, &BuiltModel) = match &view {
-            Some(v) => (&v.engine, &v.built),
-            None => (engine.as_ref(), &built),
-        };
-        let mut r = compute::analyse_level(study, det_built, det_engine, level, &laws, progress)?;
-        lap(&format!("analyses {}", level.name), &mut t);
-        if let Some(inf) = &study.inference {
-            r.posteriors = bayes::infer_level(
-                study,
-                inf,
-                lik_engine.as_deref().unwrap_or(engine.as_ref()),
-                level,
-                &laws,
-                &r.global,
-                progress,
-            )?;
-            lap(&format!("inference {}", level.name), &mut t);
-            basins::run_level(
-                study,
-                inf,
-                lik_engine.as_deref().unwrap_or(engine.as_ref()),
-                engine.as_ref(),
-                level,
-                &laws,
-                &mut r.posteriors,
-            )?;
-            if inf.basins.is_some() {
-                lap(&format!("basins {}", level.name), &mut t);
-            }
-        }
-        results.push(r);
-    }
-    if let Some(inf) = &study.inference {
-        let lik = lik_engine.as_deref().unwrap_or(engine.as_ref());
-        if let Some(c) = levels::compare(study, inf, lik, &levels, &laws, &results)? {
-            if let Some(r) = results.iter_mut().find(|r| r.level == c.high) {
-                r.across_levels = Some(c);
-            }
-            lap("across levels", &mut t);
-        }
-    }
-    let out_dir = opts
-        .output_dir
-        .clone()
-        .unwrap_or_else(|| study.output_dir.clone());
-    let figures = study.analyses.figures && !opts.no_figures;
-    let files = write::write_results(
-        study,
-        &out_dir,
-        &levels,
-        &results,
-        figures,
-        &timings,
-        &engine_note,
-        t0,
-        progress,
-    )?;
-    let mut files = files;
-    files.extend(closed_loop::run_hook(study, &out_dir)?);
-    let models = results
-        .iter()
-        .flat_map(|r| {
-            r.global.iter().map(move |g| ModelSummary {
-                level: r.level.clone(),
-                model: g.result.model_name.clone(),
-                param_names: g.result.param_names.clone(),
-                initial: g.result.initial.clone(),
-                identified: g.result.params.clone(),
-                iterations: g.result.iterations,
-                stop_reason: g.result.stop_reason.to_string(),
-                frac: g.result.frac.clone(),
-            })
-        })
-        .collect();
-    Ok(RunSummary {
-        study: study.name.clone(),
-        output_dir: out_dir,
-        files,
-        models,
-        seconds: t0.elapsed().as_secs_f64(),
-    })
+/// The stages of a run, for [`crate::pipeline`].
+pub(crate) mod stages {
+    pub(crate) use super::compute::{analyse_level, rfm_params};
+    pub(crate) use super::{build, build_engine, check_initial_values, load_levels, model_laws};
 }
 
 /// The folder of cached ROMs of `study` (`.rom-cache/` beside its output folder): where

@@ -1,4 +1,4 @@
-//! Parameter redundancy of one posterior (issue 12, item 4): the SVD of the whitened,
+//! Parameter redundancy of one posterior: the SVD of the whitened,
 //! log-scaled sensitivity at the MAP, the posterior correlation matrix and per-parameter
 //! identifiability (posterior sd over prior sd in unconstrained coordinates). The numerics are
 //! in [`crate::inference::identifiability`].

@@ -1,4 +1,4 @@
-//! Engines for effects that need new matrices (issue 13, item 1): the degraded-bond regions
+//! Engines for effects that need new matrices: the degraded-bond regions
 //! and base springs among a run's effects become the extra terms of a certified ROM
 //! and the adherend damping among a run's effects become the extra terms of a certified ROM
 //! ([`crate::rom::terms`]) that wraps the run's effect-free engine

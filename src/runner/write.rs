@@ -15,13 +15,12 @@
 //! Plus `manifest.json` (written last), `report.md` and figures `fig_*.png` / `.svg`.
 
 use super::compute::{frf_of, LevelResults};
-use super::{sibling, Event, LevelData, RunError};
+use super::{LevelData, RunError};
 use crate::common::C64;
-use crate::output::{Manifest, Report, ResultsDir, Table};
+use crate::output::{Report, Table};
 use crate::plot::{Curve, CurveStyle, FrfCurve};
 use crate::study::Study;
 use std::path::Path;
-use std::time::Instant;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
@@ -347,15 +346,23 @@ fn f4(v: f64) -> String {
 }
 
 /// The report: Tables 2-5 of the paper with its values beside ours, and the figures.
-fn build_report(
+pub(crate) fn build_report(
     study: &Study,
     levels: &[LevelData],
     results: &[LevelResults],
     figures: &[(String, String)],
     engine_note: &str,
+    loop_status: Option<&str>,
 ) -> Report {
     let mut rep = Report::new();
-    rep.heading(1, &format!("rfmlab study: {}", study.name));
+    // With the closed loop, the first line gives its status per level.
+    rep.heading(
+        1,
+        &match loop_status {
+            Some(s) => format!("rfmlab study: {}: closed loop {s}", study.name),
+            None => format!("rfmlab study: {}", study.name),
+        },
+    );
     if !study.description.is_empty() {
         rep.paragraph(&study.description);
     }
@@ -652,7 +659,7 @@ fn build_report(
 }
 
 /// Draw the figures into `dir`; returns (file name of the PNG, caption).
-fn draw_figures(
+pub(crate) fn draw_figures(
     dir: &Path,
     levels: &[LevelData],
     results: &[LevelResults],
@@ -808,118 +815,28 @@ fn draw_figures(
     Ok(out)
 }
 
-/// Write every result file into a temporary sibling folder, then swap it into `out_dir`.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn write_results(
-    study: &Study,
-    out_dir: &Path,
+/// Every table of a run, in the order they are written: the deterministic ones, then the
+/// inference, comparison and across-level ones (those only when computed).
+pub(crate) fn tables(
     levels: &[LevelData],
     results: &[LevelResults],
-    figures: bool,
-    timings: &[(String, f64)],
-    engine_note: &str,
-    t0: Instant,
-    progress: &(dyn Fn(Event) + Sync),
-) -> Result<Vec<String>, RunError> {
-    let tmp = sibling(out_dir, &format!("tmp-{}", std::process::id()));
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp).map_err(|e| {
-            crate::output::OutputError::io(&tmp, "remove stale temporary folder", e)
-        })?;
-    }
-    let parent = tmp.parent().map(Path::to_path_buf).unwrap_or_default();
-    let tmp_name = tmp
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let result = (|| -> Result<Vec<String>, RunError> {
-        let mut dir = ResultsDir::create(&parent, &tmp_name)?;
-        progress(Event::Start {
-            step: "writing results".into(),
-            total: 0,
-        });
-        let t = build_tables(levels, results)?;
-        for table in [
-            &t.frf,
-            &t.parameters,
-            &t.iterations,
-            &t.correlation,
-            &t.curves,
-            &t.modulus,
-            &t.svd,
-            &t.modal,
-            &t.sensitivity,
-        ] {
-            dir.write_table(table)?;
-        }
-        let posts: Vec<&super::bayes::PosteriorResult> =
-            results.iter().flat_map(|r| r.posteriors.iter()).collect();
-        for table in super::write_bayes::tables(levels, &posts)? {
-            dir.write_table(&table)?;
-        }
-        for table in super::write_compare::tables(&posts)? {
-            dir.write_table(&table)?;
-        }
-        for table in super::write_levels::tables(results)? {
-            dir.write_table(&table)?;
-        }
-        let figs = if figures {
-            let mut f = draw_figures(dir.path(), levels, results)?;
-            let posts: Vec<&super::bayes::PosteriorResult> =
-                results.iter().flat_map(|r| r.posteriors.iter()).collect();
-            f.extend(super::write_bayes::figures(dir.path(), &posts)?);
-            f.extend(super::write_levels::figures(dir.path(), results)?);
-            for (png, _) in &f {
-                dir.record(png);
-                dir.record(png.replace(".png", ".svg"));
-            }
-            f
-        } else {
-            Vec::new()
-        };
-        let mut report = build_report(study, levels, results, &figs, engine_note);
-        super::write_bayes::report(&mut report, levels, &posts, &figs);
-        super::write_compare::report(&mut report, &posts);
-        super::write_levels::report(&mut report, results, &figs);
-        dir.write_report(&report)?;
-        let mut manifest = Manifest::new(&study.file, Some(study.seed));
-        for (step, secs) in timings {
-            manifest.add_timing(step.clone(), *secs);
-        }
-        manifest.add_timing("total", t0.elapsed().as_secs_f64());
-        manifest.add_note(engine_note.to_string());
-        manifest.add_note(
-            "results written into a temporary folder and swapped into place at the end".to_string(),
-        );
-        dir.write_manifest(&mut manifest)?;
-        progress(Event::Finish);
-        let mut files = dir.written().to_vec();
-        files.push("manifest.json".into());
-        Ok(files)
-    })();
-    let files = match result {
-        Ok(f) => f,
-        Err(e) => {
-            let _ = std::fs::remove_dir_all(&tmp);
-            return Err(e);
-        }
-    };
-    // Swap: old -> .old-<pid>, tmp -> out_dir, delete old.
-    let old = sibling(out_dir, &format!("old-{}", std::process::id()));
-    let io = |p: &Path, what: &'static str, e| {
-        RunError::Output(crate::output::OutputError::io(p, what, e))
-    };
-    if out_dir.exists() {
-        std::fs::rename(out_dir, &old)
-            .map_err(|e| io(out_dir, "move the previous results aside", e))?;
-    }
-    if let Err(e) = std::fs::rename(&tmp, out_dir) {
-        let _ = std::fs::rename(&old, out_dir);
-        return Err(io(out_dir, "move the new results into place", e));
-    }
-    if old.exists() {
-        let _ = std::fs::remove_dir_all(&old);
-    }
-    let _ = TWO_PI;
-    Ok(files)
+) -> Result<Vec<Table>, RunError> {
+    let t = build_tables(levels, results)?;
+    let mut out = vec![
+        t.frf,
+        t.parameters,
+        t.iterations,
+        t.correlation,
+        t.curves,
+        t.modulus,
+        t.svd,
+        t.modal,
+        t.sensitivity,
+    ];
+    let posts: Vec<&super::bayes::PosteriorResult> =
+        results.iter().flat_map(|r| r.posteriors.iter()).collect();
+    out.extend(super::write_bayes::tables(levels, &posts)?);
+    out.extend(super::write_compare::tables(&posts)?);
+    out.extend(super::write_levels::tables(results)?);
+    Ok(out)
 }

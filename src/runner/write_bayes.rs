@@ -108,7 +108,8 @@ pub fn tables(levels: &[LevelData], posts: &[&PosteriorResult]) -> Result<Vec<Ta
                 su.s("sampler", s.sampler.clone());
                 su.s("parameter", p.names[k].clone());
                 su.s("unit", p.units[k].clone());
-                let u = p.units[k].as_str();
+                // The unit varies by row (the parameter's, in `unit`).
+                let u = "SI (see unit)";
                 for (c, v) in [
                     ("mean", sm.mean),
                     ("sd", sm.sd),
@@ -184,9 +185,10 @@ pub fn tables(levels: &[LevelData], posts: &[&PosteriorResult]) -> Result<Vec<Ta
             la.s("model", p.model.clone());
             la.s("parameter", p.names[k].clone());
             la.s("unit", p.units[k].clone());
-            la.f("map", &p.units[k], p.map.map_physical[k]);
-            la.f("mode_x", &p.units[k], lp.physical[k]);
-            la.f("sd", &p.units[k], sd[k]);
+            // The unit varies by row (the parameter's, in `unit`).
+            la.f("map", "SI (see unit)", p.map.map_physical[k]);
+            la.f("mode_x", "SI (see unit)", lp.physical[k]);
+            la.f("sd", "SI (see unit)", sd[k]);
             la.f("log_evidence", "nats", lp.log_evidence);
             la.f("log_likelihood", "nats", lp.log_likelihood);
             la.f("log_prior", "nats", lp.log_prior);

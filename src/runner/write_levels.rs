@@ -1,5 +1,5 @@
 //! Tables, figures and report sections of the comparison across levels, parameter redundancy
-//! and initial-value sensitivity (issue 12, items 3-5). Tables (parquet):
+//! and initial-value sensitivity. Tables (parquet):
 //!
 //! | table | columns (unit) |
 //! |---|---|
@@ -204,7 +204,18 @@ pub fn tables(results: &[LevelResults]) -> Result<Vec<Table>, RunError> {
                 );
                 for n in &names {
                     let k = b.names.iter().position(|m| m == n);
-                    let unit = k.map(|k| p.units[k].clone()).unwrap_or_default();
+                    // The parameter's unit from any posterior that has it (a column's unit
+                    // is set by its first row, which may be a model without the parameter).
+                    let unit = posts
+                        .iter()
+                        .find_map(|q| {
+                            let bq = q.basins.as_ref()?;
+                            bq.names
+                                .iter()
+                                .position(|m| m == n)
+                                .map(|k| q.units[k].clone())
+                        })
+                        .unwrap_or_default();
                     ba.f(
                         &format!("start_{}", n.to_ascii_lowercase()),
                         &unit,

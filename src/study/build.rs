@@ -1,5 +1,5 @@
 //! Study -> structural model: the mesher's [`JointSpec`] from the validated structure section,
-//! or the imported Matrix Market model.
+//! or the imported model (Matrix Market, Harwell-Boeing or Abaqus files).
 
 use super::{MeshSize, Structure, StructureSource, StudyError};
 use crate::fe::joint::{
@@ -98,16 +98,37 @@ pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> 
             })?;
             (m, Some(info))
         }
+        StructureSource::Lap(spec) => {
+            let mut spec = spec.clone();
+            spec.points = s
+                .points
+                .iter()
+                .map(|p| PointSpec {
+                    id: p.id,
+                    position_m: p.position_m,
+                    direction: p.direction,
+                })
+                .collect();
+            let (m, info) = crate::fe::lap::build_lap_model(&spec).map_err(|e| StudyError {
+                file: file.to_string(),
+                key: e.key().to_string(),
+                message: e.to_string(),
+            })?;
+            (m, Some(info))
+        }
         StructureSource::MatrixMarket(im) => {
-            let paths = crate::fe::matrix_market::MmPaths {
-                m: im.mass.clone(),
-                k_b: im.stiffness.clone(),
-                s: im.adhesive_sensitivity.clone(),
-                c_b: im.viscous_damping.clone(),
-                d_b: im.structural_damping.clone(),
+            let files = crate::fe::foreign::ImportFiles {
+                format: im.format,
+                mass: im.mass.clone(),
+                stiffness: im.stiffness.clone(),
+                adhesive_sensitivity: im.adhesive_sensitivity.clone(),
+                viscous_damping: im.viscous_damping.clone(),
+                structural_damping: im.structural_damping.clone(),
                 dof_map: Some(im.dof_map.clone()),
+                mapping: im.mapping.clone(),
+                units: im.units,
             };
-            let m = crate::fe::matrix_market::import_model(&paths).map_err(|e| StudyError {
+            let m = crate::fe::foreign::import_model_files(&files).map_err(|e| StudyError {
                 file: file.to_string(),
                 key: "structure.import".into(),
                 message: e.to_string(),

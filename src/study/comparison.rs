@@ -91,7 +91,7 @@ pub(super) fn basins(
     if starts < 2 {
         return Err(ctx.err(
             "inference.basins.starts",
-            format!("{starts} is too small: give at least 2 (200 for the basin study the issue asks for)"),
+            format!("{starts} is too small: give at least 2 (200 for a basin study)"),
         ));
     }
     let tol = r.tolerance_sd.unwrap_or(0.1);

@@ -10,9 +10,11 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// An experiment file as written (public so that the documentation's key list can be checked
+/// against it; fields stay private).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawExperimentFile {
+pub struct RawExperimentFile {
     experiment: RawExperiment,
     structure: RawStructure,
     #[serde(default)]

@@ -39,9 +39,11 @@ use crate::material_fit::{LoopParams, MasterCurve, RelaxationLaw};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
+/// A material study as written (public so that the documentation's key list can be checked
+/// against it; fields stay private).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawMaterialStudy {
+pub struct RawMaterialStudy {
     #[serde(default)]
     study: RawMeta,
     material_data: Option<RawData>,

@@ -68,9 +68,13 @@ pub struct Joint {
     pub snap_points: bool,
 }
 
-/// Matrix Market files of an externally assembled model.
+/// Matrix files of an externally assembled model (Matrix Market, Harwell-Boeing or Abaqus,
+/// see [`crate::fe::foreign`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Import {
+    pub format: crate::fe::foreign::ImportFormat,
+    pub mapping: Option<PathBuf>,
+    pub units: crate::fe::foreign::Units,
     pub mass: PathBuf,
     pub stiffness: PathBuf,
     pub adhesive_sensitivity: PathBuf,
@@ -83,6 +87,9 @@ pub struct Import {
 #[derive(Clone, Debug, PartialEq)]
 pub enum StructureSource {
     Mesher(Joint),
+    /// A single-lap joint built by the mesher (`structure.joint = "single_lap"`); its points
+    /// are the study's, added when the model is built.
+    Lap(crate::fe::lap::LapSpec),
     MatrixMarket(Import),
 }
 
@@ -264,4 +271,5 @@ pub mod comparison;
 pub mod effects;
 pub mod experiment;
 pub mod inference;
+pub mod lap;
 pub mod material;

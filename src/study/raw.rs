@@ -35,8 +35,13 @@ pub struct RawMeta {
 #[serde(deny_unknown_fields)]
 pub struct RawStructure {
     pub name: Option<String>,
-    /// Build the model with the mesher (default) or import Matrix Market files.
+    /// Build the model with the mesher (default) or import matrix files: "matrix_market",
+    /// "harwell_boeing" or "abaqus".
     pub source: Option<String>,
+    /// The meshed joint's kind: "beam_on_block" (default) or "single_lap" (with [structure.lap]).
+    pub joint: Option<String>,
+    /// The single-lap joint (joint = "single_lap").
+    pub lap: Option<super::lap::RawLap>,
     pub beam: Option<RawBeam>,
     pub adhesive: Option<RawAdhesive>,
     pub mesh: Option<RawMesh>,
@@ -44,7 +49,7 @@ pub struct RawStructure {
     pub points: Vec<RawPoint>,
     /// Id of the excitation point (one of `points`).
     pub excitation: Option<u32>,
-    /// Imported model (source = "matrix_market").
+    /// Imported model (source = "matrix_market", "harwell_boeing" or "abaqus").
     pub import: Option<RawImport>,
     /// Declared effects (see [`super::effects`]).
     #[serde(default)]
@@ -126,6 +131,10 @@ pub struct RawImport {
     pub viscous_damping: Option<String>,
     pub structural_damping: Option<String>,
     pub dof_map: String,
+    /// ANSYS equation-mapping file (Harwell-Boeing): the DOF map may then name nodes.
+    pub mapping: Option<String>,
+    /// "SI" (default) or "mm-t-s".
+    pub units: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -164,7 +164,22 @@ pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyE
 pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyError> {
     let source_name = s.source.as_deref().unwrap_or("mesher");
     let source = match source_name {
+        "mesher" if s.joint.as_deref() == Some("single_lap") => {
+            let l = s.lap.as_ref().ok_or_else(|| {
+                ctx.err(
+                    "structure.lap",
+                    "joint = \"single_lap\" needs [structure.lap] with length, thickness, width, overlap, material and adhesive",
+                )
+            })?;
+            StructureSource::Lap(super::lap::lap(ctx, l)?)
+        }
         "mesher" => {
+            if let Some(j) = s.joint.as_deref().filter(|j| *j != "beam_on_block") {
+                return Err(ctx.err(
+                    "structure.joint",
+                    format!("\"{j}\": use \"beam_on_block\" (default: a beam on an adhesive layer over a rigid base) or \"single_lap\""),
+                ));
+            }
             let beam = s.beam.as_ref().ok_or_else(|| {
                 ctx.err(
                     "structure.beam",
@@ -180,9 +195,15 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
             let j = joint(ctx, beam, ad, s.mesh.as_ref())?;
             StructureSource::Mesher(j)
         }
-        "matrix_market" => {
+        "matrix_market" | "harwell_boeing" | "abaqus" => {
+            use crate::fe::foreign::{ImportFormat, Units};
+            let format = match source_name {
+                "harwell_boeing" => ImportFormat::HarwellBoeing,
+                "abaqus" => ImportFormat::Abaqus,
+                _ => ImportFormat::MatrixMarket,
+            };
             let im = s.import.as_ref().ok_or_else(|| {
-                ctx.err("structure.import", "source = \"matrix_market\" needs [structure.import] with mass, stiffness, adhesive_sensitivity and dof_map files")
+                ctx.err("structure.import", format!("source = \"{source_name}\" needs [structure.import] with mass, stiffness, adhesive_sensitivity and dof_map files"))
             })?;
             let f = |key: &str, p: &str| -> Result<PathBuf, StudyError> {
                 let r = resolve(ctx.file, p);
@@ -198,7 +219,25 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
                     ))
                 }
             };
+            let units = match im.units.as_deref() {
+                None => Units::Si,
+                Some(u) => Units::parse(u).ok_or_else(|| {
+                    ctx.err(
+                        "structure.import.units",
+                        format!("\"{u}\" is not a unit system: use \"SI\" (m, kg, s; default) or \"mm-t-s\" (mm, tonne, s, N, MPa)"),
+                    )
+                })?,
+            };
+            if im.mapping.is_some() && format != ImportFormat::HarwellBoeing {
+                return Err(ctx.err(
+                    "structure.import.mapping",
+                    format!("the ANSYS mapping file goes with source = \"harwell_boeing\"; remove it for \"{source_name}\""),
+                ));
+            }
             StructureSource::MatrixMarket(Import {
+                format,
+                mapping: im.mapping.as_deref().map(|p| f("mapping", p)).transpose()?,
+                units,
                 mass: f("mass", &im.mass)?,
                 stiffness: f("stiffness", &im.stiffness)?,
                 adhesive_sensitivity: f("adhesive_sensitivity", &im.adhesive_sensitivity)?,
@@ -219,7 +258,7 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
             return Err(ctx.err(
                 "structure.source",
                 format!(
-                    "unknown source \"{other}\": use \"mesher\" (default) or \"matrix_market\""
+                    "unknown source \"{other}\": use \"mesher\" (default), \"matrix_market\", \"harwell_boeing\" or \"abaqus\""
                 ),
             ))
         }

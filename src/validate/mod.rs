@@ -1,7 +1,7 @@
-//! Statistical validation of the Bayesian layer on rfmlab's own frequency-domain simulation
-//! (issue 12, items 7 and 8): simulation-based calibration, interval coverage, model
-//! selection by evidence, and evidence against brute-force quadrature; every independent unit
-//! (a prior draw, a replicate, a generating model's replicate) may run in its own shard.
+//! Statistical validation of the Bayesian layer on rfmlab's own frequency-domain simulation:
+//! simulation-based calibration, interval coverage, model selection by evidence, and evidence
+//! against brute-force quadrature; every independent unit (a prior draw, a replicate, a
+//! generating model's replicate) may run in its own shard.
 //!
 //! Data: the virtual experiment of the validation file's experiment ([`simulate_level`] in
 //! frequency-domain mode: block spectra drawn from their exact Gaussian law, with the

@@ -6,9 +6,11 @@ use crate::study::StudyError;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
+/// A validation file as written (public so that the documentation's key list can be checked
+/// against it; fields stay private).
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawFile {
+pub struct RawFile {
     validation: RawValidation,
     sbc: Option<RawSbc>,
     coverage: Option<RawCoverage>,

@@ -1,4 +1,4 @@
-//! Base springs under the adhesive (src/fe/base.rs, issue 13 item 1) against physics:
+//! Base springs under the adhesive (src/fe/base.rs) against physics:
 //! * the unit spring matrices integrate the base face's area (a rigid translation of the face
 //!   by u stores k A u^2 / 2);
 //! * stiffer springs tend to the fixed base: the first modes' eigenvalues of the model on
@@ -83,7 +83,7 @@ fn stiff_springs_tend_to_the_fixed_base_and_softer_ones_lower_the_first_mode() {
 }
 
 /// The acceptance case `td_base_springs` (studies/data/closed_loop/cases/): its springs lower
-/// the first mode of the 5 mm joint by 3 % (the issue's size), at Model 4's modulus there.
+/// the first mode of the 5 mm joint by 3 % (the case's size), at Model 4's modulus there.
 #[test]
 fn the_acceptance_case_lowers_the_first_mode_by_3_percent() {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -1,4 +1,4 @@
-//! Bad structure input through the CLI (issue 2, "Bad input"): each variant of
+//! Bad structure input through the CLI: each variant of
 //! studies/paper_geometry.toml written to a temp dir makes `rfmlab modes FILE` exit with code 2,
 //! print an error naming the key and the problem on stderr, and never panic.
 

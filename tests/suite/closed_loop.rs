@@ -100,7 +100,7 @@ fn the_loop_finds_each_injected_effect() {
         cases.push((Effect::BeamModulus, 0.04));
     }
     for (effect, value) in cases {
-        // KNOWN WRONG (found in session 14, not asserted beyond the honest report): on the dense
+        // KNOWN WRONG (not asserted beyond the honest report): on the dense
         // chain a +4 % beam modulus drives Model 3's starting fit to two prior edges (E1 and
         // eta1 at 10x the truth, chi-square 7549), and the refit from there ends in another
         // basin (1.744 %, with L-BFGS or Gauss-Newton alike; from 7 space-filling starts

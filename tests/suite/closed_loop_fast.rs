@@ -1,4 +1,4 @@
-//! The closed loop's fast path (issue 13 item 3, speed): with effects in the forward model,
+//! The closed loop's fast path: with effects in the forward model,
 //! the gradient of the likelihood is one vector-Jacobian product
 //! ([`rfmlab::forward::ForwardModel::linearise`]) pulled back through the measurement kernel
 //! and the channel factor; it must equal the contraction of the full Jacobian

@@ -1,4 +1,4 @@
-//! The closed loop (issue 13) on data made by INDEPENDENT code: studies/data/virtual/model4_td
+//! The closed loop on data made by INDEPENDENT code: studies/data/virtual/model4_td
 //! (Welch H1 of a Python/scikit-fem model of the joint with its own mesh, reduced basis and
 //! measurement chain; Model 4 truth in its truth.json), diagnosed with
 //! studies/closed_loop_virtual_td.toml.

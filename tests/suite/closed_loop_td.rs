@@ -1,4 +1,4 @@
-//! Acceptance of the closed loop (issue 13) on TIME-DOMAIN data: each case of
+//! Acceptance of the closed loop on TIME-DOMAIN data: each case of
 //! studies/data/closed_loop/cases/ is simulated by `rfmlab simulate` (time-domain records,
 //! Welch H1, level L1) into a temporary folder and diagnosed with the settings of
 //! studies/closed_loop_td.toml (Model 4, coherence noise with the leakage channel correlation,

@@ -1,5 +1,5 @@
 //! Both sampled evidence estimators against brute-force quadrature on two-parameter models
-//! (issue 12's acceptance: within 0.1 nats): TMCMC with its final importance reweighting
+//! (required: within 0.1 nats): TMCMC with its final importance reweighting
 //! (a Student-t fitted to its 1000 particles, 4000 independent draws: the runner's `tmcmc_is`)
 //! and the generalized stepping-stone from a reference fitted to TMCMC's particles (the
 //! runner's path when NUTS is off), on Model 1 (E0 + j h) and Model 2 (E0 + j w eta0) through the product's likelihood on

@@ -1,4 +1,4 @@
-//! Acceptance tests of the virtual experiment (issue 5): noise-free H1 against its expected
+//! Acceptance tests of the virtual experiment: noise-free H1 against its expected
 //! value (window kernel), leakage bias at the heavily damped 22 Hz mode, random error against
 //! Bendat & Piersol across 50 seeds, and agreement of the two modes in distribution.
 //!

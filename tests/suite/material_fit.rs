@@ -1,4 +1,4 @@
-//! The material-level loop on E'(w), E''(w) (issue 13 item 5): likelihood gradient against
+//! The material-level loop on E'(w), E''(w): likelihood gradient against
 //! finite differences, residual statistics on white noise, the loop on synthetic data from a
 //! known two-branch law, the Kramers-Kronig check on causal and non-causal data, the measured
 //! DMA master curve against pyvisco's Prony fit, and bad input through the CLI.

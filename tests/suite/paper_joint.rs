@@ -1,4 +1,4 @@
-//! Issue 2 acceptance on the real bonded joint (the mesher's model of the paper's structure):
+//! Checks on the real bonded joint (the mesher's model of the paper's structure):
 //!
 //! * complex modes at the four (mode, excitation level) moduli of the paper's Table 3 (IEM
 //!   column) with 5 mm elements: frequency and modal loss factor of the y-bending mode against
@@ -64,7 +64,7 @@ const CASES: [Case; 4] = [
         paper_loss: 0.2044,
         ours_hz: 22.14,
         ours_loss: 0.2044,
-        // issue 2: 22.1 +/- 0.3 Hz, 0.204 +/- 0.004
+        // required: 22.1 +/- 0.3 Hz, 0.204 +/- 0.004
         tol_hz: 0.3,
         tol_loss: 0.004,
     },

@@ -1,4 +1,4 @@
-//! Issue 11, acceptance "the likelihood's weighting pays off": over replicate data sets at a
+//! The likelihood's weighting pays off: over replicate data sets at a
 //! realistic noise level, the MAP of the coherence likelihood scatters far less than the
 //! deterministic RFM, which weighs a line of low coherence as much as a clean one.
 //!
@@ -27,7 +27,7 @@
 //!
 //! Always on: the first [`SHORT`] replicates, 35 s in release (about 11 s for the study's ROM,
 //! then 3-5 s per replicate, on this 2-core machine while another build ran); `RFMLAB_LONG=1`:
-//! the issue's 20, 98 s.
+//! all 20, 98 s.
 
 use crate::runner_common::{built_structure, initial_of, structure};
 use rfmlab::common::C64;
@@ -36,7 +36,7 @@ use rfmlab::experiment::{
     simulate_level, ChainParams, ChannelLabel, ExperimentError, Mode, NoiseLevel, Plant,
 };
 use rfmlab::output::{ColumnData, Table};
-use rfmlab::runner::{run_study, RunOptions};
+use rfmlab::pipeline::{run_study, RunOptions};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::Mutex;

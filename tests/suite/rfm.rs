@@ -333,7 +333,7 @@ fn band_constant_recovers_a_constant_modulus() {
     ));
 }
 
-/// Issue 4 acceptance: noiseless data from each of Models 1-5 (truth = Table 4) is recovered
+/// Noiseless data from each of Models 1-5 (truth = Table 4) is recovered
 /// to 1e-6 relative from Table 4's 'Initial' rows.
 #[test]
 fn global_rfm_recovers_models_1_to_5_from_table4_initial_rows() {

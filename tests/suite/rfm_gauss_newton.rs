@@ -1,4 +1,4 @@
-//! The RFM fixed point against an independent Gauss-Newton (issue 4 acceptance; the argument is
+//! The RFM fixed point against an independent Gauss-Newton (the argument is
 //! in the module doc of `rfmlab::rfm`).
 //!
 //! Noisy data (so the fixed point is not the truth) from an SLS law (paper Model 3) on a small

@@ -1,4 +1,4 @@
-//! The certified ROM on the paper's bonded joint (rfmlab::fe::joint), issue 3 acceptance.
+//! The certified ROM on the paper's bonded joint (rfmlab::fe::joint): build, certificate and sweep.
 //!
 //! Fast tests use the 10 mm mesh; the 5 mm and 2.5 mm acceptance runs are `#[ignore]`d
 //! (commands in their doc comments) because they take longer than a test should.

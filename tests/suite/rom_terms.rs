@@ -1,4 +1,4 @@
-//! The ROM with extra structural terms (src/rom/terms.rs, issue 13 item 1) against the full
+//! The ROM with extra structural terms (src/rom/terms.rs) against the full
 //! model's sparse solve with the same term on, and its derivatives against central
 //! differences:
 //! * a 10 mm degraded strip at each end of the adhesive block (E* S -> E* (S - d S_region))

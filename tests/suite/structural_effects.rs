@@ -1,4 +1,4 @@
-//! The structural effects added for issue 13 item 1 (shaker, degraded bond, base springs)
+//! The structural effects (shaker, degraded bond, base springs)
 //! against independent full-model solves and finite differences:
 //! * shaker: the forward model's algebra on the certified ROM's drive-point receptance equals
 //!   the full sparse solve of the model with the moving mass as an extra DOF on a stinger

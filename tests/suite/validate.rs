@@ -1,4 +1,4 @@
-//! `rfmlab validate` (issue 12, items 7 and 8): the seconds-long smoke run of the statistical
+//! `rfmlab validate`: the seconds-long smoke run of the statistical
 //! validation, its sharding, and its statistics against SciPy.
 //!
 //! Smoke: the default rig (frequency-domain simulation, 200 Hann blocks, 0.2 % sensor noise,
@@ -23,7 +23,7 @@ use rfmlab::validate::{load_validation, Setup};
 use std::path::Path;
 use std::process::Command;
 
-const EXPERIMENT: &str = r#"
+pub(crate) const EXPERIMENT: &str = r#"
 [experiment]
 name = "validate_smoke"
 mode = "frequency"

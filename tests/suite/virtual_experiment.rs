@@ -6,7 +6,7 @@
 //! `force_band_hz = [1, 500]`) is not; on `model4_fd` (exact FRF at the lines, no leakage,
 //! `studies/virtual_fd.toml`) within 0.1 %.
 
-use rfmlab::runner::{run_study, RunOptions};
+use rfmlab::pipeline::{run_study, RunOptions};
 use std::path::Path;
 
 /// Truth per level in Model 4's parameter order (E0, h, E1, eta1), SI.
@@ -107,7 +107,7 @@ fn independent_virtual_experiment_model4_meets_its_targets() {
     }
 }
 
-/// Issue 11's acceptance on the time-domain set, "the posterior 95 % intervals contain the
+/// On the time-domain set, "the posterior 95 % intervals contain the
 /// truth": `studies/bayes_virtual_td.toml` as shipped (coherence noise model, the channels'
 /// errors as the Welch leakage jitter, `channel_correlation = "leakage"`) without its samplers,
 /// the MAP and its Laplace sd (the samplers' sds are within 4 % of it there). Measured: |z| <=

@@ -1,0 +1,208 @@
+//! The [`Plan`]: what a run will do, stage by stage, as typed `*Params` made from a validated
+//! [`Study`] by [`Study::plan`]. A program may edit the plan before [`super::run`]: drop a
+//! model, change the sampler settings of one inference stage, switch the engine.
+//!
+//! The stages of the runner still read their settings from a study; [`Plan::lowered`] writes
+//! the plan's parameters back into a copy of the study the plan was made from, so an edited
+//! plan is what runs.
+
+use super::RunError;
+use crate::closed_loop::ClosedLoopParams;
+use crate::inference::prior::Prior;
+use crate::rfm::RfmParams;
+use crate::study::comparison::{BasinSettings, LevelSettings};
+use crate::study::inference::{
+    CorrelationKind, Inference, NoiseSpec, NutsSettings, SteppingStoneSettings,
+};
+use crate::study::{Band, Engine, Estimator, Level, ModelSpec, Study};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// The FRF engine stage.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EngineParams {
+    /// Certified ROM (default) or the full sparse model.
+    pub engine: Engine,
+    /// Certificate tolerance of the ROM (relative FRF error). Default 1e-6.
+    pub rom_tolerance: f64,
+    /// Worker threads of the run (`None`: rayon's default, one per core).
+    pub threads: Option<usize>,
+}
+
+/// The data stage: which files make each level, over which band.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DataParams {
+    pub levels: Vec<Level>,
+    /// Lines kept (Hz, inclusive); `None`: every line above 0 Hz.
+    pub band_hz: Option<(f64, f64)>,
+    /// Response channels kept (point ids); `None`: all measured.
+    pub channels: Option<Vec<u32>>,
+    /// The analyser's H1 estimator, when the fits model its leakage.
+    pub estimator: Option<Estimator>,
+    /// Truth sidecar of simulated data (the report compares with it).
+    pub truth: Option<PathBuf>,
+}
+
+/// The deterministic identification stage (per level): per-line RFM, Model 1 over bands,
+/// circle fit + IEM, global RFM per model, correlation, sensitivities.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IdentificationParams {
+    /// The laws identified by the global RFM, with their initial values (SI).
+    pub models: Vec<ModelSpec>,
+    /// The RFM iteration's stopping rules and SVD truncation.
+    pub rfm: RfmParams,
+    pub per_line: bool,
+    pub correlation: bool,
+    pub sensitivity: bool,
+    pub band_constant: Vec<Band>,
+    pub iem: Vec<Band>,
+}
+
+/// Settings of the MAP search and the samplers of an inference stage.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SamplerParams {
+    pub nuts: Option<NutsSettings>,
+    pub tmcmc_particles: Option<usize>,
+    pub stepping_stone: Option<SteppingStoneSettings>,
+    pub noise: NoiseSpec,
+    pub noise_scale_prior: Prior,
+    pub nu_prior: Prior,
+    pub map_starts: usize,
+    pub map_max_iterations: u64,
+    pub linearised_measurement: bool,
+    pub channel_correlation: Option<(CorrelationKind, usize)>,
+}
+
+/// The posterior of one model at one level: MAP, samplers, evidence, model-comparison
+/// criteria and redundancy.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InferenceParams {
+    pub level: String,
+    pub model: String,
+    /// One prior per law parameter, then the noise parameters'.
+    pub priors: Vec<Prior>,
+    pub samplers: SamplerParams,
+}
+
+/// A run's stages. Made by [`Study::plan`]; run by [`super::run`].
+#[derive(Clone, Debug)]
+pub struct Plan {
+    study: Arc<Study>,
+    pub engine: EngineParams,
+    pub data: DataParams,
+    pub identification: IdentificationParams,
+    /// One stage per (model, level) of `[inference]`, levels in data order.
+    pub inference: Vec<InferenceParams>,
+    /// The comparison across levels (with inference on two levels or more).
+    pub comparison: Option<LevelSettings>,
+    /// The basin study of the MAP search (`[inference.basins]`).
+    pub basins: Option<BasinSettings>,
+    /// The closed loop (`[closed_loop]` with `[inference]`), run on the run's engine.
+    pub closed_loop: Option<ClosedLoopParams>,
+    /// Where [`crate::report::write`] puts the results by default.
+    pub output_dir: PathBuf,
+    /// Whether the report draws figures.
+    pub figures: bool,
+}
+
+impl Study {
+    /// Load and validate a study file (TOML as written -> typed study with units and
+    /// defaults); errors name the file, the key and the fix.
+    pub fn load(path: impl AsRef<std::path::Path>) -> Result<Study, crate::study::StudyError> {
+        crate::study::load(path.as_ref())
+    }
+
+    /// The stages of a run of this study.
+    pub fn plan(&self) -> Result<Plan, RunError> {
+        Plan::new(Arc::new(self.clone()))
+    }
+}
+
+impl Plan {
+    /// The plan of `study` (see [`Study::plan`]).
+    pub fn new(study: Arc<Study>) -> Result<Plan, RunError> {
+        let s = &*study;
+        let data =
+            match &s.measurements {
+                Some(m) => DataParams {
+                    levels: m.levels.clone(),
+                    band_hz: m.band_hz,
+                    channels: m.channels.clone(),
+                    estimator: m.estimator.clone(),
+                    truth: m.truth.clone(),
+                },
+                None => return Err(RunError::Study(crate::study::StudyError {
+                    file: s.file.display().to_string(),
+                    key: "measurements".into(),
+                    message:
+                        "no [measurements] section: add [[measurements.levels]] with name and files"
+                            .into(),
+                })),
+            };
+        let mut inference = Vec::new();
+        if let Some(inf) = &s.inference {
+            let samplers = sampler_params(inf);
+            for level in &data.levels {
+                if !inf.levels.contains(&level.name) {
+                    continue;
+                }
+                for model in &inf.models {
+                    inference.push(InferenceParams {
+                        level: level.name.clone(),
+                        model: model.clone(),
+                        priors: inf.priors.get(model).cloned().unwrap_or_default(),
+                        samplers: samplers.clone(),
+                    });
+                }
+            }
+        }
+        let closed_loop = (s.inference.is_some()
+            && s.closed_loop.as_ref().is_some_and(|c| c.enabled))
+        .then(|| crate::runner::closed_loop::params_of(s));
+        Ok(Plan {
+            engine: EngineParams {
+                engine: s.solver.engine,
+                rom_tolerance: s.solver.rom_tolerance,
+                threads: s.solver.threads,
+            },
+            data,
+            identification: IdentificationParams {
+                models: s.models.clone(),
+                rfm: crate::runner::stages::rfm_params(s),
+                per_line: s.analyses.per_line,
+                correlation: s.analyses.correlation,
+                sensitivity: s.analyses.sensitivity,
+                band_constant: s.analyses.band_constant.clone(),
+                iem: s.analyses.iem.clone(),
+            },
+            inference,
+            comparison: s.inference.as_ref().map(|i| i.level_change.clone()),
+            basins: s.inference.as_ref().and_then(|i| i.basins.clone()),
+            closed_loop,
+            output_dir: s.output_dir.clone(),
+            figures: s.analyses.figures,
+            study,
+        })
+    }
+
+    /// The study the plan was made from (as loaded, before any edit of the plan).
+    pub fn study(&self) -> &Study {
+        &self.study
+    }
+}
+
+/// The sampler settings of an `[inference]` section.
+pub(super) fn sampler_params(inf: &Inference) -> SamplerParams {
+    SamplerParams {
+        nuts: inf.nuts.clone(),
+        tmcmc_particles: inf.tmcmc_particles,
+        stepping_stone: inf.stepping_stone.clone(),
+        noise: inf.noise.clone(),
+        noise_scale_prior: inf.noise_scale_prior.clone(),
+        nu_prior: inf.nu_prior.clone(),
+        map_starts: inf.map_starts,
+        map_max_iterations: inf.map_max_iterations,
+        linearised_measurement: inf.linearised_measurement,
+        channel_correlation: inf.channel_correlation,
+    }
+}

@@ -1,0 +1,249 @@
+//! [`Results`]: everything a run computed, in memory. The typed values (identified parameters,
+//! posteriors with their draws and summaries, evidence, comparisons, level changes,
+//! redundancy, basins, closed-loop results) and every table that [`crate::report::write`]
+//! writes as parquet, as polars `DataFrame`s named by the file stems (`parameters`, `draws`,
+//! `summary`, ...).
+
+use crate::inference::diagnostics::Summary;
+use crate::output::Table;
+use crate::runner::bayes::{Draws, PosteriorResult};
+use crate::runner::closed_loop::LoopOutcome;
+use crate::runner::{GlobalResult, LevelData, LevelResults, ModelSummary, RunError};
+use crate::study::Study;
+use polars::prelude::DataFrame;
+use std::sync::Arc;
+
+/// The folder (inside the results folder) of the closed loop's files.
+pub const LOOP_DIR: &str = "closed_loop";
+
+/// The identified parameters of one global RFM run (SI, in the law's order).
+#[derive(Clone, Debug, PartialEq)]
+pub struct IdentifiedParameters {
+    pub level: String,
+    pub model: String,
+    pub names: Vec<String>,
+    /// SI unit per parameter (`Pa`, `Pa s`, `1`, ...).
+    pub units: Vec<String>,
+    pub initial: Vec<f64>,
+    pub identified: Vec<f64>,
+    pub iterations: usize,
+    pub stop_reason: String,
+    /// FRAC per response channel at the initial and the identified parameters.
+    pub frac_initial: Vec<f64>,
+    pub frac_updated: Vec<f64>,
+}
+
+/// A run's results in memory (see the module doc).
+#[derive(Clone, Debug)]
+pub struct Results {
+    pub(crate) study: Arc<Study>,
+    pub(crate) levels: Vec<LevelData>,
+    pub(crate) level_results: Vec<LevelResults>,
+    pub(crate) engine_note: String,
+    pub(crate) timings: Vec<(String, f64)>,
+    pub(crate) counters: Vec<(String, u64)>,
+    pub(crate) seconds: f64,
+    pub(crate) figures: bool,
+    pub(crate) output_dir: std::path::PathBuf,
+    pub(crate) closed_loop: Option<LoopOutcome>,
+    /// (name = path of the parquet file without `.parquet`, table, its DataFrame).
+    tables: Vec<(String, Table, DataFrame)>,
+}
+
+impl Results {
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        study: Arc<Study>,
+        levels: Vec<LevelData>,
+        level_results: Vec<LevelResults>,
+        engine_note: String,
+        timings: Vec<(String, f64)>,
+        counters: Vec<(String, u64)>,
+        seconds: f64,
+        figures: bool,
+        output_dir: std::path::PathBuf,
+        closed_loop: Option<LoopOutcome>,
+    ) -> Result<Results, RunError> {
+        let mut tables = Vec::new();
+        for t in crate::runner::write::tables(&levels, &level_results)? {
+            let df = t.to_dataframe()?;
+            tables.push((t.name().to_string(), t, df));
+        }
+        if let Some(o) = &closed_loop {
+            for t in crate::runner::closed_loop::loop_tables(o)? {
+                let df = t.to_dataframe()?;
+                tables.push((format!("{}/{}", LOOP_DIR, t.name()), t, df));
+            }
+        }
+        Ok(Results {
+            study,
+            levels,
+            level_results,
+            engine_note,
+            timings,
+            counters,
+            seconds,
+            figures,
+            output_dir,
+            closed_loop,
+            tables,
+        })
+    }
+
+    /// The study that ran (with the plan's parameters written in).
+    pub fn study(&self) -> &Study {
+        &self.study
+    }
+    /// Names of the tables: the paths of the parquet files [`crate::report::write`] writes,
+    /// without `.parquet` (`parameters`, `draws`, ..., `closed_loop/candidates`).
+    pub fn table_names(&self) -> Vec<&str> {
+        self.tables.iter().map(|(n, _, _)| n.as_str()).collect()
+    }
+    /// The table `name` (e.g. `"parameters"`, `"summary"`, `"draws"`).
+    pub fn table(&self, name: &str) -> Option<&DataFrame> {
+        self.tables
+            .iter()
+            .find(|(n, _, _)| n == name)
+            .map(|(_, _, d)| d)
+    }
+    /// The table `name` with the unit of each column ([`Table::unit`]).
+    pub fn table_with_units(&self, name: &str) -> Option<&Table> {
+        self.tables
+            .iter()
+            .find(|(n, _, _)| n == name)
+            .map(|(_, t, _)| t)
+    }
+    /// The tables of the results folder itself (not the closed loop's).
+    pub(crate) fn top_tables(&self) -> impl Iterator<Item = &Table> {
+        self.tables
+            .iter()
+            .filter(|(n, _, _)| !n.contains('/'))
+            .map(|(_, t, _)| t)
+    }
+    /// The closed loop's outcome, when the plan ran it: per level its rounds, candidates,
+    /// accepted effects and the fit before and after.
+    pub fn closed_loop(&self) -> Option<&LoopOutcome> {
+        self.closed_loop.as_ref()
+    }
+    /// The measured data of every level as the identification used it.
+    pub fn levels(&self) -> &[LevelData] {
+        &self.levels
+    }
+    /// Everything computed for `level` (deterministic analyses and posteriors).
+    pub fn level(&self, level: &str) -> Option<&LevelResults> {
+        self.level_results.iter().find(|r| r.level == level)
+    }
+    /// Everything computed, per level in data order.
+    pub fn level_results(&self) -> &[LevelResults] {
+        &self.level_results
+    }
+    /// The global RFM of `model` at `level` with its FRFs and correlation.
+    pub fn rfm(&self, level: &str, model: &str) -> Option<&GlobalResult> {
+        self.level(level)?
+            .global
+            .iter()
+            .find(|g| g.result.model_name.eq_ignore_ascii_case(model))
+    }
+    /// The identified parameters of every global RFM run, per level and model.
+    pub fn identified(&self) -> Vec<IdentifiedParameters> {
+        self.level_results
+            .iter()
+            .flat_map(|r| {
+                r.global.iter().map(move |g| {
+                    let res = &g.result;
+                    let units = crate::material::model_from_name(&res.model_name, None)
+                        .map(|l| l.param_units())
+                        .unwrap_or_else(|_| vec![String::new(); res.params.len()]);
+                    IdentifiedParameters {
+                        level: r.level.clone(),
+                        model: res.model_name.clone(),
+                        names: res.param_names.clone(),
+                        units,
+                        initial: res.initial.clone(),
+                        identified: res.params.clone(),
+                        iterations: res.iterations,
+                        stop_reason: res.stop_reason.to_string(),
+                        frac_initial: g.frac_initial.clone(),
+                        frac_updated: g.frac_updated.clone(),
+                    }
+                })
+            })
+            .collect()
+    }
+    /// The identified parameters of `model` at `level`.
+    pub fn identified_at(&self, level: &str, model: &str) -> Option<IdentifiedParameters> {
+        self.identified()
+            .into_iter()
+            .find(|p| p.level == level && p.model.eq_ignore_ascii_case(model))
+    }
+    /// Every posterior (MAP, samplers' draws, evidence, comparison, redundancy, basins).
+    pub fn posteriors(&self) -> impl Iterator<Item = &PosteriorResult> {
+        self.level_results.iter().flat_map(|r| r.posteriors.iter())
+    }
+    /// The posterior of `model` at `level`.
+    pub fn posterior(&self, level: &str, model: &str) -> Option<&PosteriorResult> {
+        self.posteriors()
+            .find(|p| p.level == level && p.model.eq_ignore_ascii_case(model))
+    }
+    /// The draws of `sampler` (`"nuts"`, `"tmcmc"`; `None`: the one the figures show) for
+    /// `model` at `level`, with the parameter names (law, then noise) of `values`.
+    pub fn draws(
+        &self,
+        level: &str,
+        model: &str,
+        sampler: Option<&str>,
+    ) -> Option<(&[String], &Draws)> {
+        let p = self.posterior(level, model)?;
+        let s = match sampler {
+            Some(name) => p.samplers.iter().find(|s| s.sampler == name)?,
+            None => p.figure_sampler()?,
+        };
+        Some((&p.names, &s.draws))
+    }
+    /// Diagnostics (mean, sd, quantiles, HDI, R-hat, ESS) per sampler and parameter of
+    /// `model` at `level`, parameters in the order of [`PosteriorResult::names`].
+    pub fn summaries(&self, level: &str, model: &str) -> Vec<(String, Vec<Summary>)> {
+        self.posterior(level, model)
+            .map(crate::runner::write_bayes::summaries)
+            .unwrap_or_default()
+    }
+    /// The plan's results folder (where `rfmlab run` writes these results).
+    pub fn output_dir(&self) -> &std::path::Path {
+        &self.output_dir
+    }
+    /// Description of the FRF engine (kind, ROM certificate).
+    pub fn engine_note(&self) -> &str {
+        &self.engine_note
+    }
+    /// Seconds per step of the run.
+    pub fn timings(&self) -> &[(String, f64)] {
+        &self.timings
+    }
+    /// Counters of the run (e.g. `rom builds`: ROMs built and certified, 0 when loaded from
+    /// the cache).
+    pub fn counters(&self) -> &[(String, u64)] {
+        &self.counters
+    }
+    /// Wall-clock seconds of the run.
+    pub fn seconds(&self) -> f64 {
+        self.seconds
+    }
+    /// Per level and model: identified parameters, stop reason and FRAC per FRF.
+    pub fn model_summaries(&self) -> Vec<ModelSummary> {
+        self.level_results
+            .iter()
+            .flat_map(|r| {
+                r.global.iter().map(move |g| ModelSummary {
+                    level: r.level.clone(),
+                    model: g.result.model_name.clone(),
+                    param_names: g.result.param_names.clone(),
+                    initial: g.result.initial.clone(),
+                    identified: g.result.params.clone(),
+                    iterations: g.result.iterations,
+                    stop_reason: g.result.stop_reason.to_string(),
+                    frac: g.result.frac.clone(),
+                })
+            })
+            .collect()
+    }
+}
