@@ -119,7 +119,8 @@ pub enum Reference {
     /// GMRES with the ROM as coarse space and the basis's real Cholesky factors as
     /// preconditioner ([`reference`]), to ||b - Z x||_{P^-1} <= `residual_tol` ||b||_{P^-1}
     /// at every point (the residual in the energy norm of the preconditioner P = K_b + e S),
-    /// at most `max_iter` iterations.
+    /// at most `max_iter` iterations. When a point falls short, the sparse LU replaces the
+    /// whole reference (the certificate's `reference` says so).
     Iterative { residual_tol: f64, max_iter: usize },
 }
 
@@ -180,7 +181,9 @@ pub struct Certificate {
     pub e_ref_pa: Vec<f64>,
     /// Largest error after each level (same measure as max_rel_error).
     pub error_history: Vec<f64>,
-    /// The reference solver: "sparse LU" or "GMRES".
+    /// The reference solver: "sparse LU" or "GMRES"; "sparse LU (the GMRES reference reached
+    /// only ...)" when the iterative reference fell short of its residual and the sparse LU
+    /// replaced it.
     #[serde(default)]
     pub reference: String,
     /// GMRES: the largest final relative residual ||b - Z x||_{P^-1} / ||b||_{P^-1} (energy norm of
