@@ -230,7 +230,11 @@ pub(crate) fn check_error(a: &TermRom, b: &TermRom, check: &[Sample]) -> Result<
             })
             .collect()
     };
-    Ok(super::certify::worst_rel_to_peak(&hs(a)?.concat(), &hs(b)?))
+    Ok(super::certify::worst_rel_to_peak(
+        &hs(a)?.concat(),
+        &hs(b)?,
+        b.rom.inputs.len(),
+    ))
 }
 
 /// `U^T A U` of a dense symmetric matrix.

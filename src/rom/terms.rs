@@ -416,7 +416,7 @@ fn case_error(
         let (sw, _) = rom
             .sweep_terms_impl(lines, &vec![e; lines.len()], coef, false)
             .map_err(|x| RomError::Factorization(x.to_string()))?;
-        worst = worst.max(worst_rel_to_peak(&sw.h, &refh[m]));
+        worst = worst.max(worst_rel_to_peak(&sw.h, &refh[m], rom.inputs().len()));
     }
     Ok(worst)
 }
