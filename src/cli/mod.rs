@@ -8,7 +8,6 @@ use clap::{Parser, Subcommand};
 pub mod common;
 mod convergence;
 mod diagnose;
-mod engine;
 mod frf;
 mod inspect;
 mod material;

@@ -123,6 +123,24 @@ pub struct ChannelLabel {
     pub reference_dir: Direction,
 }
 
+impl ChannelLabel {
+    /// One label per response point `(id, direction)`, all driven at `reference`.
+    pub fn for_responses(
+        responses: impl IntoIterator<Item = (u32, Direction)>,
+        reference: (u32, Direction),
+    ) -> Vec<ChannelLabel> {
+        responses
+            .into_iter()
+            .map(|(id, dir)| ChannelLabel {
+                response_id: id,
+                response_dir: dir,
+                reference_id: reference.0,
+                reference_dir: reference.1,
+            })
+            .collect()
+    }
+}
+
 impl SimulatedLevel {
     /// The level as measured data (accelerance with coherence, labelled channels).
     pub fn to_frf_level(

@@ -25,11 +25,7 @@ impl Plan {
         s.solver.rom_tolerance = self.engine.rom_tolerance;
         s.solver.threads = self.engine.threads;
         if let Some(m) = s.measurements.as_mut() {
-            m.levels = self.data.levels.clone();
-            m.band_hz = self.data.band_hz;
-            m.channels = self.data.channels.clone();
-            m.estimator = self.data.estimator.clone();
-            m.truth = self.data.truth.clone();
+            *m = self.data.clone();
         }
         let id = &self.identification;
         s.models = id.models.clone();

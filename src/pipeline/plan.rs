@@ -14,7 +14,7 @@ use crate::study::comparison::{BasinSettings, LevelSettings};
 use crate::study::inference::{
     CorrelationKind, Inference, NoiseSpec, NutsSettings, SteppingStoneSettings,
 };
-use crate::study::{Band, Engine, Estimator, Level, ModelSpec, Study};
+use crate::study::{Band, Engine, ModelSpec, Study};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -29,19 +29,10 @@ pub struct EngineParams {
     pub threads: Option<usize>,
 }
 
-/// The data stage: which files make each level, over which band.
-#[derive(Clone, Debug, PartialEq)]
-pub struct DataParams {
-    pub levels: Vec<Level>,
-    /// Lines kept (Hz, inclusive); `None`: every line above 0 Hz.
-    pub band_hz: Option<(f64, f64)>,
-    /// Response channels kept (point ids); `None`: all measured.
-    pub channels: Option<Vec<u32>>,
-    /// The analyser's H1 estimator, when the fits model its leakage.
-    pub estimator: Option<Estimator>,
-    /// Truth sidecar of simulated data (the report compares with it).
-    pub truth: Option<PathBuf>,
-}
+/// The data stage: which files make each level, over which band, with the analyser's H1
+/// estimator and the truth sidecar of simulated data: the study's validated
+/// `[measurements]` section, as it is.
+pub type DataParams = crate::study::Measurements;
 
 /// The deterministic identification stage (per level): per-line RFM, Model 1 over bands,
 /// circle fit + IEM, global RFM per model, correlation, sensitivities.
@@ -124,13 +115,7 @@ impl Plan {
         let s = &*study;
         let data =
             match &s.measurements {
-                Some(m) => DataParams {
-                    levels: m.levels.clone(),
-                    band_hz: m.band_hz,
-                    channels: m.channels.clone(),
-                    estimator: m.estimator.clone(),
-                    truth: m.truth.clone(),
-                },
+                Some(m) => m.clone(),
                 None => return Err(RunError::Study(crate::study::StudyError {
                     file: s.file.display().to_string(),
                     key: "measurements".into(),

@@ -232,17 +232,10 @@ fn replicates(correlation: &str) {
         seen: Mutex::new(Vec::new()),
     };
     let exc = &built.model.points[built.excitation];
-    let labels: Vec<ChannelLabel> = built
-        .model
-        .points
-        .iter()
-        .map(|p| ChannelLabel {
-            response_id: p.id,
-            response_dir: p.direction,
-            reference_id: exc.id,
-            reference_dir: exc.direction,
-        })
-        .collect();
+    let labels = ChannelLabel::for_responses(
+        built.model.points.iter().map(|p| (p.id, p.direction)),
+        (exc.id, exc.direction),
+    );
 
     // Replicates.
     let mut files = Vec::new();
