@@ -22,83 +22,16 @@
 //! The independent cases run with RFMLAB_LONG=1 (a few minutes each on 2 busy cores).
 
 use crate::common_data::data;
-use crate::spring_model::{measured_engine, Normal};
+use crate::closed_loop::{lines, long, posterior, simulate, TRUTH};
+use crate::spring_model::measured_engine;
 use rfmlab::closed_loop::conclude::conclude;
 use rfmlab::closed_loop::null::{calibrate, Chain, NullParams};
 use rfmlab::closed_loop::verdict::{Status, VerdictParams};
 use rfmlab::closed_loop::{default_candidates, run_closed_loop, ClosedLoopParams};
-use rfmlab::common::C64;
-use rfmlab::forward::{Effect, EffectTerm, Effects, ForwardModel};
-use rfmlab::inference::likelihood::{
-    ErrorLaw, FrfData, FrfLikelihood, FrfPosterior, NoiseModel, Scale,
-};
-use rfmlab::inference::prior::Prior;
-use rfmlab::material::Model3;
-use rfmlab::rfm::DenseEngine;
+use rfmlab::forward::Effect;
 use rfmlab::runner::closed_loop::{diagnose_study, params_of, DiagnoseLevel};
 use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
-
-const TRUTH: [f64; 3] = [4.7121e6, 5.5573e6, 6.0491e3];
-const SIGMA: f64 = 0.01;
-
-fn long() -> bool {
-    std::env::var("RFMLAB_LONG").is_ok_and(|v| v == "1")
-}
-
-fn lines() -> Vec<f64> {
-    (0..160).map(|i| TAU * (8.0 + 6.0 * i as f64)).collect()
-}
-
-/// Dense-chain data with `effect` and relative complex noise SIGMA; the variances.
-fn simulate(eng: &DenseEngine, effect: Option<(Effect, f64)>, seed: u64) -> (Vec<C64>, Vec<f64>) {
-    let w = lines();
-    let mut fm = ForwardModel::new(eng, &Model3, &w, 1, &[0, 1, 2, 3], None).unwrap();
-    if let Some((effect, value)) = effect {
-        fm.set_effects(Effects {
-            terms: vec![EffectTerm {
-                effect,
-                value,
-                free: false,
-            }],
-        })
-        .unwrap();
-    }
-    let h = fm.predict(&TRUTH, false).unwrap().values;
-    let mut rng = Normal(seed);
-    let v: Vec<f64> = h.iter().map(|z| 0.5 * (SIGMA * z.norm()).powi(2)).collect();
-    let x = h
-        .iter()
-        .zip(&v)
-        .map(|(z, v)| z + C64::new(rng.next(), rng.next()) * v.sqrt())
-        .collect();
-    (x, v)
-}
-
-fn posterior<'a>(eng: &'a DenseEngine, x: Vec<C64>, v: Vec<f64>) -> FrfPosterior<'a> {
-    let w = lines();
-    let fm = ForwardModel::new(eng, &Model3, &w, 1, &[0, 1, 2, 3], None).unwrap();
-    let data = FrfData {
-        freq_hz: w.iter().map(|w| w / TAU).collect(),
-        n_out: 4,
-        values: x,
-        coherence: None,
-    };
-    let noise = NoiseModel {
-        scale: Scale::Fixed { variances: v },
-        errors: ErrorLaw::Gaussian,
-        model_error: 0.0,
-    };
-    let lik = FrfLikelihood::new(fm, data, noise, &[1, 2, 3, 4]).unwrap();
-    let priors = TRUTH
-        .iter()
-        .map(|t| Prior::LogUniform {
-            lo: t / 10.0,
-            hi: t * 10.0,
-        })
-        .collect();
-    FrfPosterior::new(lik, priors).unwrap()
-}
 
 /// Loop, null level (the noise model's own errors) and verdict on dense-chain data.
 fn dense_verdict(
