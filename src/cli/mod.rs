@@ -101,7 +101,7 @@ const RUN_HELP: &str = "Writes results/<name>/ (or [study] output_dir): report.m
   frf, parameters, iterations, correlation, correlation_curves, modulus, svd, modal, sensitivity;
   with [inference]: draws, summary, starts, laplace, sampler_runs, evidence, model_comparison, ppc, predictive,
   pointwise_loglik, level_change, level_evidence, redundancy, basins;
-  with [closed_loop]: closed_loop/ (residuals, candidates, closed_loop, signatures, closed_loop.md).
+  with [closed_loop]: closed_loop/ (residuals, candidates, closed_loop, verdict, signatures, closed_loop.md).
 Docs: docs/outputs.md (every table, column and figure), docs/study-files.md (every key), docs/method.md.";
 
 /// `rfmlab material --help`.
@@ -117,8 +117,8 @@ Docs: docs/outputs.md (section rfmlab validate), docs/validation.md, docs/study-
 
 /// `rfmlab diagnose --help`.
 const DIAGNOSE_HELP: &str = "Writes results/<name>.diagnose/: closed_loop.md, residuals_<level>.png and parquet tables
-  residuals, candidates, closed_loop, signatures.
-Docs: docs/closed-loop.md (what each conclusion means and what to do next), docs/outputs.md (closed-loop tables).";
+  residuals, candidates, closed_loop, verdict, signatures; closed_loop.md's first line is the status per level.
+Docs: docs/closed-loop.md (what each status means and what to do next), docs/outputs.md (closed-loop tables).";
 
 /// Parse arguments, run, print the error chain, return the exit code.
 pub fn run() -> i32 {

@@ -33,8 +33,11 @@
 //!    place of the current law and it competes with the round's effects by Laplace evidence.
 
 pub mod alternative;
+pub mod conclude;
 pub mod confounding;
+pub mod null;
 pub mod signatures;
+pub mod verdict;
 
 use crate::common::C64;
 use crate::forward::{Effect, EffectTerm, Effects, ForwardError};
@@ -230,6 +233,12 @@ pub struct Fit {
     pub values: Vec<f64>,
     pub sd: Vec<f64>,
     pub log_evidence: f64,
+    /// Log likelihood plus log prior at the MAP.
+    pub log_posterior: f64,
+    /// Whether the Laplace Hessian was positive definite.
+    pub positive_definite: bool,
+    /// Laplace covariance of the physical values (row-major, the order of `names`).
+    pub cov: Vec<f64>,
     pub residuals: Residuals,
 }
 
@@ -554,7 +563,7 @@ fn install(
     Ok(())
 }
 
-fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
+pub(crate) fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
     Ok(Fit {
         law: post.likelihood.forward.law.name().to_string(),
         n_law: post.likelihood.forward.law.n_params(),
@@ -562,6 +571,9 @@ fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, ForwardError> {
         values: r.map_physical.clone(),
         sd: r.laplace.sd_physical(),
         log_evidence: r.laplace.log_evidence,
+        log_posterior: r.laplace.log_likelihood + r.laplace.log_prior,
+        positive_definite: r.laplace.positive_definite,
+        cov: r.laplace.cov_physical.clone(),
         residuals: residuals(post, &r.map_physical)?,
     })
 }
@@ -631,7 +643,9 @@ pub fn run_closed_loop_with_laws<'a>(
         let mut scored = Vec::new();
         let mut starts: Vec<(String, Vec<f64>)> = Vec::new();
         for c in candidates {
-            if accepted.iter().any(|(e, _, _)| e == c)
+            if accepted
+                .iter()
+                .any(|(e, _, _)| e == c || same_mass_point(e, c))
                 || post
                     .likelihood
                     .forward
@@ -1041,6 +1055,16 @@ pub(crate) fn evidence_gain(r: &MapResult, current: &MapResult, extra: i64, n_da
         let lp = |l: &crate::inference::map::Laplace| l.log_likelihood + l.log_prior;
         lp(&r.laplace) - lp(&current.laplace) - 0.5 * extra as f64 * (2.0 * n_data as f64).ln()
     }
+}
+
+/// Whether `a` and `b` are masses (a point mass or a sensor mass) at the same point: once one
+/// is accepted the other is not tried.
+fn same_mass_point(a: &Effect, b: &Effect) -> bool {
+    let id = |e: &Effect| match e {
+        Effect::PointMass { id, .. } | Effect::SensorMass { id, .. } => Some(*id),
+        _ => None,
+    };
+    id(a).is_some() && id(a) == id(b)
 }
 
 /// Whether `e` changes the constitutive law (a Maxwell branch) rather than the structure or

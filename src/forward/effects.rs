@@ -28,8 +28,11 @@
 //! the observation points, so the ROM with an effect on is as accurate as the ROM itself: no
 //! basis enrichment is needed (the mass identity needs only point receptances; the modulus
 //! scaling evaluates the engine at another frequency inside its certified band). The point
-//! mass acts in the measured direction only (a sensor's translational inertia along its axis);
-//! its x and y inertia are not modelled. The derivative in the beam factor is a central
+//! mass acts in the measured direction only (a sensor's translational inertia along its axis).
+//! The sensor mass acts in all three translations at its point: three point masses of the same
+//! value at the point's x, y and z engine points (every one an engine input), `M -> M + m
+//! (b_x b_x^T + b_y b_y^T + b_z b_z^T)`, the same Sherman-Morrison-Woodbury update with a 3 x 3
+//! block, its derivative the sum of the three masses' columns (rotary inertia not modelled). The derivative in the beam factor is a central
 //! difference (step 1e-6) of the exact transform; every other derivative is analytic. The
 //! shaker acts after the point masses (on the drive-point receptance with the masses on); it
 //! is tested against the full model with the moving mass as an extra DOF
@@ -50,6 +53,9 @@ pub enum Effect {
     /// A point mass (kg) at engine point `point` (an engine input), acting in the measured
     /// direction; `id` the point's id in the study.
     PointMass { point: usize, id: u32 },
+    /// A sensor's mass (kg) at a point, acting in all three translations: `points` are the
+    /// engine points (inputs) of the point's x, y and z directions; `id` the point's id.
+    SensorMass { points: [usize; 3], id: u32 },
     /// Relative change of the adherends' (beam) modulus, `E_beam = (1 + b) E_beam,declared`.
     BeamModulus,
     /// A shaker's moving mass m_s (kg) on a stinger of stiffness `stiffness_n_m` at the drive
@@ -95,6 +101,7 @@ impl Effect {
             Effect::Gain { id, .. } => format!("gain_ch{id}"),
             Effect::Delay { id, .. } => format!("delay_ch{id}"),
             Effect::PointMass { id, .. } => format!("mass_pt{id}"),
+            Effect::SensorMass { id, .. } => format!("mass3_pt{id}"),
             Effect::BeamModulus => "beam_modulus".into(),
             Effect::Shaker { .. } => "shaker_mass".into(),
             Effect::MaxwellBranch { tau_s } => {
@@ -113,6 +120,7 @@ impl Effect {
             Effect::Gain { .. } => "gain",
             Effect::Delay { .. } => "delay",
             Effect::PointMass { .. } => "point_mass",
+            Effect::SensorMass { .. } => "sensor_mass",
             Effect::BeamModulus => "beam_modulus",
             Effect::Shaker { .. } => "shaker",
             Effect::MaxwellBranch { .. } => "maxwell_branch",
@@ -129,7 +137,7 @@ impl Effect {
             | Effect::DegradedBond { .. }
             | Effect::AdherendDamping => "1",
             Effect::Delay { .. } => "s",
-            Effect::PointMass { .. } | Effect::Shaker { .. } => "kg",
+            Effect::PointMass { .. } | Effect::SensorMass { .. } | Effect::Shaker { .. } => "kg",
             Effect::MaxwellBranch { .. } => "Pa",
             Effect::BaseSprings { .. } => "m^3/N",
         }
@@ -145,6 +153,9 @@ impl Effect {
             ),
             Effect::PointMass { id, .. } => format!(
                 "an undeclared mass m at point {id} (a sensor, cable or fixture) lowers the modes that move that point"
+            ),
+            Effect::SensorMass { id, .. } => format!(
+                "an undeclared mass m at point {id} (a sensor, cable or fixture) with its inertia in x, y and z lowers the modes that move that point in any direction"
             ),
             Effect::BeamModulus => "the adherends' modulus differs from the declared one by a factor (1 + b): all beam-dominated modes shift by sqrt(1 + b)".into(),
             Effect::Shaker { stiffness_n_m } => format!(
@@ -175,6 +186,7 @@ impl Effect {
         matches!(
             self,
             Effect::PointMass { .. }
+                | Effect::SensorMass { .. }
                 | Effect::Shaker { .. }
                 | Effect::MaxwellBranch { .. }
                 | Effect::DegradedBond { .. }
@@ -187,7 +199,9 @@ impl Effect {
         match self {
             Effect::Gain { .. } => (-0.9, 9.0),
             Effect::Delay { .. } => (-0.01, 0.01),
-            Effect::PointMass { .. } | Effect::Shaker { .. } => (-1e-12, 10.0),
+            Effect::PointMass { .. } | Effect::SensorMass { .. } | Effect::Shaker { .. } => {
+                (-1e-12, 10.0)
+            }
             Effect::BeamModulus => (-0.9, 9.0),
             Effect::MaxwellBranch { .. } => (-1e-6, 1e11),
             Effect::DegradedBond { .. } => (-1e-9, 1.0),
@@ -209,7 +223,9 @@ impl Effect {
                 lo: -1e-3,
                 hi: 1e-3,
             },
-            Effect::PointMass { .. } | Effect::Shaker { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
+            Effect::PointMass { .. } | Effect::SensorMass { .. } | Effect::Shaker { .. } => {
+                Prior::Uniform { lo: 0.0, hi: 0.1 }
+            }
             Effect::MaxwellBranch { .. } => Prior::Uniform { lo: 0.0, hi: 2e7 },
             Effect::DegradedBond { .. } => Prior::Uniform { lo: 0.0, hi: 1.0 },
             // k_n >= 1e9 N/m^3: about the adhesive layer's own E_oed / t (2e9 for the paper's
@@ -233,6 +249,7 @@ impl Effect {
         matches!(
             self,
             Effect::PointMass { .. }
+                | Effect::SensorMass { .. }
                 | Effect::BeamModulus
                 | Effect::Shaker { .. }
                 | Effect::DegradedBond { .. }
@@ -371,6 +388,13 @@ impl Effects {
                 Effect::PointMass { point, .. } if !engine.inputs().contains(&point) => {
                     return Err(super::ForwardError::Setup(format!(
                         "effect {name}: point index {point} is not an input of the engine (a point mass needs the receptances of its point)"
+                    )));
+                }
+                Effect::SensorMass { points, .. }
+                    if points.iter().any(|p| !engine.inputs().contains(p)) =>
+                {
+                    return Err(super::ForwardError::Setup(format!(
+                        "effect {name}: the point's x, y and z directions (engine points {points:?}) must all be inputs of the engine (a sensor mass needs the receptances of all three)"
                     )));
                 }
                 Effect::Shaker { stiffness_n_m }
@@ -560,15 +584,24 @@ impl Effects {
         let zero = C64::new(0.0, 0.0);
         let pos = |p: usize| inputs.iter().position(|&j| j == p);
         let jin = pos(input).ok_or(crate::frf::FrfError::BadInput(input))?;
-        // Masses: (term index, point, engine input position, value).
+        // Masses: (term index, point, engine input position, value). A sensor mass is three
+        // masses of the same value at its x, y and z points (M + m (w_x w_x^T + w_y w_y^T +
+        // w_z w_z^T)); its derivative is the sum of the three columns.
         let masses: Vec<(usize, usize, usize, f64)> = self
             .terms
             .iter()
             .zip(values)
             .enumerate()
-            .filter_map(|(t, (term, v))| match term.effect {
-                Effect::PointMass { point, .. } => Some((t, point, pos(point)?, *v)),
-                _ => None,
+            .flat_map(|(t, (term, v))| match term.effect {
+                Effect::PointMass { point, .. } => pos(point)
+                    .map(|j| (t, point, j, *v))
+                    .into_iter()
+                    .collect::<Vec<_>>(),
+                Effect::SensorMass { points, .. } => points
+                    .iter()
+                    .filter_map(|&p| pos(p).map(|j| (t, p, j, *v)))
+                    .collect(),
+                _ => Vec::new(),
             })
             .collect();
         let np = masses.len();
@@ -700,9 +733,9 @@ impl Effects {
                     for (p, m) in masses.iter().enumerate() {
                         let v = acc * (w * w) * g[p] * c[p];
                         if k == n {
-                            drive_dt[m.0][l] = v;
+                            drive_dt[m.0][l] += v;
                         } else {
-                            res.d_terms[m.0][l * n + k] = v;
+                            res.d_terms[m.0][l * n + k] += v;
                         }
                     }
                 }

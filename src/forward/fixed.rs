@@ -48,6 +48,16 @@ impl<'a> FixedEffectsEngine<'a> {
                         .ok_or(FrfError::BadInput(point))?;
                     masses.push((point, pos, t.value));
                 }
+                Effect::SensorMass { points, .. } => {
+                    for point in points {
+                        let pos = inner
+                            .inputs()
+                            .iter()
+                            .position(|&j| j == point)
+                            .ok_or(FrfError::BadInput(point))?;
+                        masses.push((point, pos, t.value));
+                    }
+                }
                 Effect::BeamModulus => beam += t.value,
                 _ => {}
             }
@@ -74,6 +84,7 @@ impl<'a> FixedEffectsEngine<'a> {
                 !matches!(
                     t.effect,
                     Effect::PointMass { .. }
+                        | Effect::SensorMass { .. }
                         | Effect::BeamModulus
                         | Effect::Gain { .. }
                         | Effect::Delay { .. }

@@ -85,7 +85,17 @@ fn fill(
         Vec::new()
     };
     let engine_note = results.engine_note();
-    let mut report = write::build_report(study, levels, level_results, &figs, engine_note);
+    let loop_status = results
+        .closed_loop()
+        .map(|o| closed_loop::status_line(&o.summary.levels));
+    let mut report = write::build_report(
+        study,
+        levels,
+        level_results,
+        &figs,
+        engine_note,
+        loop_status.as_deref(),
+    );
     mesh_error_section(&mut report, results.mesh_error());
     write_bayes::report(&mut report, levels, &posts, &figs);
     write_compare::report(&mut report, &posts);

@@ -3,9 +3,12 @@
 //! candidates: a point mass at every measured point, a gain and a delay per channel, the beam
 //! modulus factor (left out when the adherend has viscous damping `C_b`, where its exact
 //! scaling does not hold), the Maxwell branches, and the fractional Zener law as an alternative
-//! law ([`crate::closed_loop::alternative`]; opt-out in `[closed_loop] candidates`). Writes the
-//! parquet tables `residuals`, `candidates`, `closed_loop` and a markdown summary
-//! `closed_loop.md` into `<output_dir>.diagnose/`.
+//! law ([`crate::closed_loop::alternative`]; opt-out in `[closed_loop] candidates`); on a
+//! meshed joint also a sensor mass (x, y and z) at every measured point. Each level ends with a
+//! verdict ([`crate::closed_loop::verdict`]) against a null level calibrated on replicates of
+//! the fitted model. Writes the parquet tables `residuals`, `candidates`, `closed_loop`,
+//! `verdict`, `signatures` and a markdown summary `closed_loop.md` (its first line the status
+//! per level) into `<output_dir>.diagnose/`.
 
 use super::{posterior, RunError};
 use crate::closed_loop::{
@@ -32,6 +35,13 @@ pub struct DiagnoseSummary {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct DiagnoseLevel {
     pub level: String,
+    /// `nothing_missing`, `explained`, `unexplained` or `confounded`
+    /// ([`crate::closed_loop::verdict`]).
+    pub status: String,
+    /// The verdict behind the status (null level, where the residual is, tentative effects).
+    pub verdict: crate::closed_loop::verdict::Verdict,
+    /// The calibrated null level of the normalised chi-square.
+    pub null: crate::closed_loop::null::NullCalibration,
     pub conclusion: String,
     pub chi2_normalised_before: f64,
     pub chi2_normalised_after: f64,
@@ -142,6 +152,11 @@ pub fn diagnose_into(
     let mut with_loop = study.clone();
     if !needs_all_inputs(&with_loop) {
         with_loop.closed_loop = Some(crate::study::effects::ClosedLoopSettings::default());
+    }
+    // A sensor's mass acts in x, y and z: the other two directions of every measured point
+    // of a meshed joint become model points (and engine inputs) for the sensor-mass candidate.
+    if crate::study::build::joint_spec(&with_loop.structure).is_some() {
+        with_loop.structure.points = with_all_directions(&with_loop.structure.points);
     }
     let study = &with_loop;
     if study.inference.is_none() {
@@ -309,6 +324,11 @@ pub(crate) fn loop_stage(
             .map(|(o, id)| (*o, *id))
             .collect();
         let mut candidates = default_candidates(&level.response_ids, &mass_points);
+        candidates.extend(sensor_mass_candidates(
+            &built.model.points,
+            engine.inputs(),
+            &level.response_ids,
+        ));
         let band = (
             level.freq_hz.first().copied().unwrap_or(0.0),
             level.freq_hz.last().copied().unwrap_or(0.0),
@@ -335,6 +355,11 @@ pub(crate) fn loop_stage(
                 analysis: format!("closed loop of {name} at {}", level.name),
                 message: e.to_string(),
             })?;
+        let (res, verdict, null) = verdict_of(study, level, &mut post, res, params)?;
+        params.progress.say(&format!(
+            "{}: {} (null level {:.3}, threshold {:.3}, {:.1} s)",
+            level.name, verdict.status, null.mean, null.threshold, null.seconds
+        ));
         // The truth of the final law (the study's, or the alternative that replaced it).
         let truth = level
             .truth
@@ -343,6 +368,9 @@ pub(crate) fn loop_stage(
             .map(|t| t.params.clone());
         summary.push(DiagnoseLevel {
             level: level.name.clone(),
+            status: verdict.status.to_string(),
+            verdict,
+            null,
             conclusion: res.conclusion.clone(),
             chi2_normalised_before: res.before.residuals.chi2_normalised,
             chi2_normalised_after: res.after.residuals.chi2_normalised,
@@ -382,6 +410,7 @@ pub(crate) fn loop_stage(
         &study.name,
         &name,
         &results,
+        &summary,
         term_rom.as_ref().map(|(t, c)| (t.names.as_slice(), c)),
     );
     Ok(LoopOutcome {
@@ -403,12 +432,13 @@ pub(crate) fn loop_stage(
     })
 }
 
-/// The loop's tables: `residuals`, `candidates`, `closed_loop`, `signatures`.
+/// The loop's tables: `residuals`, `candidates`, `closed_loop`, `verdict`, `signatures`.
 pub(crate) fn loop_tables(o: &LoopOutcome) -> Result<Vec<Table>, RunError> {
     Ok(vec![
         residuals_table(&o.levels)?,
         candidates_table(&o.levels)?,
-        closed_loop_table(&o.levels)?,
+        closed_loop_table(&o.levels, &o.summary.levels)?,
+        verdict_table(&o.levels, &o.summary.levels)?,
         signatures_table(&o.levels)?,
     ])
 }
@@ -723,12 +753,35 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
 
 /// `closed_loop`: per level and quantity, before and after (parameters with sds, and the
 /// residual statistics), and the truth where the data are simulated.
-fn closed_loop_table(results: &[LevelResult]) -> Result<Table, RunError> {
+/// Every row carries the level's `status`; the law's parameters of an `unexplained` level
+/// carry its warning, those of a `confounded` level their range over the effect's plausible
+/// sizes.
+fn closed_loop_table(
+    results: &[LevelResult],
+    summary: &[DiagnoseLevel],
+) -> Result<Table, RunError> {
     let (mut lv, mut q) = (Vec::new(), Vec::new());
     let (mut b, mut bs, mut a, mut as_, mut tr) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for (level, _, ids, res, truth) in results {
+    let (mut status, mut warning) = (Vec::new(), Vec::new());
+    for ((level, _, ids, res, truth), l) in results.iter().zip(summary) {
+        let v = &l.verdict;
+        let n_rows = q.len();
         for pc in parameter_changes(res, truth.as_deref()) {
+            let law_param = res.after.names[..res.after.n_law].contains(&pc.name);
+            let range = v.confounded.first().and_then(|c| {
+                c.ranges.iter().find(|r| r.0 == pc.name).map(|(_, lo, hi)| {
+                    format!(
+                        "confounded with {} (correlation {:.4}): range [{lo:.4e}, {hi:.4e}]",
+                        c.effect, c.correlation
+                    )
+                })
+            });
+            warning.push(match (law_param, &v.warning, range) {
+                (true, Some(w), _) => w.clone(),
+                (true, None, Some(r)) => r,
+                _ => String::new(),
+            });
             lv.push(level.clone());
             q.push(pc.name);
             b.push(pc.before);
@@ -760,28 +813,52 @@ fn closed_loop_table(results: &[LevelResult]) -> Result<Table, RunError> {
             a.push(Some(y));
             as_.push(None);
             tr.push(None);
+            warning.push(String::new());
         }
+        status.extend(std::iter::repeat_n(v.status.to_string(), q.len() - n_rows));
     }
     let mut t = Table::new("closed_loop");
     t.push_str("level", lv)
+        .and_then(|t| t.push_str("status", status))
         .and_then(|t| t.push_str("quantity", q))
         .and_then(|t| t.push_opt_f64("before", "SI", b))
         .and_then(|t| t.push_opt_f64("before_sd", "SI", bs))
         .and_then(|t| t.push_opt_f64("after", "SI", a))
         .and_then(|t| t.push_opt_f64("after_sd", "SI", as_))
         .and_then(|t| t.push_opt_f64("truth", "SI", tr))
+        .and_then(|t| t.push_str("warning", warning))
         .map_err(out_err)?;
     Ok(t)
+}
+
+/// The status of every level, `L1 `explained`, L2 `unexplained``: the first line of the
+/// loop's markdown and of the run's report.
+pub fn status_line(levels: &[DiagnoseLevel]) -> String {
+    levels
+        .iter()
+        .map(|l| format!("{} `{}`", l.level, l.status))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 fn markdown(
     study: &str,
     model: &str,
     results: &[LevelResult],
+    summary: &[DiagnoseLevel],
     term: Option<(&[String], &crate::rom::TermCertificate)>,
 ) -> String {
     let mut s = String::new();
-    let _ = writeln!(s, "# Closed loop: {study}, {model}\n");
+    // The first line: the status of every level.
+    let _ = writeln!(
+        s,
+        "# Closed loop: {study}, {model}: {}\n",
+        status_line(summary)
+    );
+    let _ = writeln!(
+        s,
+        "Status per level: `nothing_missing` (the residual is consistent with noise, nothing accepted), `explained` (effects accepted, the final residual consistent with noise), `unexplained` (the residual stays above the calibrated null level: the effects accepted on the way are tentative and the adhesive's parameters carry a warning), `confounded` (an effect the data cannot separate from the adhesive's parameters: they are given as a range). Consistent with noise: the normalised chi-square at most the threshold of its null level, calibrated on replicates of the fitted model through the same measurement chain.\n"
+    );
     if let Some((names, c)) = term {
         let _ = writeln!(
             s,
@@ -795,8 +872,30 @@ fn markdown(
             c.n_lines
         );
     }
-    for (level, _, ids, res, truth) in results {
-        let _ = writeln!(s, "## Level {level}\n\n**{}**\n", res.conclusion);
+    for ((level, _, ids, res, truth), l) in results.iter().zip(summary) {
+        let v = &l.verdict;
+        let _ = writeln!(
+            s,
+            "## Level {level}: `{}`\n\n**{}**\n\n{}\n",
+            v.status, v.sentence, res.conclusion
+        );
+        if let Some(w) = &v.warning {
+            let _ = writeln!(s, "**Warning on the adhesive's parameters:** {w}.\n");
+        }
+        for d in &v.drop_one {
+            let _ = writeln!(
+                s,
+                "- drop-one check of {}: {:.1} nats in the final model, {:.1} once widened by kappa = {:.2}: {}",
+                d.effect,
+                d.gain,
+                d.scaled_gain,
+                d.kappa,
+                if d.kept { "kept (tentative)" } else { "dropped" }
+            );
+        }
+        if !v.drop_one.is_empty() {
+            s.push('\n');
+        }
         let _ = writeln!(
             s,
             "| round | rank | effect | score T | p | evidence gain (nat) | size +- sd | 95 % interval | verdict |\n|---|---|---|---|---|---|---|---|---|"
@@ -949,4 +1048,258 @@ fn signatures_markdown(
             let _ = writeln!(s, "\nSignatures beyond 5 sd {when}: {}.", f.join("; "));
         }
     }
+}
+
+/// The null level of the level's measurement chain ([`crate::closed_loop::null`]: replicate
+/// Welch experiments of the fitted model through the declared estimator, else the noise
+/// model's own errors), then the drop-one check and the verdict
+/// ([`crate::closed_loop::conclude`]).
+fn verdict_of(
+    study: &Study,
+    level: &super::LevelData,
+    post: &mut crate::inference::likelihood::FrfPosterior<'_>,
+    res: ClosedLoopResult,
+    params: &ClosedLoopParams,
+) -> Result<
+    (
+        ClosedLoopResult,
+        crate::closed_loop::verdict::Verdict,
+        crate::closed_loop::null::NullCalibration,
+    ),
+    RunError,
+> {
+    use crate::closed_loop::null::{calibrate, Chain, NullParams};
+    let fail = |m: String| RunError::Analysis {
+        analysis: format!("verdict of the closed loop at {}", level.name),
+        message: m,
+    };
+    let est = study
+        .measurements
+        .as_ref()
+        .and_then(|m| m.estimator.as_ref());
+    let chain = match est {
+        Some(e) => {
+            let nb = (e.fs_hz * e.block_s).round() as usize;
+            let n_d = match &post.likelihood.noise.scale {
+                crate::inference::likelihood::Scale::Coherence { n_averages, .. } => *n_averages,
+                _ => 0.0,
+            };
+            // Blocks: the file's count, else the count whose Welch equivalent is n_d.
+            let blocks = level.n_averages.map(|n| n as usize).unwrap_or_else(|| {
+                (1..=20_000)
+                    .min_by(|&a, &b| {
+                        let f = |n| {
+                            (crate::experiment::estimator::effective_averages(
+                                e.window,
+                                nb,
+                                nb / 2,
+                                n,
+                            ) - n_d)
+                                .abs()
+                        };
+                        f(a).total_cmp(&f(b))
+                    })
+                    .unwrap_or(200)
+            });
+            let spec = super::bayes::estimator_spec(e, &level.freq_hz);
+            let force = study
+                .measurements
+                .as_ref()
+                .and_then(|m| m.levels.iter().find(|l| l.name == level.name))
+                .and_then(|l| l.force_rms_n)
+                .unwrap_or(1.0);
+            Chain::Welch(Box::new(crate::experiment::ChainParams {
+                force_rms_n: force,
+                band_hz: spec.force_band_hz,
+                fs_hz: e.fs_hz,
+                block_s: e.block_s,
+                n_averages: blocks,
+                window: e.window,
+                shaker: e.shaker,
+                lines_hz: level.freq_hz.clone(),
+                mode: crate::experiment::Mode::FrequencyDomain,
+                ..Default::default()
+            }))
+        }
+        None => Chain::NoiseModel,
+    };
+    params
+        .progress
+        .say(&format!("{}: null level of the residual", level.name));
+    let np = NullParams {
+        seed: study.seed,
+        ..NullParams::default()
+    };
+    let null = calibrate(post, &res.after.values, &chain, &level.response_ids, &np)
+        .map_err(|e| fail(e.to_string()))?;
+    let vp = crate::closed_loop::verdict::VerdictParams {
+        threshold_nats: params.threshold_nats,
+        p_threshold: params.p_threshold,
+        ..Default::default()
+    };
+    let (res, v) = crate::closed_loop::conclude::conclude(
+        post,
+        res,
+        &null,
+        &level.freq_hz,
+        &level.response_ids,
+        params,
+        &vp,
+    )
+    .map_err(|e| fail(e.to_string()))?;
+    Ok((res, v, null))
+}
+
+/// `verdict`: one row per level: the status, the null level and threshold, where the residual
+/// is, the tentative, dropped and confounded effects, and the sentence of the report.
+fn verdict_table(results: &[LevelResult], summary: &[DiagnoseLevel]) -> Result<Table, RunError> {
+    let verdicts: Vec<&crate::closed_loop::verdict::Verdict> =
+        summary.iter().map(|l| &l.verdict).collect();
+    let mut t = Table::new("verdict");
+    let lv: Vec<String> = results.iter().map(|r| r.0.clone()).collect();
+    let st: Vec<String> = verdicts.iter().map(|v| v.status.to_string()).collect();
+    let f = |g: &dyn Fn(&crate::closed_loop::verdict::Verdict) -> f64| -> Vec<f64> {
+        verdicts.iter().map(|v| g(v)).collect()
+    };
+    let text = |g: &dyn Fn(&crate::closed_loop::verdict::Verdict) -> String| -> Vec<String> {
+        verdicts.iter().map(|v| g(v)).collect()
+    };
+    let join = |v: Vec<String>| v.join("; ");
+    t.push_str("level", lv)
+        .and_then(|t| t.push_str("status", st))
+        .and_then(|t| t.push_f64("chi2_before", "1", f(&|v| v.chi2_before)))
+        .and_then(|t| t.push_f64("chi2_after", "1", f(&|v| v.chi2_after)))
+        .and_then(|t| t.push_f64("null_mean", "1", f(&|v| v.null_mean)))
+        .and_then(|t| t.push_f64("null_sd", "1", f(&|v| v.null_sd)))
+        .and_then(|t| t.push_f64("threshold", "1", f(&|v| v.threshold)))
+        .and_then(|t| t.push_f64("false_alarm", "1", f(&|v| v.false_alarm)))
+        .and_then(|t| t.push_f64("excess", "1", f(&|v| v.excess)))
+        .and_then(|t| {
+            t.push_str(
+                "null_method",
+                summary.iter().map(|s| s.null.method.clone()).collect(),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "worst_bands",
+                text(&|v| {
+                    join(
+                        v.bands
+                            .iter()
+                            .map(|b| {
+                                format!(
+                                    "{:.0}-{:.0} Hz: {:.3}",
+                                    b.lo_hz, b.hi_hz, b.chi2_normalised
+                                )
+                            })
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "channels",
+                text(&|v| {
+                    join(
+                        v.channels
+                            .iter()
+                            .map(|c| {
+                                format!(
+                                    "ch{}: {:.3} (null {:.3})",
+                                    c.id, c.chi2_normalised, c.null_mean
+                                )
+                            })
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "closest",
+                text(&|v| {
+                    join(
+                        v.closest
+                            .iter()
+                            .map(|c| format!("{}: {:.2} nats", c.name, c.gain))
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| t.push_str("tentative", text(&|v| join(v.tentative.clone()))))
+        .and_then(|t| {
+            t.push_str(
+                "dropped",
+                text(&|v| {
+                    join(
+                        v.drop_one
+                            .iter()
+                            .filter(|d| !d.kept)
+                            .map(|d| d.effect.clone())
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "confounded",
+                text(&|v| {
+                    join(
+                        v.confounded
+                            .iter()
+                            .map(|c| format!("{} (correlation {:.4})", c.effect, c.correlation))
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| t.push_str("sentence", text(&|v| v.sentence.clone())))
+        .map_err(out_err)?;
+    Ok(t)
+}
+
+/// `points` with, for every point, the two other axes' directions at the same position (same
+/// id, after the declared points so that a point's id still names its measured direction).
+fn with_all_directions(points: &[crate::study::Point]) -> Vec<crate::study::Point> {
+    use crate::common::{Axis, Direction};
+    let mut out = points.to_vec();
+    for p in points {
+        for axis in [Axis::X, Axis::Y, Axis::Z] {
+            if !out.iter().any(|q| q.id == p.id && q.direction.axis == axis) {
+                out.push(crate::study::Point {
+                    direction: Direction::new(axis, 1),
+                    ..p.clone()
+                });
+            }
+        }
+    }
+    out
+}
+
+/// A sensor-mass candidate (x, y and z) at every measured point whose three directions are
+/// engine inputs.
+fn sensor_mass_candidates(
+    points: &[crate::fe::ObservationPoint],
+    inputs: &[usize],
+    ids: &[u32],
+) -> Vec<crate::forward::Effect> {
+    use crate::common::Axis;
+    ids.iter()
+        .filter_map(|&id| {
+            let at = |axis: Axis| {
+                points
+                    .iter()
+                    .position(|p| p.id == id && p.direction.axis == axis)
+                    .filter(|k| inputs.contains(k))
+            };
+            Some(crate::forward::Effect::SensorMass {
+                points: [at(Axis::X)?, at(Axis::Y)?, at(Axis::Z)?],
+                id,
+            })
+        })
+        .collect()
 }

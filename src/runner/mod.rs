@@ -541,6 +541,14 @@ pub(crate) fn build_engine(
             }
         }
     }
+    // The other directions of a measured point, when the model has them (the closed loop's
+    // sensor-mass candidate), are inputs too.
+    let ids: Vec<u32> = inputs.iter().map(|&k| built.model.points[k].id).collect();
+    for (k, p) in built.model.points.iter().enumerate() {
+        if ids.contains(&p.id) && !inputs.contains(&k) {
+            inputs.push(k);
+        }
+    }
     inputs.sort_unstable();
     match study.solver.engine {
         Engine::Full => Ok(Engines {

@@ -308,9 +308,17 @@ pub(crate) fn build_report(
     results: &[LevelResults],
     figures: &[(String, String)],
     engine_note: &str,
+    loop_status: Option<&str>,
 ) -> Report {
     let mut rep = Report::new();
-    rep.heading(1, &format!("rfmlab study: {}", study.name));
+    // With the closed loop, the first line gives its status per level.
+    rep.heading(
+        1,
+        &match loop_status {
+            Some(s) => format!("rfmlab study: {}: closed loop {s}", study.name),
+            None => format!("rfmlab study: {}", study.name),
+        },
+    );
     if !study.description.is_empty() {
         rep.paragraph(&study.description);
     }

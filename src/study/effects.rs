@@ -444,17 +444,26 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
                         "must be a string: an effect type (e.g. \"point_mass\") or a parameter name (e.g. \"mass_pt4\")",
                     ));
                 };
-                // (An alternative law, the fractional Zener, is a candidate of the loop too.)
-                let known_type = EFFECT_TYPES.contains(&s) || s == "alternative_law";
-                let known_name = ["mass_pt", "gain_ch", "delay_ch", "maxwell_fc", "bond_x"]
-                    .iter()
-                    .any(|p| s.starts_with(p))
+                // (An alternative law, the fractional Zener, and a sensor's mass in x, y and z
+                // are candidates of the loop too, not declarable effects.)
+                let known_type =
+                    EFFECT_TYPES.contains(&s) || s == "alternative_law" || s == "sensor_mass";
+                let known_name = [
+                    "mass_pt",
+                    "mass3_pt",
+                    "gain_ch",
+                    "delay_ch",
+                    "maxwell_fc",
+                    "bond_x",
+                ]
+                .iter()
+                .any(|p| s.starts_with(p))
                     || s == "beam_modulus"
                     || s == "fractional_zener";
                 if !(known_type || known_name) {
                     return Err(ctx.err(
                         format!("closed_loop.candidates[{i}]"),
-                        format!("unknown candidate \"{s}\": use \"all\" or effect types ({}, alternative_law) or names such as \"mass_pt4\", \"gain_ch3\", \"fractional_zener\"", EFFECT_TYPES.join(", ")),
+                        format!("unknown candidate \"{s}\": use \"all\" or effect types ({}, sensor_mass, alternative_law) or names such as \"mass_pt4\", \"gain_ch3\", \"fractional_zener\"", EFFECT_TYPES.join(", ")),
                     ));
                 }
                 v.push(s.to_string());

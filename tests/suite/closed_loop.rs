@@ -20,15 +20,15 @@ use rfmlab::material::Model3;
 use rfmlab::rfm::DenseEngine;
 use std::f64::consts::TAU;
 
-const TRUTH: [f64; 3] = [4.7121e6, 5.5573e6, 6.0491e3];
-const SIGMA: f64 = 0.01;
+pub(crate) const TRUTH: [f64; 3] = [4.7121e6, 5.5573e6, 6.0491e3];
+pub(crate) const SIGMA: f64 = 0.01;
 
-fn lines() -> Vec<f64> {
+pub(crate) fn lines() -> Vec<f64> {
     (0..160).map(|i| TAU * (8.0 + 6.0 * i as f64)).collect()
 }
 
 /// Data with `effect` (fixed at `value`) and relative complex noise SIGMA; the variances.
-fn simulate(eng: &DenseEngine, effect: Option<(Effect, f64)>, seed: u64) -> (Vec<C64>, Vec<f64>) {
+pub(crate) fn simulate(eng: &DenseEngine, effect: Option<(Effect, f64)>, seed: u64) -> (Vec<C64>, Vec<f64>) {
     let w = lines();
     let mut fm = ForwardModel::new(eng, &Model3, &w, 1, &[0, 1, 2, 3], None).unwrap();
     if let Some((effect, value)) = effect {
@@ -52,7 +52,7 @@ fn simulate(eng: &DenseEngine, effect: Option<(Effect, f64)>, seed: u64) -> (Vec
     (x, v)
 }
 
-fn posterior<'a>(eng: &'a DenseEngine, x: Vec<C64>, v: Vec<f64>) -> FrfPosterior<'a> {
+pub(crate) fn posterior<'a>(eng: &'a DenseEngine, x: Vec<C64>, v: Vec<f64>) -> FrfPosterior<'a> {
     let w = lines();
     let fm = ForwardModel::new(eng, &Model3, &w, 1, &[0, 1, 2, 3], None).unwrap();
     let data = FrfData {
@@ -77,7 +77,7 @@ fn posterior<'a>(eng: &'a DenseEngine, x: Vec<C64>, v: Vec<f64>) -> FrfPosterior
     FrfPosterior::new(lik, priors).unwrap()
 }
 
-fn long() -> bool {
+pub(crate) fn long() -> bool {
     std::env::var("RFMLAB_LONG").is_ok_and(|v| v == "1")
 }
 

@@ -12,6 +12,8 @@
 //!   1 s Welch block; neither changes the coherence): the loop must name the effect first,
 //!   identify its size within 15 % and within its 95 % interval, and meet the null's criteria.
 //!
+//! The verdict: `nothing_missing` on the null, `explained` with the injected effect.
+//!
 //! By default level L1 (null and a 4 % gain on channel 3); RFMLAB_LONG=1 adds level L2's null
 //! and a 50 us delay on channel 4 at L1.
 
@@ -124,6 +126,9 @@ fn null_failures(l: &DiagnoseLevel) -> Vec<String> {
     if !l.accepted.is_empty() {
         f.push(format!("accepted {:?}", l.accepted));
     }
+    if l.status != "nothing_missing" {
+        f.push(format!("status {}: {}", l.status, l.verdict.sentence));
+    }
     if l.parameters.len() != 4 || l.parameters.iter().any(|p| p.truth.is_none()) {
         f.push("the independent truth.json was not read for all four parameters".into());
     }
@@ -170,6 +175,12 @@ fn independent_data_with_a_channel_error_name_it() {
         let l = run(dir.path(), "L1", inject);
         if l.parameters.iter().take(4).any(|p| p.truth.is_none()) {
             failures.push(format!("{name}: the truth was not read"));
+        }
+        if l.status != "explained" {
+            failures.push(format!(
+                "{name}: status {}: {}",
+                l.status, l.verdict.sentence
+            ));
         }
         failures.extend(
             judge(&l, name, false, Some(size), 1.2)

@@ -1,8 +1,9 @@
 //! The closed loop as a stage of the run (`studies/closed_loop_td.toml`: time-domain data with
 //! an undeclared 12 g sensor mass at point 4, `[closed_loop]`, MAP only): in memory the loop
 //! names the mass first, on the run's own engine (one ROM built), and `report::write` puts
-//! its tables, markdown and report section into the one results folder, listed in the
-//! manifest with the ROM counter; no temporary or old folder is left beside it.
+//! its tables (the verdict among them), markdown and report section into the one results
+//! folder, listed in the manifest with the ROM counter, the report's first line giving the
+//! loop's status per level; no temporary or old folder is left beside it.
 
 use std::path::Path;
 
@@ -28,7 +29,11 @@ fn the_closed_loop_runs_inside_the_run_and_is_written_in_the_same_swap() {
         (size - 0.012).abs() < 0.15 * 0.012 && (size - 0.012).abs() < 1.96 * sd,
         "mass {size} +- {sd} kg against the 12 g simulated"
     );
-    for t in ["closed_loop/candidates", "closed_loop/residuals"] {
+    for t in [
+        "closed_loop/candidates",
+        "closed_loop/residuals",
+        "closed_loop/verdict",
+    ] {
         assert!(
             results.table(t).is_some(),
             "{t} in {:?}",
@@ -71,6 +76,15 @@ fn the_closed_loop_runs_inside_the_run_and_is_written_in_the_same_swap() {
         .any(|t| t["step"] == "closed loop"));
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("## Closed loop"), "report section");
+    // The report's first line gives the loop's status per level, as computed in memory.
+    let first = report.lines().next().unwrap();
+    assert!(
+        first.contains(&format!("closed loop {} `{}`", l.level, l.status)),
+        "{first}"
+    );
+    let verdict = results.table("closed_loop/verdict").unwrap();
+    let status = verdict.column("status").unwrap().str().unwrap().get(0);
+    assert_eq!(status, Some(l.status.as_str()));
     let names: Vec<String> = std::fs::read_dir(dir.path())
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
