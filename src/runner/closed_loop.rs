@@ -107,6 +107,18 @@ pub fn params_of(study: &Study) -> ClosedLoopParams {
     }
 }
 
+/// Whether `[closed_loop] candidates` names the three-direction sensor mass (its type
+/// `sensor_mass` or a name `mass3_pt<id>`): it is not among `candidates = "all"`.
+pub fn wants_sensor_mass(study: &Study) -> bool {
+    study.closed_loop.as_ref().is_some_and(|c| {
+        c.candidates.as_ref().is_some_and(|names| {
+            names
+                .iter()
+                .any(|n| n == "sensor_mass" || n.starts_with("mass3_pt"))
+        })
+    })
+}
+
 /// Run the loop on `study` (model `model`, else the first of `[inference] models`); results in
 /// `<output_dir>.diagnose/`.
 pub fn diagnose_study(
@@ -153,9 +165,12 @@ pub fn diagnose_into(
     if !needs_all_inputs(&with_loop) {
         with_loop.closed_loop = Some(crate::study::effects::ClosedLoopSettings::default());
     }
-    // A sensor's mass acts in x, y and z: the other two directions of every measured point
-    // of a meshed joint become model points (and engine inputs) for the sensor-mass candidate.
-    if crate::study::build::joint_spec(&with_loop.structure).is_some() {
+    // A sensor's mass acts in x, y and z: when `[closed_loop] candidates` names the
+    // sensor-mass candidate, the other two directions of every measured point of a meshed
+    // joint become model points (and engine inputs) for it. Opt-in: the engine's inputs
+    // triple, and its reduced basis with them (minutes to build on the paper's joint).
+    if crate::study::build::joint_spec(&with_loop.structure).is_some() && wants_sensor_mass(study)
+    {
         with_loop.structure.points = with_all_directions(&with_loop.structure.points);
     }
     let study = &with_loop;
@@ -1101,7 +1116,7 @@ fn verdict_of(
                     })
                     .unwrap_or(200)
             });
-            let spec = super::bayes::estimator_spec(e, &level.freq_hz);
+            let spec = super::posterior::estimator_spec(e, &level.freq_hz);
             let force = study
                 .measurements
                 .as_ref()
