@@ -14,12 +14,13 @@
 //! experiments of the fitted model):
 //! * model4_td (null): `nothing_missing` at both levels (L1 is also checked by default in
 //!   tests/suite/closed_loop_independent.rs);
-//! * support_td (a compliant base the study does not declare): never `explained` with a
-//!   wrong effect;
-//! * mass3d_td (a 9 g mass at point 3 acting in x, y and z): never `explained` with a wrong
-//!   effect.
+//! * support_td (a compliant base the study does not declare; base springs are not among
+//!   the default candidates): `unexplained`, never `explained` with a wrong effect (in the
+//!   default suite);
+//! * mass3d_td (a 9 g mass at point 3 acting in x, y and z), with the opt-in three-direction
+//!   sensor mass among the candidates: never `explained` with a wrong effect.
 //!
-//! The independent cases run with RFMLAB_LONG=1 (a few minutes each on 2 busy cores).
+//! The other independent cases run with RFMLAB_LONG=1 (minutes each on 2 busy cores).
 
 use crate::common_data::data;
 use crate::closed_loop::{lines, long, posterior, simulate, TRUTH};
@@ -129,6 +130,11 @@ fn dense_effect_outside_the_candidates_is_unexplained() {
 /// Diagnose `level` of the independent case `case` (a folder of ../shared/data/virtual) with
 /// studies/closed_loop_virtual_td.toml.
 fn run_independent(dir: &Path, case: &str, level: &str) -> DiagnoseLevel {
+    run_independent_with(dir, case, level, "\"all\"")
+}
+
+/// [`run_independent`] with `[closed_loop] candidates = <candidates>` (TOML).
+fn run_independent_with(dir: &Path, case: &str, level: &str, candidates: &str) -> DiagnoseLevel {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let folder = data(&format!("virtual/{case}"));
     let text = std::fs::read_to_string(root.join("studies/closed_loop_virtual_td.toml"))
@@ -140,7 +146,8 @@ fn run_independent(dir: &Path, case: &str, level: &str) -> DiagnoseLevel {
         .replace(
             "\"data/virtual/model4_td/",
             &format!("\"{}/", folder.display()),
-        );
+        )
+        .replace("candidates = \"all\"", &format!("candidates = {candidates}"));
     let path = dir.join(format!("{case}_{level}.toml"));
     std::fs::write(&path, &text).unwrap();
     let mut study = rfmlab::study::parse_str(&text, &path).unwrap();
@@ -202,12 +209,12 @@ fn explained_wrongly(l: &DiagnoseLevel, expected: &[&str]) -> bool {
             .any(|(n, _, _, _)| !expected.iter().any(|e| n.starts_with(e)))
 }
 
+/// The default candidates hold no base springs (opt-in: their term ROM takes minutes), so on
+/// the independent compliant base the loop cannot explain the residual: it must say so
+/// (`unexplained`, with the excess over the null level, where it is and a warning on the
+/// adhesive's parameters) rather than end `explained` or `nothing_missing`.
 #[test]
-fn independent_compliant_base_is_never_explained_wrongly() {
-    if !long() {
-        eprintln!("skipped: set RFMLAB_LONG=1");
-        return;
-    }
+fn independent_compliant_base_is_unexplained_with_the_default_candidates() {
     let dir = tempfile::tempdir().unwrap();
     let l = run_independent(dir.path(), "support_td", "L1");
     assert!(
@@ -215,9 +222,13 @@ fn independent_compliant_base_is_never_explained_wrongly() {
         "explained with a wrong effect: {}",
         l.verdict.sentence
     );
-    if l.status == "unexplained" {
-        assert!(l.verdict.excess > 1.0 && l.verdict.warning.is_some());
-    }
+    assert_eq!(l.status, "unexplained", "{}", l.verdict.sentence);
+    assert!(l.verdict.excess > 1.5, "excess {}", l.verdict.excess);
+    assert!(l.verdict.warning.is_some());
+    assert!(!l.verdict.bands.is_empty() && !l.verdict.channels.is_empty());
+    // The null level of Welch data of a correct model sits well below 1 (not a fixed
+    // chi-square): the residual here is above the threshold, not above 1.
+    assert!(l.null.mean < 1.0 && l.null.threshold < l.chi2_normalised_after);
 }
 
 #[test]
@@ -227,7 +238,12 @@ fn independent_three_direction_mass_is_never_explained_wrongly() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let l = run_independent(dir.path(), "mass3d_td", "L1");
+    let l = run_independent_with(
+        dir.path(),
+        "mass3d_td",
+        "L1",
+        "[\"point_mass\", \"sensor_mass\", \"gain\", \"delay\", \"beam_modulus\", \"shaker\", \"maxwell_branch\", \"alternative_law\"]",
+    );
     assert!(
         !explained_wrongly(&l, &["mass_pt3"]),
         "explained with a wrong effect: {}",
