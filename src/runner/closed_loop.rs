@@ -169,8 +169,7 @@ pub fn diagnose_into(
     // sensor-mass candidate, the other two directions of every measured point of a meshed
     // joint become model points (and engine inputs) for it. Opt-in: the engine's inputs
     // triple, and its reduced basis with them (minutes to build on the paper's joint).
-    if crate::study::build::joint_spec(&with_loop.structure).is_some() && wants_sensor_mass(study)
-    {
+    if crate::study::build::joint_spec(&with_loop.structure).is_some() && wants_sensor_mass(study) {
         with_loop.structure.points = with_all_directions(&with_loop.structure.points);
     }
     let study = &with_loop;

@@ -28,7 +28,11 @@ pub(crate) fn lines() -> Vec<f64> {
 }
 
 /// Data with `effect` (fixed at `value`) and relative complex noise SIGMA; the variances.
-pub(crate) fn simulate(eng: &DenseEngine, effect: Option<(Effect, f64)>, seed: u64) -> (Vec<C64>, Vec<f64>) {
+pub(crate) fn simulate(
+    eng: &DenseEngine,
+    effect: Option<(Effect, f64)>,
+    seed: u64,
+) -> (Vec<C64>, Vec<f64>) {
     let w = lines();
     let mut fm = ForwardModel::new(eng, &Model3, &w, 1, &[0, 1, 2, 3], None).unwrap();
     if let Some((effect, value)) = effect {

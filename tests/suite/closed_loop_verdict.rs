@@ -22,8 +22,8 @@
 //!
 //! The other independent cases run with RFMLAB_LONG=1 (minutes each on 2 busy cores).
 
-use crate::common_data::data;
 use crate::closed_loop::{lines, long, posterior, simulate, TRUTH};
+use crate::common_data::data;
 use crate::spring_model::measured_engine;
 use rfmlab::closed_loop::conclude::conclude;
 use rfmlab::closed_loop::null::{calibrate, Chain, NullParams};
@@ -147,7 +147,10 @@ fn run_independent_with(dir: &Path, case: &str, level: &str, candidates: &str) -
             "\"data/virtual/model4_td/",
             &format!("\"{}/", folder.display()),
         )
-        .replace("candidates = \"all\"", &format!("candidates = {candidates}"));
+        .replace(
+            "candidates = \"all\"",
+            &format!("candidates = {candidates}"),
+        );
     let path = dir.join(format!("{case}_{level}.toml"));
     std::fs::write(&path, &text).unwrap();
     let mut study = rfmlab::study::parse_str(&text, &path).unwrap();
