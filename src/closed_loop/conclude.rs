@@ -1,8 +1,17 @@
-//! The end of the loop: the drop-one check of the accepted effects when the residual is not
-//! consistent with noise, then the verdict ([`super::verdict`]).
+//! The end of the loop, then the verdict ([`super::verdict`]):
+//!
+//! * residual consistent with noise: the smallest set of accepted effects that keeps it so.
+//!   Latest acceptance first, each effect is refitted out of the model and left out when the
+//!   normalised chi-square without it stays at most the null threshold. An effect can gain
+//!   decisive evidence without being needed for a fit within the noise: at very high
+//!   signal-to-noise a small model-form difference (a sensor's x and z inertia that the
+//!   measured-direction mass leaves out) is absorbed by a proxy such as a beam factor of
+//!   -0.01 %, which is not in the data;
+//! * residual not consistent with noise: the drop-one check of the accepted effects under the
+//!   likelihood widened to the residual left.
 
 use super::null::NullCalibration;
-use super::verdict::{assess, consistent, DropOne, Verdict, VerdictParams};
+use super::verdict::{assess, consistent, DropOne, NotNeeded, Verdict, VerdictParams};
 use super::{fit_of, ClosedLoopError, ClosedLoopParams, ClosedLoopResult};
 use crate::forward::Effects;
 use crate::inference::likelihood::FrfPosterior;
@@ -71,8 +80,13 @@ pub fn conclude(
     loop_params: &ClosedLoopParams,
     params: &VerdictParams,
 ) -> Result<(ClosedLoopResult, Verdict), ClosedLoopError> {
-    if consistent(&res, null) || res.accepted.is_empty() {
-        let v = assess(&res, null, freq_hz, ids, Vec::new(), params);
+    if res.accepted.is_empty() {
+        let v = assess(&res, null, freq_hz, ids, Vec::new(), Vec::new(), params);
+        return Ok((res, v));
+    }
+    if consistent(&res, null) {
+        let not_needed = leave_out_unneeded(post, &mut res, null, loop_params)?;
+        let v = assess(&res, null, freq_hz, ids, Vec::new(), not_needed, params);
         return Ok((res, v));
     }
     let kappa = (res.after.residuals.chi2_normalised / null.mean).max(1.0);
@@ -145,6 +159,76 @@ pub fn conclude(
             dropped.join(", ")
         );
     }
-    let v = assess(&res, null, freq_hz, ids, checks, params);
+    let v = assess(&res, null, freq_hz, ids, checks, Vec::new(), params);
     Ok((res, v))
+}
+
+/// The accepted effects of a level whose residual is consistent with `null`, latest first,
+/// left out while the model refitted without them stays at most the threshold. `post` and
+/// `res` hold the final model on return (without the effects left out).
+fn leave_out_unneeded(
+    post: &mut FrfPosterior<'_>,
+    res: &mut ClosedLoopResult,
+    null: &NullCalibration,
+    loop_params: &ClosedLoopParams,
+) -> Result<Vec<NotNeeded>, ClosedLoopError> {
+    let map = MapParams {
+        n_starts: 0,
+        search: SearchMethod::GaussNewton,
+        ..loop_params.map.clone()
+    };
+    let effects = post.likelihood.forward.effects.clone();
+    let priors = post.priors.clone();
+    let names = post.names.clone();
+    let after = res.after.clone();
+    let mut out: Vec<NotNeeded> = Vec::new();
+    let mut dropped: Vec<String> = Vec::new();
+    let mut best: Option<MapResult> = None;
+    for (e, size, _) in res.accepted.iter().rev() {
+        let name = e.name();
+        loop_params
+            .progress
+            .say(&format!("is {name} needed for a residual within the noise?"));
+        let mut trial = dropped.clone();
+        trial.push(name.clone());
+        without(post, &effects, &priors, &names, &trial)?;
+        let Ok(r) = refit(post, &after.names, &after.values, &map) else {
+            continue;
+        };
+        let chi2 = fit_of(post, &r)?.residuals.chi2_normalised;
+        if chi2 <= null.threshold {
+            out.push(NotNeeded {
+                effect: name.clone(),
+                size: *size,
+                unit: e.unit().to_string(),
+                chi2_without: chi2,
+            });
+            dropped = trial;
+            best = Some(r);
+        }
+    }
+    without(post, &effects, &priors, &names, &dropped)?;
+    let Some(r) = best else {
+        return Ok(out);
+    };
+    res.after = fit_of(post, &r)?;
+    res.accepted
+        .retain(|(e, _, _)| !dropped.contains(&e.name()));
+    for c in res.candidates.iter_mut() {
+        if let Some(r) = c.refit.as_mut().filter(|r| r.accepted) {
+            if let Some(d) = out.iter().find(|d| d.effect == c.effect.name()) {
+                r.accepted = false;
+                r.verdict = format!(
+                    "accepted, then left out: not needed for a residual consistent with noise (chi-square {:.3} without it, threshold {:.3})",
+                    d.chi2_without, null.threshold
+                );
+            }
+        }
+    }
+    res.conclusion = format!(
+        "{}. Left out after the loop (the residual is consistent with noise without them): {}",
+        res.conclusion,
+        dropped.join(", ")
+    );
+    Ok(out)
 }

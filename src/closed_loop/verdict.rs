@@ -133,6 +133,20 @@ pub struct DropOne {
     pub kept: bool,
 }
 
+/// An accepted effect left out of an `explained` level because the residual is consistent with
+/// noise without it: the data need it for their evidence but not for their fit (a proxy for a
+/// small difference the candidates do not describe, e.g. a beam factor of -0.01 % after a
+/// sensor's mass whose x and z inertia the measured-direction mass leaves out).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct NotNeeded {
+    pub effect: String,
+    /// The size it had in the final fit, in its unit.
+    pub size: f64,
+    pub unit: String,
+    /// Normalised chi-square of the final model refitted without it (at most the threshold).
+    pub chi2_without: f64,
+}
+
 /// An effect the data cannot separate from the law's parameters.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ConfoundedEffect {
@@ -171,6 +185,8 @@ pub struct Verdict {
     /// Accepted effects reported as tentative (an `unexplained` end).
     pub tentative: Vec<String>,
     pub drop_one: Vec<DropOne>,
+    /// Accepted effects left out because the residual is consistent with noise without them.
+    pub not_needed: Vec<NotNeeded>,
     pub confounded: Vec<ConfoundedEffect>,
     /// The warning the law's parameters carry (an `unexplained` level).
     pub warning: Option<String>,
@@ -396,6 +412,7 @@ pub fn assess(
     freq_hz: &[f64],
     ids: &[u32],
     drop_one: Vec<DropOne>,
+    not_needed: Vec<NotNeeded>,
     params: &VerdictParams,
 ) -> Verdict {
     let a = &res.after.residuals;
@@ -454,12 +471,19 @@ pub fn assess(
         Status::NothingMissing => (
             Vec::new(),
             None,
-            format!("nothing_missing: no effect accepted; {level}"),
+            format!(
+                "nothing_missing: no effect needed; {level}{}",
+                left_out(&not_needed)
+            ),
         ),
         Status::Explained => (
             Vec::new(),
             None,
-            format!("explained: {}; {level}", accepted_names.join("; ")),
+            format!(
+                "explained: {}; {level}{}",
+                accepted_names.join("; "),
+                left_out(&not_needed)
+            ),
         ),
         Status::Confounded => {
             let c = &confounded[0];
@@ -574,8 +598,29 @@ pub fn assess(
         closest: close,
         tentative,
         drop_one,
+        not_needed,
         confounded,
         warning,
         sentence,
     }
+}
+
+/// The sentence's note on the effects left out as not needed (empty without any).
+fn left_out(not_needed: &[NotNeeded]) -> String {
+    if not_needed.is_empty() {
+        return String::new();
+    }
+    let each: Vec<String> = not_needed
+        .iter()
+        .map(|d| {
+            format!(
+                "{} ({:.4e} {}; chi-square {:.3} without it)",
+                d.effect, d.size, d.unit, d.chi2_without
+            )
+        })
+        .collect();
+    format!(
+        "; left out, not needed for a residual consistent with noise (accepted for their evidence, likely proxies for a difference the candidates do not describe): {}",
+        each.join(", ")
+    )
 }

@@ -35,20 +35,34 @@ impl SensitivitySvd {
     }
 }
 
+/// Why the sensitivity's SVD could not be formed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SensitivityError {
+    #[error("the sensitivity needs at least as many rows as parameters, all columns of one length (got {columns} columns of {rows} rows)")]
+    Shape { columns: usize, rows: usize },
+    #[error("the sensitivity has non-finite entries")]
+    NonFinite,
+    #[error("SVD failed: {0}")]
+    Svd(String),
+}
+
 /// SVD of `S` given by its columns (`cols[k][row]`, one per parameter).
-pub fn sensitivity_svd(cols: &[Vec<f64>]) -> Result<SensitivitySvd, String> {
+pub fn sensitivity_svd(cols: &[Vec<f64>]) -> Result<SensitivitySvd, SensitivityError> {
     let d = cols.len();
     let n = cols.first().map_or(0, Vec::len);
     if d == 0 || n < d || cols.iter().any(|c| c.len() != n) {
-        return Err(format!(
-            "the sensitivity needs at least as many rows as parameters, all columns of one length (got {d} columns of {n} rows)"
-        ));
+        return Err(SensitivityError::Shape {
+            columns: d,
+            rows: n,
+        });
     }
     if cols.iter().flatten().any(|v| !v.is_finite()) {
-        return Err("the sensitivity has non-finite entries".into());
+        return Err(SensitivityError::NonFinite);
     }
     let m = faer::Mat::<f64>::from_fn(n, d, |r, k| cols[k][r]);
-    let svd = m.thin_svd().map_err(|e| format!("SVD failed: {e:?}"))?;
+    let svd = m
+        .thin_svd()
+        .map_err(|e| SensitivityError::Svd(format!("{e:?}")))?;
     let s: Vec<f64> = svd.S().column_vector().iter().copied().collect();
     let v = svd.V();
     let mut order: Vec<usize> = (0..s.len()).collect();

@@ -20,6 +20,7 @@ pub mod map;
 pub mod nuts;
 pub mod prior;
 pub mod reference;
+pub mod refine;
 pub mod sampling;
 pub mod special;
 pub mod stepping_stone;

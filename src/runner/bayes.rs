@@ -9,11 +9,14 @@ use crate::frf::FrfEngine;
 use crate::inference::likelihood::NoiseModel;
 use crate::inference::likelihood::{ChannelCorrelation, FrfPosterior};
 use crate::inference::map::{find_map, MapParams, MapResult};
+use crate::inference::refine::{
+    correlation_fixed_point, relinearise_to_map, CorrelationKind, LEAKAGE_EPS_MIN,
+};
 use crate::inference::prior::Prior;
 use crate::inference::Posterior;
 use crate::inference::Sampler;
 use crate::material::ConstitutiveModel;
-use crate::study::inference::{CorrelationKind, Inference};
+use crate::study::inference::Inference;
 use crate::study::Study;
 use std::time::Instant;
 
@@ -40,7 +43,7 @@ pub struct PosteriorResult {
     /// Evidence, predictive criteria and checks for model comparison ([`super::compare`]).
     pub compare: super::compare::Comparison,
     /// Parameter redundancy at the MAP; the error says why it is missing.
-    pub redundancy: Result<super::redundancy::Redundancy, String>,
+    pub redundancy: Result<super::redundancy::Redundancy, super::redundancy::RedundancyError>,
     /// The basin study (`[inference.basins]`), filled in after the level's inference.
     pub basins: Option<super::basins::BasinStudy>,
 }
@@ -158,39 +161,21 @@ pub fn infer_level(
             // Correlated channels: the correlation per line from the MAP's standardised
             // residuals, then the MAP again under it; twice, so the correlation is that of
             // the residuals of the MAP it defines (the second pass moves it little).
-            for _ in 0..CORRELATION_PASSES {
-                let c = correlation_at(&post, &map.map_physical, kind, window, &level.freq_hz)
-                    .map_err(|e| {
-                        fail(
-                            format!("channel correlation of {name} at {}", level.name),
-                            e,
-                        )
-                    })?;
-                post.likelihood
-                    .set_channel_correlation(Some(c))
-                    .map_err(|e| {
-                        super::study_err(
-                            study,
-                            "inference.noise.channel_correlation",
-                            e.to_string(),
-                        )
-                    })?;
-                let again = find_map(
-                    &post,
-                    Some(&map.map_x),
-                    &MapParams {
-                        n_starts: 0,
-                        ..params.clone()
-                    },
-                    &|| (),
+            correlation_fixed_point(
+                &mut post,
+                &mut map,
+                &params,
+                kind,
+                window,
+                &level.freq_hz,
+                linearised,
+            )
+            .map_err(|e| {
+                fail(
+                    format!("channel correlation of {name} at {}", level.name),
+                    e,
                 )
-                .map_err(|e| fail(format!("MAP of {name} at level {}", level.name), e))?;
-                adopt(&mut map, again);
-                if linearised {
-                    relinearise_to_map(&mut post, &mut map, &params, nl)
-                        .map_err(|e| fail(format!("MAP of {name} at level {}", level.name), e))?;
-                }
-            }
+            })?;
             if let Some(c) = post.likelihood.channel_correlation() {
                 notes.push(correlation_note(c, &level.freq_hz, kind, window));
             }
@@ -286,98 +271,6 @@ fn linearisation_error(
     (d.len(), sd, lme)
 }
 
-/// Take a polishing search's end point as the MAP (the start list stays the multistart's).
-fn adopt(map: &mut MapResult, again: MapResult) {
-    map.evaluations += again.evaluations;
-    map.polish_steps += again.polish_steps;
-    map.map_x = again.map_x;
-    map.map_physical = again.map_physical;
-    map.laplace = again.laplace;
-}
-
-/// Re-linearise the measurement bias at the MAP and search again from it until the MAP stops
-/// moving (relative 1e-7 in every law parameter); leaves the bias linearised at the final MAP,
-/// where the linearised and the exact likelihood agree in value and gradient.
-pub fn relinearise_to_map(
-    post: &mut FrfPosterior<'_>,
-    map: &mut MapResult,
-    params: &MapParams,
-    nl: usize,
-) -> Result<(), String> {
-    for _ in 0..MAX_RELINEARISATIONS {
-        let p_lin = map.map_physical[..nl].to_vec();
-        post.likelihood
-            .forward
-            .linearise_measurement(&p_lin)
-            .map_err(|e| e.to_string())?;
-        let again = find_map(
-            &*post,
-            Some(&map.map_x),
-            &MapParams {
-                n_starts: 0,
-                ..params.clone()
-            },
-            &|| (),
-        )
-        .map_err(|e| e.to_string())?;
-        let moved = again.map_physical[..nl]
-            .iter()
-            .zip(&p_lin)
-            .map(|(a, b)| ((a - b) / b).abs())
-            .fold(0.0, f64::max);
-        adopt(map, again);
-        if moved < 1e-7 {
-            break;
-        }
-    }
-    post.likelihood
-        .forward
-        .linearise_measurement(&map.map_physical[..nl])
-        .map_err(|e| e.to_string())
-}
-
-/// Floor on the leakage structure's isotropic share eps. Below about 1 % the rank-one structure
-/// makes the differences between channels near exact, and then a model difference far below the
-/// noise reads as information: on the independent frequency-domain virtual data (whose random
-/// error also lies along dE[H1]/df) a floor of 1e-4 gave posterior sds of 1e-5 and put the truth
-/// 9 sd away, at a 5e-5 relative parameter shift (the two codes' FE discretisations).
-pub(crate) const LEAKAGE_EPS_MIN: f64 = 1e-2;
-
-/// The channels' error correlation per line (`inference.noise.channel_correlation`) from the
-/// standardised residuals at the physical parameters `physical` (law's, then noise scales):
-/// estimated from the residuals over `window` lines, or the Welch H1's leakage structure
-/// (rank one along dE[H1]/df plus an isotropic share floored at [`LEAKAGE_EPS_MIN`]). Used by
-/// the inference and by the closed loop, so both see the same correlation.
-pub(crate) fn correlation_at(
-    post: &FrfPosterior<'_>,
-    physical: &[f64],
-    kind: CorrelationKind,
-    window: usize,
-    freq_hz: &[f64],
-) -> Result<ChannelCorrelation, String> {
-    let (pl, pn) = physical.split_at(post.likelihood.forward.n_params());
-    let s = post
-        .likelihood
-        .standardised(pl, pn)
-        .map_err(|e| format!("residuals: {e}"))?;
-    let n_out = post.likelihood.data.n_out;
-    match kind {
-        CorrelationKind::Estimated => ChannelCorrelation::estimate(&s, n_out, window),
-        CorrelationKind::Leakage => {
-            let pred = post
-                .likelihood
-                .forward
-                .predict(pl, false)
-                .map_err(|e| format!("prediction: {e}"))?;
-            ChannelCorrelation::leakage(&pred.values, freq_hz, &s, n_out, window, LEAKAGE_EPS_MIN)
-        }
-    }
-    .map_err(|e| e.to_string())
-}
-
-/// Passes of (estimate the channels' correlation at the MAP, search the MAP again).
-const CORRELATION_PASSES: usize = 2;
-
 /// A report sentence on an estimated channel correlation: where it is large and how much
 /// shrinkage the estimate needed.
 fn correlation_note(
@@ -420,10 +313,6 @@ fn correlation_note(
         }
     }
 }
-
-/// At most this many re-linearisations of the measurement bias at the MAP (2-3 suffice: the
-/// bias moves the optimum by a fraction of a per cent).
-const MAX_RELINEARISATIONS: usize = 6;
 
 /// The basin study of every posterior of a level (hook of the runner after the level's
 /// inference): rebuilds each posterior, linearises its measurement bias at the MAP as the

@@ -487,16 +487,16 @@ pub(crate) fn write_loop(
     Ok(())
 }
 
-/// Correlated channels (`inference.noise.channel_correlation`): the correlation per line from
-/// the standardised residuals of the starting model's MAP (returned, unconstrained, as the
-/// loop's start), held fixed during the loop (as in
-/// `runner::bayes`, one pass; with a missing effect the residuals hold it too, so the
-/// correlation is estimated once, before, not re-estimated per candidate).
+/// Correlated channels (`inference.noise.channel_correlation`): the starting model's MAP, then
+/// the inference's channel-correlation fixed point at it
+/// ([`crate::inference::refine::correlation_fixed_point`]); the MAP is returned, unconstrained,
+/// as the loop's start and the correlation is held fixed during the loop (with a missing
+/// effect the residuals hold it too, so it is estimated once, before, not per candidate).
 fn set_correlation(
     post: &mut crate::inference::likelihood::FrfPosterior<'_>,
     x0: &[f64],
     map: &crate::inference::map::MapParams,
-    kind: crate::study::inference::CorrelationKind,
+    kind: crate::inference::refine::CorrelationKind,
     window: usize,
     level: &super::LevelData,
 ) -> Result<Vec<f64>, RunError> {
@@ -504,13 +504,18 @@ fn set_correlation(
         analysis: format!("channel correlation for the closed loop at {}", level.name),
         message: m,
     };
-    let r = crate::inference::map::find_map(&*post, Some(x0), map, &|| ())
+    let mut r = crate::inference::map::find_map(&*post, Some(x0), map, &|| ())
         .map_err(|e| fail(e.to_string()))?;
-    let c = super::bayes::correlation_at(post, &r.map_physical, kind, window, &level.freq_hz)
-        .map_err(fail)?;
-    post.likelihood
-        .set_channel_correlation(Some(c))
-        .map_err(|e| fail(e.to_string()))?;
+    crate::inference::refine::correlation_fixed_point(
+        post,
+        &mut r,
+        map,
+        kind,
+        window,
+        &level.freq_hz,
+        false,
+    )
+    .map_err(|e| fail(e.to_string()))?;
     Ok(r.map_x)
 }
 
@@ -907,7 +912,14 @@ fn markdown(
                 if d.kept { "kept (tentative)" } else { "dropped" }
             );
         }
-        if !v.drop_one.is_empty() {
+        for d in &v.not_needed {
+            let _ = writeln!(
+                s,
+                "- {} = {:.4e} {} left out: the final model refitted without it reads a normalised chi-square of {:.3}, within the noise (threshold {:.3}); its evidence gain came from a difference it stands in for",
+                d.effect, d.size, d.unit, d.chi2_without, v.threshold
+            );
+        }
+        if !v.drop_one.is_empty() || !v.not_needed.is_empty() {
             s.push('\n');
         }
         let _ = writeln!(
@@ -1253,6 +1265,19 @@ fn verdict_table(results: &[LevelResult], summary: &[DiagnoseLevel]) -> Result<T
                             .iter()
                             .filter(|d| !d.kept)
                             .map(|d| d.effect.clone())
+                            .collect(),
+                    )
+                }),
+            )
+        })
+        .and_then(|t| {
+            t.push_str(
+                "left_out",
+                text(&|v| {
+                    join(
+                        v.not_needed
+                            .iter()
+                            .map(|d| format!("{} = {:.4e} {}", d.effect, d.size, d.unit))
                             .collect(),
                     )
                 }),

@@ -132,8 +132,14 @@ impl Prepared {
                         .map_err(|e| bad_at(e.to_string()))?;
                 }
                 if let Some((kind, window)) = inf.channel_correlation {
-                    let c = super::bayes::correlation_at(&post, p, kind, window, &lv.freq_hz)
-                        .map_err(bad_at)?;
+                    let c = crate::inference::refine::correlation_at(
+                        &post,
+                        p,
+                        kind,
+                        window,
+                        &lv.freq_hz,
+                    )
+                    .map_err(|e| bad_at(e.to_string()))?;
                     post.likelihood
                         .set_channel_correlation(Some(c))
                         .map_err(|e| bad_at(e.to_string()))?;

@@ -4,8 +4,10 @@
 //! in [`crate::inference::identifiability`].
 
 use super::posterior::SamplerResult;
+use crate::forward::ForwardError;
 use crate::inference::identifiability::{
-    combination_text, correlation_matrix, prior_sd_x, sd, sensitivity_svd, SensitivitySvd,
+    combination_text, correlation_matrix, prior_sd_x, sd, sensitivity_svd, SensitivityError,
+    SensitivitySvd,
 };
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::MapResult;
@@ -41,20 +43,28 @@ impl Redundancy {
     }
 }
 
+/// Why a posterior has no redundancy analysis.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum RedundancyError {
+    #[error("sensitivity at the MAP: {0}")]
+    Sensitivity(#[from] ForwardError),
+    #[error(transparent)]
+    Svd(#[from] SensitivityError),
+    #[error("no posterior draws")]
+    NoDraws,
+}
+
 /// The redundancy analysis of `post` at `map` with the draws of the first sampler in
 /// `samplers` (NUTS's when it ran). `post` must be in the state the samplers saw.
 pub fn analyse(
     post: &FrfPosterior<'_>,
     map: &MapResult,
     samplers: &[SamplerResult],
-) -> Result<Redundancy, String> {
+) -> Result<Redundancy, RedundancyError> {
     let nl = post.n_law();
     let phys = &map.map_physical;
     let lik = &post.likelihood;
-    let pred = lik
-        .forward
-        .predict(&phys[..nl], true)
-        .map_err(|e| format!("sensitivity at the MAP: {e}"))?;
+    let pred = lik.forward.predict(&phys[..nl], true)?;
     let var = lik.variances(&phys[nl..]);
     let cols: Vec<Vec<f64>> = (0..nl)
         .map(|k| {
@@ -78,7 +88,7 @@ pub fn analyse(
         .iter()
         .find(|s| s.sampler == Sampler::Nuts)
         .or(samplers.first())
-        .ok_or("no posterior draws")?;
+        .ok_or(RedundancyError::NoDraws)?;
     let xcols: Vec<Vec<f64>> = s
         .draws
         .values

@@ -183,14 +183,7 @@ pub struct NutsSettings {
     pub target_accept: f64,
 }
 
-/// How the channels' error correlation per line is modelled.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum CorrelationKind {
-    /// Rank one along dE[H1]/df plus an estimated isotropic share (the Welch leakage jitter).
-    Leakage,
-    /// The shrunk sample correlation of the MAP residuals.
-    Estimated,
-}
+pub use crate::inference::refine::CorrelationKind;
 
 /// The validated `[inference]` section.
 #[derive(Clone, Debug, PartialEq)]

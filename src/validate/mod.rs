@@ -48,7 +48,7 @@ use crate::material::ConstitutiveModel;
 use crate::output::shards::Shard;
 use crate::output::Table;
 use crate::rom::{build_rom, ModulusRange, ReducedModel, RomParams};
-use crate::runner::bayes::relinearise_to_map;
+use crate::inference::refine::relinearise_to_map;
 use rand::RngExt;
 use rayon::prelude::*;
 pub use spec::{load_validation, DataSource, ValidationSpec};
@@ -527,7 +527,7 @@ fn fit(
         ..MapParams::default()
     };
     let mut map = find_map(post, Some(&x0), &params, &|| ()).map_err(|e| e.to_string())?;
-    relinearise_to_map(post, &mut map, &params, nl)?;
+    relinearise_to_map(post, &mut map, &params, nl).map_err(|e| e.to_string())?;
     if !map.laplace.positive_definite {
         return Err("the Hessian at the MAP is not positive definite".into());
     }
