@@ -32,8 +32,8 @@ pub const FRACTIONAL_ZENER: &str = "fractional_zener";
 /// The candidate type of a law that replaces the current one.
 pub const ALTERNATIVE_LAW: &str = "alternative_law";
 
-/// Levenberg-Marquardt iterations per start of [`fit_modulus`].
-pub const MODULUS_FIT_ITERS: usize = 200;
+/// Levenberg-Marquardt steps (tried, accepted or not) per start of [`fit_modulus`].
+pub const MODULUS_FIT_ITERS: u64 = 2000;
 
 /// A law fitted to a modulus curve: its parameters and the RMS relative complex error.
 #[derive(Clone, Debug, PartialEq)]
@@ -125,21 +125,19 @@ pub fn fit_modulus_holding(
         if crate::material::check_params(law, s).is_err() {
             continue;
         }
-        let mut u: Vec<f64> = s.iter().zip(&bounds).map(|(p, b)| to_u(*p, *b)).collect();
-        let Some((mut cost, mut r, mut j)) = eval(&u, true) else {
-            continue;
-        };
-        let mut lambda = 1e-3;
-        for _ in 0..MODULUS_FIT_ITERS {
-            // Normal equations (J^T J + lambda diag(J^T J)) du = -J^T r.
+        let u: Vec<f64> = s.iter().zip(&bounds).map(|(p, b)| to_u(*p, *b)).collect();
+        // f = |r|^2: gradient 2 J^T r, Gauss-Newton curvature 2 J^T J; held parameters get a
+        // zero gradient and a unit curvature (their step is zero).
+        let quadratic = |u: &[f64]| -> Result<crate::inference::lm::Quadratic, String> {
+            let (cost, r, j) = eval(u, true).ok_or("the law's modulus is not finite")?;
             let mut a = vec![0.0; n * n];
             let mut g = vec![0.0; n];
             for row in 0..2 * m {
                 let jr = &j[row * n..(row + 1) * n];
                 for k in 0..n {
-                    g[k] += jr[k] * r[row];
+                    g[k] += 2.0 * jr[k] * r[row];
                     for l in 0..n {
-                        a[k * n + l] += jr[k] * jr[l];
+                        a[k * n + l] += 2.0 * jr[k] * jr[l];
                     }
                 }
             }
@@ -151,36 +149,23 @@ pub fn fit_modulus_holding(
                 }
                 a[k * n + k] = 1.0;
             }
-            let mut moved = false;
-            for _ in 0..12 {
-                let mut al = a.clone();
-                for k in 0..n {
-                    al[k * n + k] += lambda * a[k * n + k].max(1e-12);
-                }
-                let Some(l) = crate::inference::map::cholesky(&al, n) else {
-                    lambda *= 10.0;
-                    continue;
-                };
-                let du = crate::inference::map::chol_solve(&l, n, &g);
-                let trial: Vec<f64> = u.iter().zip(&du).map(|(u, d)| u - d).collect();
-                match eval(&trial, true) {
-                    Some((c, rt, jt)) if c < cost => {
-                        let rel = (cost - c) / cost.max(f64::MIN_POSITIVE);
-                        u = trial;
-                        cost = c;
-                        r = rt;
-                        j = jt;
-                        lambda = (lambda / 10.0).max(1e-12);
-                        moved = rel > 1e-14;
-                        break;
-                    }
-                    _ => lambda *= 10.0,
-                }
-            }
-            if !moved {
-                break;
-            }
+            Ok((cost, g, a))
+        };
+        let value = |u: &[f64]| eval(u, false).map_or(f64::INFINITY, |e| e.0);
+        let out = crate::inference::lm::levenberg_marquardt(
+            &u,
+            quadratic,
+            value,
+            &crate::inference::lm::LmParams {
+                max_iters: MODULUS_FIT_ITERS,
+                tol: f64::MIN_POSITIVE,
+                rel_tol: 1e-14,
+            },
+        );
+        if !out.f.is_finite() {
+            continue;
         }
+        let (cost, u) = (out.f, out.x);
         if best.as_ref().is_none_or(|b| cost < b.0) {
             best = Some((cost, u));
         }

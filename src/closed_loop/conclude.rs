@@ -186,9 +186,9 @@ fn leave_out_unneeded(
     let mut best: Option<MapResult> = None;
     for (e, size, _) in res.accepted.iter().rev() {
         let name = e.name();
-        loop_params
-            .progress
-            .say(&format!("is {name} needed for a residual within the noise?"));
+        loop_params.progress.say(&format!(
+            "is {name} needed for a residual within the noise?"
+        ));
         let mut trial = dropped.clone();
         trial.push(name.clone());
         without(post, &effects, &priors, &names, &trial)?;

@@ -17,6 +17,7 @@
 //! material of the initial-value sensitivity study. Starts run in parallel (rayon); results
 //! are collected in start order, so they do not depend on the thread count.
 
+use super::lm::Quadratic;
 use super::{unit_rng, DensityError, Posterior};
 use argmin::core::{CostFunction, Executor, Gradient, State};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
@@ -277,9 +278,6 @@ fn search(
     }
 }
 
-/// An objective's value, gradient and curvature at a point.
-type Quadratic = (f64, Vec<f64>, Vec<f64>);
-
 /// `-log p(x | data)` (plus the transform's log-Jacobian when `physical`: the physical-MAP
 /// objective), its gradient and Gauss-Newton curvature; the log-Jacobian's Hessian by central
 /// differences of its gradient (the transform only, no likelihood). None when the posterior
@@ -324,12 +322,10 @@ fn gn_objective(
     Some(Ok((f, g, h)))
 }
 
-/// Levenberg-Marquardt from `x0` on the MAP objective (see [`gn_objective`]), with Nielsen's
-/// damping update (Madsen, Nielsen & Tingleff 2004, sec. 3.2) and the damping scaled by the
-/// curvature's diagonal. Stops when the Newton decrement `g^T H^-1 g / 2` (undamped curvature)
-/// is below `tol`, after `max_iters` iterations, or when no damped step decreases the
-/// objective. Returns (x, objective, iterations, stop reason), or None when the posterior has
-/// no curvature.
+/// Levenberg-Marquardt ([`super::lm`]) from `x0` on the MAP objective (see [`gn_objective`]).
+/// Stops when the Newton decrement `g^T H^-1 g / 2` (undamped curvature) is below `tol`, after
+/// `max_iters` iterations, or when no damped step decreases the objective. Returns (x,
+/// objective, iterations, stop reason), or None when the posterior has no curvature.
 fn gauss_newton_search(
     post: &dyn Posterior,
     x0: &[f64],
@@ -339,10 +335,9 @@ fn gauss_newton_search(
     count: &std::sync::atomic::AtomicUsize,
 ) -> Option<(Vec<f64>, f64, u64, String)> {
     use std::sync::atomic::Ordering::Relaxed;
-    let d = x0.len();
     count.fetch_add(1, Relaxed);
-    let (mut f, mut g, mut h) = match gn_objective(post, x0, physical)? {
-        Ok(v) => v,
+    let mut first = match gn_objective(post, x0, physical)? {
+        Ok(q) => Some(q),
         Err(e) => {
             return Some((
                 x0.to_vec(),
@@ -352,66 +347,31 @@ fn gauss_newton_search(
             ))
         }
     };
-    let mut x = x0.to_vec();
-    let mut lambda = 1e-3;
-    let mut nu = 2.0;
-    let mut reason = "maximum iterations reached".to_string();
-    let mut it = 0;
-    while it < max_iters {
-        if let Some(l) = cholesky(&h, d) {
-            let s = chol_solve(&l, d, &g);
-            let dec = 0.5 * s.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>();
-            if dec < tol {
-                reason = "converged: Newton decrement below tolerance".into();
-                break;
-            }
+    let quadratic = |x: &[f64]| -> Result<Quadratic, String> {
+        if let Some(q) = first.take() {
+            return Ok(q);
         }
-        it += 1;
-        let top = (0..d).map(|i| h[i * d + i].abs()).fold(0.0, f64::max);
-        let mut a = h.clone();
-        for i in 0..d {
-            a[i * d + i] += lambda * h[i * d + i].abs().max(1e-12 * top).max(1e-300);
-        }
-        let Some(l) = cholesky(&a, d) else {
-            lambda *= nu;
-            nu *= 2.0;
-            continue;
-        };
-        let step: Vec<f64> = chol_solve(&l, d, &g).iter().map(|v| -v).collect();
-        // Predicted decrease of the damped quadratic model (positive: A is positive definite).
-        let gs: f64 = g.iter().zip(&step).map(|(a, b)| a * b).sum();
-        let sas: f64 = (0..d)
-            .map(|i| step[i] * (0..d).map(|j| a[i * d + j] * step[j]).sum::<f64>())
-            .sum();
-        let predicted = -(gs + 0.5 * sas);
-        let xn: Vec<f64> = x.iter().zip(&step).map(|(a, b)| a + b).collect();
         count.fetch_add(1, Relaxed);
-        let fn_ = objective(post, &xn, None, physical).map_or(f64::INFINITY, |v| -v);
-        let rho = (f - fn_) / predicted;
-        if fn_.is_finite() && fn_ < f && rho > 1e-4 {
-            count.fetch_add(1, Relaxed);
-            match gn_objective(post, &xn, physical)? {
-                Ok((f1, g1, h1)) => {
-                    x = xn;
-                    (f, g, h) = (f1, g1, h1);
-                }
-                Err(e) => {
-                    reason = format!("failed: curvature at an accepted point ({e})");
-                    break;
-                }
-            }
-            lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
-            nu = 2.0;
-        } else {
-            lambda *= nu;
-            nu *= 2.0;
+        match gn_objective(post, x, physical) {
+            Some(r) => r.map_err(|e| e.to_string()),
+            None => Err("the posterior has no curvature".into()),
         }
-        if lambda > 1e16 {
-            reason = "stalled: no damped step decreases the objective".into();
-            break;
-        }
-    }
-    Some((x, f, it, reason))
+    };
+    let value = |x: &[f64]| {
+        count.fetch_add(1, Relaxed);
+        objective(post, x, None, physical).map_or(f64::INFINITY, |v| -v)
+    };
+    let out = super::lm::levenberg_marquardt(
+        x0,
+        quadratic,
+        value,
+        &super::lm::LmParams {
+            max_iters,
+            tol,
+            rel_tol: 0.0,
+        },
+    );
+    Some((out.x, out.f, out.iterations, out.reason))
 }
 
 /// Central-difference Hessian of `-log p(x | data)` (in x, Jacobian included) from the

@@ -15,6 +15,7 @@ pub mod diagnostics;
 pub mod identifiability;
 pub mod joint;
 pub mod likelihood;
+pub mod lm;
 pub mod loo;
 pub mod map;
 pub mod nuts;

@@ -9,10 +9,10 @@ use crate::frf::FrfEngine;
 use crate::inference::likelihood::NoiseModel;
 use crate::inference::likelihood::{ChannelCorrelation, FrfPosterior};
 use crate::inference::map::{find_map, MapParams, MapResult};
+use crate::inference::prior::Prior;
 use crate::inference::refine::{
     correlation_fixed_point, relinearise_to_map, CorrelationKind, LEAKAGE_EPS_MIN,
 };
-use crate::inference::prior::Prior;
 use crate::inference::Posterior;
 use crate::inference::Sampler;
 use crate::material::ConstitutiveModel;

@@ -43,12 +43,12 @@ use crate::inference::likelihood::{
 };
 use crate::inference::map::{cholesky, find_map, MapParams, MapResult};
 use crate::inference::prior::{normal_quantile, Prior};
+use crate::inference::refine::relinearise_to_map;
 use crate::inference::{unit_rng, Posterior, SteppingStoneParams};
 use crate::material::ConstitutiveModel;
 use crate::output::shards::Shard;
 use crate::output::Table;
 use crate::rom::{build_rom, ModulusRange, ReducedModel, RomParams};
-use crate::inference::refine::relinearise_to_map;
 use rand::RngExt;
 use rayon::prelude::*;
 pub use spec::{load_validation, DataSource, ValidationSpec};

@@ -102,7 +102,13 @@ fn dense_null_data_are_nothing_missing_in_19_of_20_seeds() {
     let mut statuses = Vec::new();
     for seed in 100..120 {
         let (res, v) = dense_verdict(None, &all_candidates(), seed);
-        statuses.push((seed, v.status, res.accepted.len(), v.chi2_after, v.threshold));
+        statuses.push((
+            seed,
+            v.status,
+            res.accepted.len(),
+            v.chi2_after,
+            v.threshold,
+        ));
     }
     let clean = statuses
         .iter()
