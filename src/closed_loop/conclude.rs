@@ -42,6 +42,42 @@ fn without(
     Ok(())
 }
 
+/// The final model's state that the end-of-loop refits start from and restore: the search
+/// settings (one warm Gauss-Newton start), the effects, priors and names, and the final fit.
+struct FinalModel {
+    map: MapParams,
+    effects: Effects,
+    priors: Vec<Prior>,
+    names: Vec<String>,
+    after: super::Fit,
+}
+
+impl FinalModel {
+    fn of(post: &FrfPosterior<'_>, res: &ClosedLoopResult, loop_params: &ClosedLoopParams) -> Self {
+        FinalModel {
+            map: MapParams {
+                n_starts: 0,
+                search: SearchMethod::GaussNewton,
+                ..loop_params.map.clone()
+            },
+            effects: post.likelihood.forward.effects.clone(),
+            priors: post.priors.clone(),
+            names: post.names.clone(),
+            after: res.after.clone(),
+        }
+    }
+
+    /// `post` without the effects named in `drop`.
+    fn without(&self, post: &mut FrfPosterior<'_>, drop: &[String]) -> Result<(), ClosedLoopError> {
+        without(post, &self.effects, &self.priors, &self.names, drop)
+    }
+
+    /// The warm refit of `post`'s current model from the final fit's values.
+    fn refit(&self, post: &FrfPosterior<'_>) -> Result<MapResult, ClosedLoopError> {
+        refit(post, &self.after.names, &self.after.values, &self.map)
+    }
+}
+
 /// The warm Gauss-Newton refit of `post`'s current model from the physical values of `names`
 /// in `values` (the final fit's, restricted to the model's parameters).
 fn refit(
@@ -90,24 +126,17 @@ pub fn conclude(
         return Ok((res, v));
     }
     let kappa = (res.after.residuals.chi2_normalised / null.mean).max(1.0);
-    let map = MapParams {
-        n_starts: 0,
-        search: SearchMethod::GaussNewton,
-        ..loop_params.map.clone()
-    };
-    let effects = post.likelihood.forward.effects.clone();
-    let priors = post.priors.clone();
-    let names = post.names.clone();
+    let fin = FinalModel::of(post, &res, loop_params);
     let n_data = post.likelihood.data.values.len();
-    let after = res.after.clone();
+    let after = &fin.after;
     let mut checks = Vec::new();
     for (e, _, _) in &res.accepted {
         let name = e.name();
         loop_params
             .progress
             .say(&format!("drop-one check of {name}"));
-        without(post, &effects, &priors, &names, std::slice::from_ref(&name))?;
-        let gain = match refit(post, &after.names, &after.values, &map) {
+        fin.without(post, std::slice::from_ref(&name))?;
+        let gain = match fin.refit(post) {
             Ok(r) => {
                 if r.laplace.positive_definite && after.positive_definite {
                     after.log_evidence - r.laplace.log_evidence
@@ -133,9 +162,9 @@ pub fn conclude(
         .filter(|d| !d.kept)
         .map(|d| d.effect.clone())
         .collect();
-    without(post, &effects, &priors, &names, &dropped)?;
+    fin.without(post, &dropped)?;
     if !dropped.is_empty() {
-        let r = refit(post, &after.names, &after.values, &map)?;
+        let r = fin.refit(post)?;
         res.after = fit_of(post, &r)?;
         res.accepted
             .retain(|(e, _, _)| !dropped.contains(&e.name()));
@@ -172,15 +201,7 @@ fn leave_out_unneeded(
     null: &NullCalibration,
     loop_params: &ClosedLoopParams,
 ) -> Result<Vec<NotNeeded>, ClosedLoopError> {
-    let map = MapParams {
-        n_starts: 0,
-        search: SearchMethod::GaussNewton,
-        ..loop_params.map.clone()
-    };
-    let effects = post.likelihood.forward.effects.clone();
-    let priors = post.priors.clone();
-    let names = post.names.clone();
-    let after = res.after.clone();
+    let fin = FinalModel::of(post, res, loop_params);
     let mut out: Vec<NotNeeded> = Vec::new();
     let mut dropped: Vec<String> = Vec::new();
     let mut best: Option<MapResult> = None;
@@ -191,8 +212,8 @@ fn leave_out_unneeded(
         ));
         let mut trial = dropped.clone();
         trial.push(name.clone());
-        without(post, &effects, &priors, &names, &trial)?;
-        let Ok(r) = refit(post, &after.names, &after.values, &map) else {
+        fin.without(post, &trial)?;
+        let Ok(r) = fin.refit(post) else {
             continue;
         };
         let chi2 = fit_of(post, &r)?.residuals.chi2_normalised;
@@ -207,7 +228,7 @@ fn leave_out_unneeded(
             best = Some(r);
         }
     }
-    without(post, &effects, &priors, &names, &dropped)?;
+    fin.without(post, &dropped)?;
     let Some(r) = best else {
         return Ok(out);
     };

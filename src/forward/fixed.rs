@@ -40,16 +40,14 @@ impl<'a> FixedEffectsEngine<'a> {
         let mut beam = 0.0;
         for t in &effects.terms {
             match t.effect {
-                Effect::PointMass { point, .. } => {
-                    let pos = inner
-                        .inputs()
-                        .iter()
-                        .position(|&j| j == point)
-                        .ok_or(FrfError::BadInput(point))?;
-                    masses.push((point, pos, t.value));
-                }
-                Effect::SensorMass { points, .. } => {
-                    for point in points {
+                // A sensor mass is the same mass at its x, y and z points.
+                Effect::PointMass { .. } | Effect::SensorMass { .. } => {
+                    let points: &[usize] = match &t.effect {
+                        Effect::PointMass { point, .. } => std::slice::from_ref(point),
+                        Effect::SensorMass { points, .. } => points,
+                        _ => unreachable!("matched above"),
+                    };
+                    for &point in points {
                         let pos = inner
                             .inputs()
                             .iter()
