@@ -78,6 +78,29 @@ impl FinalModel {
     }
 }
 
+/// `conclusion` without the accepted effects named in `gone` (their `name = size +- sd unit`
+/// entries, as the loop wrote them), so that it lists only the effects kept.
+fn strike(
+    conclusion: &str,
+    accepted: &[(crate::forward::Effect, f64, f64)],
+    gone: &[String],
+) -> String {
+    let mut c = conclusion.to_string();
+    for (e, v, s) in accepted.iter().filter(|(e, _, _)| gone.contains(&e.name())) {
+        let entry = format!("{} = {v:.4e} +- {s:.1e} {}", e.name(), e.unit());
+        for pat in [format!("{entry}; "), format!("; {entry}"), entry] {
+            if c.contains(&pat) {
+                c = c.replacen(&pat, "", 1);
+                break;
+            }
+        }
+    }
+    if c.is_empty() || c.starts_with('.') {
+        c = format!("no effect kept{c}");
+    }
+    c
+}
+
 /// The warm Gauss-Newton refit of `post`'s current model from the physical values of `names`
 /// in `values` (the final fit's, restricted to the model's parameters).
 fn refit(
@@ -166,6 +189,7 @@ pub fn conclude(
     if !dropped.is_empty() {
         let r = fin.refit(post)?;
         res.after = fit_of(post, &r)?;
+        res.conclusion = strike(&res.conclusion, &res.accepted, &dropped);
         res.accepted
             .retain(|(e, _, _)| !dropped.contains(&e.name()));
         for c in res.candidates.iter_mut() {
@@ -233,6 +257,7 @@ fn leave_out_unneeded(
         return Ok(out);
     };
     res.after = fit_of(post, &r)?;
+    res.conclusion = strike(&res.conclusion, &res.accepted, &dropped);
     res.accepted
         .retain(|(e, _, _)| !dropped.contains(&e.name()));
     for c in res.candidates.iter_mut() {
@@ -246,10 +271,45 @@ fn leave_out_unneeded(
             }
         }
     }
+    let left: Vec<String> = out
+        .iter()
+        .map(|d| format!("{} = {:.4e} {}", d.effect, d.size, d.unit))
+        .collect();
     res.conclusion = format!(
         "{}. Left out after the loop (the residual is consistent with noise without them): {}",
         res.conclusion,
-        dropped.join(", ")
+        left.join(", ")
     );
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::strike;
+    use crate::forward::Effect;
+
+    #[test]
+    fn strike_keeps_only_the_effects_kept() {
+        let accepted = vec![
+            (Effect::PointMass { point: 2, id: 3 }, 8.9895e-3, 5.8e-6),
+            (Effect::BeamModulus, -1.3719e-4, 1.8e-5),
+        ];
+        let c = "mass_pt3 = 8.9895e-3 +- 5.8e-6 kg; beam_modulus = -1.3719e-4 +- 1.8e-5 1";
+        assert_eq!(
+            strike(c, &accepted, &["beam_modulus".into()]),
+            "mass_pt3 = 8.9895e-3 +- 5.8e-6 kg"
+        );
+        assert_eq!(
+            strike(c, &accepted, &["mass_pt3".into()]),
+            "beam_modulus = -1.3719e-4 +- 1.8e-5 1"
+        );
+        assert_eq!(
+            strike(
+                "beam_modulus = -1.3719e-4 +- 1.8e-5 1. The starting fit has E0 at the edge",
+                &accepted,
+                &["beam_modulus".into()]
+            ),
+            "no effect kept. The starting fit has E0 at the edge"
+        );
+    }
 }
