@@ -101,6 +101,31 @@ fn strike(
     c
 }
 
+/// `res` after the effects in `dropped` were removed and the model refitted (`r`, on `post`'s
+/// current model): the final fit, the conclusion and the accepted list without them, and each
+/// one's refit marked not accepted with the reason `why(name)`.
+fn remove_accepted(
+    post: &FrfPosterior<'_>,
+    res: &mut ClosedLoopResult,
+    r: &MapResult,
+    dropped: &[String],
+    why: impl Fn(&str) -> Option<String>,
+) -> Result<(), ClosedLoopError> {
+    res.after = fit_of(post, r)?;
+    res.conclusion = strike(&res.conclusion, &res.accepted, dropped);
+    res.accepted
+        .retain(|(e, _, _)| !dropped.contains(&e.name()));
+    for c in res.candidates.iter_mut() {
+        if let Some(refit) = c.refit.as_mut().filter(|r| r.accepted) {
+            if let Some(reason) = why(&c.effect.name()) {
+                refit.accepted = false;
+                refit.verdict = reason;
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The warm Gauss-Newton refit of `post`'s current model from the physical values of `names`
 /// in `values` (the final fit's, restricted to the model's parameters).
 fn refit(
@@ -188,24 +213,14 @@ pub fn conclude(
     fin.without(post, &dropped)?;
     if !dropped.is_empty() {
         let r = fin.refit(post)?;
-        res.after = fit_of(post, &r)?;
-        res.conclusion = strike(&res.conclusion, &res.accepted, &dropped);
-        res.accepted
-            .retain(|(e, _, _)| !dropped.contains(&e.name()));
-        for c in res.candidates.iter_mut() {
-            if let Some(r) = c.refit.as_mut().filter(|r| r.accepted) {
-                if let Some(d) = checks
-                    .iter()
-                    .find(|d| d.effect == c.effect.name() && !d.kept)
-                {
-                    r.accepted = false;
-                    r.verdict = format!(
-                        "accepted, then dropped: {:.1} nats / kappa {:.2} = {:.1} < {} in the final model",
-                        d.gain, d.kappa, d.scaled_gain, params.threshold_nats
-                    );
-                }
-            }
-        }
+        remove_accepted(post, &mut res, &r, &dropped, |name| {
+            checks.iter().find(|d| d.effect == name && !d.kept).map(|d| {
+                format!(
+                    "accepted, then dropped: {:.1} nats / kappa {:.2} = {:.1} < {} in the final model",
+                    d.gain, d.kappa, d.scaled_gain, params.threshold_nats
+                )
+            })
+        })?;
         res.conclusion = format!(
             "{}. Dropped after the loop (evidence not decisive once the likelihood is widened to the residual left): {}",
             res.conclusion,
@@ -256,21 +271,14 @@ fn leave_out_unneeded(
     let Some(r) = best else {
         return Ok(out);
     };
-    res.after = fit_of(post, &r)?;
-    res.conclusion = strike(&res.conclusion, &res.accepted, &dropped);
-    res.accepted
-        .retain(|(e, _, _)| !dropped.contains(&e.name()));
-    for c in res.candidates.iter_mut() {
-        if let Some(r) = c.refit.as_mut().filter(|r| r.accepted) {
-            if let Some(d) = out.iter().find(|d| d.effect == c.effect.name()) {
-                r.accepted = false;
-                r.verdict = format!(
-                    "accepted, then left out: not needed for a residual consistent with noise (chi-square {:.3} without it, threshold {:.3})",
-                    d.chi2_without, null.threshold
-                );
-            }
-        }
-    }
+    remove_accepted(post, res, &r, &dropped, |name| {
+        out.iter().find(|d| d.effect == name).map(|d| {
+            format!(
+                "accepted, then left out: not needed for a residual consistent with noise (chi-square {:.3} without it, threshold {:.3})",
+                d.chi2_without, null.threshold
+            )
+        })
+    })?;
     let left: Vec<String> = out
         .iter()
         .map(|d| format!("{} = {:.4e} {}", d.effect, d.size, d.unit))
