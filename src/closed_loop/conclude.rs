@@ -87,7 +87,7 @@ fn strike(
 ) -> String {
     let mut c = conclusion.to_string();
     for (e, v, s) in accepted.iter().filter(|(e, _, _)| gone.contains(&e.name())) {
-        let entry = format!("{} = {v:.4e} +- {s:.1e} {}", e.name(), e.unit());
+        let entry = super::accepted_entry(e, *v, *s);
         for pat in [format!("{entry}; "), format!("; {entry}"), entry] {
             if c.contains(&pat) {
                 c = c.replacen(&pat, "", 1);
@@ -279,10 +279,7 @@ fn leave_out_unneeded(
             )
         })
     })?;
-    let left: Vec<String> = out
-        .iter()
-        .map(|d| format!("{} = {:.4e} {}", d.effect, d.size, d.unit))
-        .collect();
+    let left: Vec<String> = out.iter().map(NotNeeded::entry).collect();
     res.conclusion = format!(
         "{}. Left out after the loop (the residual is consistent with noise without them): {}",
         res.conclusion,

@@ -499,6 +499,12 @@ pub(crate) fn normal_equations(
     (s, fi)
 }
 
+/// An accepted effect as the conclusion, the verdict and the report name it:
+/// `name = size +- sd unit`.
+pub(crate) fn accepted_entry(e: &Effect, size: f64, sd: f64) -> String {
+    format!("{} = {size:.4e} +- {sd:.1e} {}", e.name(), e.unit())
+}
+
 /// The weighted residual sum of squares `sum |data_o - values_o|^2 / v_o`.
 pub(crate) fn weighted_rss(data: &[C64], values: &[C64], v: &[f64]) -> f64 {
     data.iter()
@@ -978,11 +984,7 @@ pub fn run_closed_loop_with_laws<'a>(
     } else {
         law_changes
             .into_iter()
-            .chain(
-                accepted
-                    .iter()
-                    .map(|(e, v, s)| format!("{} = {v:.4e} +- {s:.1e} {}", e.name(), e.unit())),
-            )
+            .chain(accepted.iter().map(|(e, v, s)| accepted_entry(e, *v, *s)))
             .collect::<Vec<_>>()
             .join("; ")
     };

@@ -147,6 +147,13 @@ pub struct NotNeeded {
     pub chi2_without: f64,
 }
 
+impl NotNeeded {
+    /// `name = size unit`, as the conclusion and `verdict.parquet` name it.
+    pub fn entry(&self) -> String {
+        format!("{} = {:.4e} {}", self.effect, self.size, self.unit)
+    }
+}
+
 /// An effect the data cannot separate from the law's parameters.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ConfoundedEffect {
@@ -435,7 +442,7 @@ pub fn assess(
     let accepted_names: Vec<String> = res
         .accepted
         .iter()
-        .map(|(e, v, s)| format!("{} = {v:.4e} +- {s:.1e} {}", e.name(), e.unit()))
+        .map(|(e, v, s)| super::accepted_entry(e, *v, *s))
         .chain(
             res.law_candidates
                 .iter()

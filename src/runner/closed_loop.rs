@@ -4,7 +4,8 @@
 //! modulus factor (left out when the adherend has viscous damping `C_b`, where its exact
 //! scaling does not hold), the Maxwell branches, and the fractional Zener law as an alternative
 //! law ([`crate::closed_loop::alternative`]; opt-out in `[closed_loop] candidates`); on a
-//! meshed joint also a sensor mass (x, y and z) at every measured point. Each level ends with a
+//! meshed joint, when `candidates` names it, also a sensor mass (x, y and z) at every measured
+//! point. Each level ends with a
 //! verdict ([`crate::closed_loop::verdict`]) against a null level calibrated on replicates of
 //! the fitted model. Writes the parquet tables `residuals`, `candidates`, `closed_loop`,
 //! `verdict`, `signatures` and a markdown summary `closed_loop.md` (its first line the status
@@ -110,13 +111,10 @@ pub fn params_of(study: &Study) -> ClosedLoopParams {
 /// Whether `[closed_loop] candidates` names the three-direction sensor mass (its type
 /// `sensor_mass` or a name `mass3_pt<id>`): it is not among `candidates = "all"`.
 pub fn wants_sensor_mass(study: &Study) -> bool {
-    study.closed_loop.as_ref().is_some_and(|c| {
-        c.candidates.as_ref().is_some_and(|names| {
-            names
-                .iter()
-                .any(|n| n == "sensor_mass" || n.starts_with("mass3_pt"))
-        })
-    })
+    study
+        .closed_loop
+        .as_ref()
+        .is_some_and(|c| c.names(|n| n == "sensor_mass" || n.starts_with("mass3_pt")))
 }
 
 /// Run the loop on `study` (model `model`, else the first of `[inference] models`); results in
@@ -264,11 +262,10 @@ pub(crate) fn loop_stage(
     let bonds: Vec<crate::forward::Effect> = term_candidates
         .into_iter()
         .filter(|e| {
-            study.closed_loop.as_ref().is_some_and(|c| {
-                c.candidates
-                    .as_ref()
-                    .is_some_and(|names| names.iter().any(|n| n == e.kind() || *n == e.name()))
-            })
+            study
+                .closed_loop
+                .as_ref()
+                .is_some_and(|c| c.names(|n| n == e.kind() || n == e.name()))
         })
         .collect();
     let term_cache = super::rom_cache_dir(study);
@@ -876,7 +873,7 @@ fn markdown(
     );
     let _ = writeln!(
         s,
-        "Status per level: `nothing_missing` (the residual is consistent with noise, nothing accepted), `explained` (effects accepted, the final residual consistent with noise), `unexplained` (the residual stays above the calibrated null level: the effects accepted on the way are tentative and the adhesive's parameters carry a warning), `confounded` (an effect the data cannot separate from the adhesive's parameters: they are given as a range). Consistent with noise: the normalised chi-square at most the threshold of its null level, calibrated on replicates of the fitted model through the same measurement chain.\n"
+        "Status per level: `nothing_missing` (the residual is consistent with noise, no effect needed), `explained` (effects accepted, the final residual consistent with noise), `unexplained` (the residual stays above the calibrated null level: the effects accepted on the way are tentative and the adhesive's parameters carry a warning), `confounded` (an effect the data cannot separate from the adhesive's parameters: they are given as a range). Consistent with noise: the normalised chi-square at most the threshold of its null level, calibrated on replicates of the fitted model through the same measurement chain.\n"
     );
     if let Some((names, c)) = term {
         let _ = writeln!(
@@ -1273,14 +1270,7 @@ fn verdict_table(results: &[LevelResult], summary: &[DiagnoseLevel]) -> Result<T
         .and_then(|t| {
             t.push_str(
                 "left_out",
-                text(&|v| {
-                    join(
-                        v.not_needed
-                            .iter()
-                            .map(|d| format!("{} = {:.4e} {}", d.effect, d.size, d.unit))
-                            .collect(),
-                    )
-                }),
+                text(&|v| join(v.not_needed.iter().map(|d| d.entry()).collect())),
             )
         })
         .and_then(|t| {

@@ -157,6 +157,14 @@ impl ClosedLoopSettings {
             .as_ref()
             .is_none_or(|c| c.iter().any(|s| s == kind || s == name))
     }
+
+    /// Whether `candidates` lists an entry for which `matches` holds (`"all"` lists none): how
+    /// the opt-in candidates are asked for.
+    pub fn names(&self, matches: impl Fn(&str) -> bool) -> bool {
+        self.candidates
+            .as_ref()
+            .is_some_and(|c| c.iter().any(|s| matches(s)))
+    }
 }
 
 /// Validate `[[structure.effects]]` against the study's points (`point_ids`).
