@@ -89,6 +89,7 @@ pub mod rfm;
 #[allow(clippy::needless_borrow)]
 pub mod rom;
 pub mod runner;
+pub mod stage;
 pub mod study;
 pub mod validate;
 

@@ -1,0 +1,86 @@
+//! What every stage of a run shares: the measured data of a level ([`LevelData`]) as the
+//! identification, the inference and the closed loop read it, the progress events of long
+//! steps ([`Event`]) and the run's error ([`RunError`]).
+
+use crate::common::C64;
+use crate::data::DataError;
+use crate::study::StudyError;
+
+/// Progress of a run, for progress bars.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Event {
+    /// A step started; `total` units of work follow (0 = unknown length).
+    Start { step: String, total: u64 },
+    /// One unit of the current step is done.
+    Advance,
+    /// The current step finished.
+    Finish,
+}
+
+/// Errors of a run. [`RunError::is_input`] tells bad input (exit code 2) from other failures.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    #[error(transparent)]
+    Study(#[from] StudyError),
+    #[error(transparent)]
+    Data(#[from] DataError),
+    #[error("building the FRF engine failed: {0}")]
+    Engine(String),
+    #[error("{analysis} failed: {message}")]
+    Analysis { analysis: String, message: String },
+    #[error(transparent)]
+    Output(#[from] crate::output::OutputError),
+    #[error("figure: {0}")]
+    Plot(#[from] crate::plot::PlotError),
+    /// The executor's cancellation flag was set; nothing was written.
+    #[error("the run was cancelled")]
+    Cancelled,
+}
+
+impl RunError {
+    /// True for errors caused by the study file or the data (the CLI exits with code 2).
+    pub fn is_input(&self) -> bool {
+        matches!(self, RunError::Study(_) | RunError::Data(_))
+    }
+}
+
+/// Measured data of one level, reduced to what the identification uses.
+#[derive(Clone, Debug)]
+pub struct LevelData {
+    pub name: String,
+    /// Lines (Hz) inside the band.
+    pub freq_hz: Vec<f64>,
+    /// Response point ids, in the order of the column's outputs.
+    pub response_ids: Vec<u32>,
+    pub reference_id: u32,
+    /// The measured accelerance column ((m/s^2)/N) on the band's lines.
+    pub column: crate::rfm::MeasuredColumn,
+    /// The law that made simulated data, from `measurements.truth`.
+    pub truth: Option<LevelTruth>,
+    /// Ordinary coherence per value, `[line * n_out + k]`, when every channel has it.
+    pub coherence: Option<Vec<f64>>,
+    /// Number of averaged blocks of the H1 estimate, when the file says.
+    pub n_averages: Option<u32>,
+    /// The H1 estimator's model on these lines with its grid chosen by convergence
+    /// ([`crate::forward::Observation::converged_measurement`]), set with the engine; `None`
+    /// before, or without an estimator (then [`crate::runner::posterior::measurement_model`] uses the default
+    /// grid).
+    pub measurement: Option<(crate::forward::MeasurementModel, crate::forward::GridChoice)>,
+}
+
+/// The constitutive law and parameters (in the law's order, SI) that made a simulated level.
+#[derive(Clone, Debug)]
+pub struct LevelTruth {
+    /// The law's name as in the sidecar (`"model4"`, ...).
+    pub law: String,
+    pub model: std::sync::Arc<dyn crate::material::ConstitutiveModel>,
+    pub params: Vec<f64>,
+}
+
+impl LevelTruth {
+    /// E*(w) of the truth (Pa).
+    pub fn modulus(&self, omega_rad_s: f64) -> C64 {
+        self.model.modulus(&self.params, omega_rad_s)
+    }
+}
+
