@@ -10,6 +10,7 @@
 //! | [`material`] | constitutive models E*(w; p) with analytic Jacobians (Models 1-5, fractional Zener, generalized Maxwell) |
 //! | [`material_fit`] | material-level loop on measured E'(w), E''(w) (DMA): posterior, residual tests, Kramers-Kronig check |
 //! | [`frf`] | the FRF engine interface and the full-model sweep with sensitivities (paper eq. 44-47) |
+//! | [`stats`] | priors of parameters and effects, the chi-square tail and the normal quantile |
 //! | [`forward`] | the forward model: engine + law + H1 measurement model -> predicted H1 and its Jacobian |
 //! | [`inference`] | priors, likelihood, MAP (argmin multistart), samplers (NUTS, TMCMC), diagnostics |
 //! | [`modes`] | complex modes of (K_b + E* S, M), sparse real eigensolver |
@@ -23,6 +24,7 @@
 //! | [`study`] | study files: TOML as written -> validated typed study (outside the numerical core) |
 //! | [`output`] | parquet tables, manifest, atomic writes (outside the numerical core) |
 //! | [`plot`] | PNG/SVG figures (outside the numerical core) |
+//! | [`stage`] | what every stage of a run shares: a level's measured data, progress events, the run's error |
 //! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
 //!
 //! Numerical modules never import `study`, `output`, `plot` or the CLI.
@@ -90,6 +92,7 @@ pub mod rfm;
 pub mod rom;
 pub mod runner;
 pub mod stage;
+pub mod stats;
 pub mod study;
 pub mod validate;
 

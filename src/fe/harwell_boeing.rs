@@ -630,7 +630,7 @@ mod tests {
         // row indices 10 and 11 written as "1011" by (2I2): no blank between the fields
         let text = "t\n 3 1 1 1 0\nRUA 11 11 2 0\n(12I1) (2I2) (2E10.3)\n111111111123\n1011\n 1.000E+00 2.000E+00\n";
         let a = parse_hb(text, Path::new("x.hb")).unwrap();
-        let d = crate::linalg::synthetic::to_dense(&a);
+        let d = crate::fe::synthetic::to_dense(&a);
         assert_eq!((d[(9, 9)], d[(10, 10)], d[(0, 0)]), (1.0, 2.0, 0.0));
         // a file that ends early names the block and the line
         let text = "t\n 3 1 1 1 0\nRUA 11 11 2 0\n(12I1) (2I2) (2E10.3)\n111111111123\n1011\n";

@@ -28,6 +28,7 @@ pub mod mesh;
 pub mod model;
 pub mod points;
 pub mod region;
+pub mod synthetic;
 
 pub use error::{FeError, ModelEditError};
 pub use model::{ObservationPoint, StructuralModel};

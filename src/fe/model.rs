@@ -3,10 +3,9 @@
 
 use super::error::ModelEditError;
 use crate::common::Direction;
-use faer::sparse::SparseColMat;
 
 /// Real sparse matrix over the free DOFs (constrained DOFs already removed).
-pub type SpMat = SparseColMat<usize, f64>;
+pub use crate::linalg::SpMat;
 
 /// A measurement or excitation point: a response (or force) in one direction, as a linear
 /// combination of free DOFs. At a node this is a single DOF with weight 1; a point inside an

@@ -40,7 +40,7 @@
 
 use crate::common::C64;
 use crate::frf::FrfEngine;
-use crate::inference::prior::Prior;
+use crate::stats::prior::Prior;
 
 /// One kind of effect, with where it acts.
 #[derive(Clone, Debug, PartialEq)]

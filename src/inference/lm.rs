@@ -14,7 +14,7 @@
 //! Tests: tests/suite/inference_samplers.rs (the MAP), tests/suite/closed_loop_alt.rs (the law
 //! fits), and the unit tests below (a Rosenbrock valley and a linear least-squares problem).
 
-use super::map::{chol_solve, cholesky};
+use crate::linalg::dense::{chol_solve, cholesky};
 
 /// An objective's value, gradient and curvature (row-major) at a point.
 pub type Quadratic = (f64, Vec<f64>, Vec<f64>);

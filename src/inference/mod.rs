@@ -19,14 +19,15 @@ pub mod lm;
 pub mod loo;
 pub mod map;
 pub mod nuts;
-pub mod prior;
 pub mod reference;
 pub mod refine;
 pub mod sampling;
-pub mod special;
 pub mod stepping_stone;
 pub mod tmcmc;
 pub mod whiten;
+
+/// The priors and special functions live in [`crate::stats`], below the forward model.
+pub use crate::stats::{prior, special};
 
 pub use nuts::{sample_nuts, ChainDraws, NutsParams, NutsRun};
 pub use reference::{

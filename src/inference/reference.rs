@@ -34,13 +34,13 @@ use rand::rngs::StdRng;
 use rand::RngExt;
 use rand_distr::{ChiSquared, Distribution, StandardNormal};
 
-use super::map::cholesky;
 use super::sampling::SamplerError;
 use super::stepping_stone::{
     stepping_stone, stepping_stone_replica, SteppingStoneParams, SteppingStoneReplica,
     SteppingStoneRun,
 };
 use super::{DensityError, Posterior, Progress};
+use crate::linalg::dense::cholesky;
 
 /// A multivariate Student-t (Gaussian for infinite `nu`) on `R^d`: location `mean`, scale
 /// matrix `L L^T`.

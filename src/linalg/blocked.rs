@@ -10,8 +10,8 @@
 //! - [`tn`]: A^T B (a k x l result, a reduction over the n rows);
 //! - [`nn_acc`]: C += alpha A B (n x l, rows independent).
 
+use super::SpMat;
 use crate::common::C64;
-use crate::fe::model::SpMat;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatMut, MatRef, Par};
 use rayon::prelude::*;

@@ -7,10 +7,11 @@
 //! number of threads of the caller.
 
 pub mod blocked;
-pub mod synthetic;
+pub mod dense;
 
 use crate::common::C64;
-use crate::fe::model::SpMat;
+/// A real sparse matrix in compressed sparse column form (the FE matrices, the load vectors).
+pub type SpMat = faer::sparse::SparseColMat<usize, f64>;
 use faer::sparse::SymbolicSparseColMat;
 
 /// y = A x for a real sparse A and a real x (y is overwritten).

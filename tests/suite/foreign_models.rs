@@ -465,12 +465,12 @@ fn abaqus_constraints_units_and_node_map() {
     let m = import_model_files(&f).unwrap();
     // nodes 1 (held) and 9 (uncoupled) removed: free DOFs (2,2), (3,2)
     assert_eq!(m.n_dof(), 2, "{}", m.description);
-    let k = rfmlab::linalg::synthetic::to_dense(&m.k_b);
+    let k = rfmlab::fe::synthetic::to_dense(&m.k_b);
     assert_eq!(
         (k[(0, 0)], k[(0, 1)], k[(1, 0)], k[(1, 1)]),
         (2e3, -1e3, -1e3, 1e3)
     );
-    let s = rfmlab::linalg::synthetic::to_dense(&m.s);
+    let s = rfmlab::fe::synthetic::to_dense(&m.s);
     assert_eq!((s[(0, 1)], s[(1, 0)]), (-0.5, -0.5));
     assert_eq!(m.points[0].dofs, vec![(1, 1.0)]);
     assert_eq!(m.points[1].dofs, vec![(0, -0.5)]);
@@ -480,9 +480,9 @@ fn abaqus_constraints_units_and_node_map() {
         ..f.clone()
     })
     .unwrap();
-    let k2 = rfmlab::linalg::synthetic::to_dense(&mm.k_b);
-    let s2 = rfmlab::linalg::synthetic::to_dense(&mm.s);
-    let m2 = rfmlab::linalg::synthetic::to_dense(&mm.m);
+    let k2 = rfmlab::fe::synthetic::to_dense(&mm.k_b);
+    let s2 = rfmlab::fe::synthetic::to_dense(&mm.s);
+    let m2 = rfmlab::fe::synthetic::to_dense(&mm.m);
     assert_eq!((k2[(0, 0)], s2[(0, 0)], m2[(0, 0)]), (2e6, 1e-3, 1e3));
     // a point on the held node, on a missing node
     std::fs::write(dir.path().join("pts.csv"), "id,direction,node\n1,+y,1\n").unwrap();

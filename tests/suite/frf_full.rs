@@ -1,6 +1,6 @@
 //! Full-model FRF engine against a dense oracle, finite differences and across thread counts.
 //!
-//! Models: the synthetic mass-spring lattice of `rfmlab::linalg::synthetic` (a free adherend
+//! Models: the synthetic mass-spring lattice of `rfmlab::fe::synthetic` (a free adherend
 //! held by "adhesive" springs scaled by E), seeded.
 
 use crate::numerics::sweep_difference;
@@ -8,9 +8,9 @@ use faer::linalg::solvers::Solve;
 use faer::Mat;
 use rfmlab::common::{C64, J};
 use rfmlab::fe::model::StructuralModel;
+use rfmlab::fe::synthetic::{add_damping, lattice_model, to_dense_c64, LatticeParams};
 use rfmlab::frf::full::{receptance_column, FullModel, FullParams};
 use rfmlab::frf::{FrfEngine, FrfError};
-use rfmlab::linalg::synthetic::{add_damping, lattice_model, to_dense_c64, LatticeParams};
 
 const E0: C64 = C64::new(7.0e6, 1.4e6);
 

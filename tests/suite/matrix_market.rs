@@ -12,9 +12,9 @@ use rfmlab::fe::matrix_market::{
     export_model, import_model, parse_dof_map, parse_mtx, MmError, MmPaths,
 };
 use rfmlab::fe::model::StructuralModel;
+use rfmlab::fe::synthetic::{add_damping, lattice_model, LatticeParams};
 use rfmlab::frf::full::{FullModel, FullParams};
 use rfmlab::frf::FrfEngine;
-use rfmlab::linalg::synthetic::{add_damping, lattice_model, LatticeParams};
 use std::path::Path;
 
 fn model() -> StructuralModel {
@@ -33,8 +33,8 @@ fn sweep(model: &StructuralModel) -> Vec<C64> {
 }
 
 fn same_matrix(a: &rfmlab::fe::model::SpMat, b: &rfmlab::fe::model::SpMat) {
-    let da = rfmlab::linalg::synthetic::to_dense(a);
-    let db = rfmlab::linalg::synthetic::to_dense(b);
+    let da = rfmlab::fe::synthetic::to_dense(a);
+    let db = rfmlab::fe::synthetic::to_dense(b);
     assert_eq!((da.nrows(), da.ncols()), (db.nrows(), db.ncols()));
     for j in 0..da.ncols() {
         for i in 0..da.nrows() {
@@ -94,7 +94,7 @@ fn parse_err(text: &str) -> String {
 fn malformed_matrix_market_is_a_clear_error() {
     let ok = "%%MatrixMarket matrix coordinate real symmetric\n% c\n2 2 2\n1 1 4.0\n2 1 -1\n";
     let a = parse_mtx(ok, Path::new("x.mtx")).unwrap();
-    let d = rfmlab::linalg::synthetic::to_dense(&a);
+    let d = rfmlab::fe::synthetic::to_dense(&a);
     assert_eq!(
         (d[(0, 0)], d[(1, 0)], d[(0, 1)], d[(1, 1)]),
         (4.0, -1.0, -1.0, 0.0)

@@ -1,11 +1,11 @@
 //! Real and complex modes against dense oracles, and eigenvalue sensitivities against
-//! central finite differences. Models: seeded synthetic lattices (rfmlab::linalg::synthetic).
+//! central finite differences. Models: seeded synthetic lattices (rfmlab::fe::synthetic).
 
 use faer::linalg::solvers::DenseSolveCore;
 use faer::{Mat, Side};
 use rfmlab::common::{C64, J};
 use rfmlab::fe::model::{SpMat, StructuralModel};
-use rfmlab::linalg::synthetic::{add_damping, lattice_model, to_dense, LatticeParams};
+use rfmlab::fe::synthetic::{add_damping, lattice_model, to_dense, LatticeParams};
 use rfmlab::modes::{complex_modes, real_modes, EigenParams, ModesParams};
 
 const E0: C64 = C64::new(6.974e6, 1.4827e6);

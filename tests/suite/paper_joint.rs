@@ -18,9 +18,9 @@ use faer::Mat;
 use rfmlab::common::{C64, J};
 use rfmlab::fe::joint::{build_joint_model, Divisions, JointSpec, MeshSize};
 use rfmlab::fe::model::StructuralModel;
+use rfmlab::fe::synthetic::to_dense_c64;
 use rfmlab::frf::full::{FullModel, FullParams};
 use rfmlab::frf::FrfEngine;
-use rfmlab::linalg::synthetic::to_dense_c64;
 use rfmlab::modes::{complex_modes, ModesParams};
 use std::f64::consts::PI;
 

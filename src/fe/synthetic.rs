@@ -11,8 +11,8 @@
 //! j = 0 with i < nx_bond are tied to the ground by springs of stiffness s0 (per unit Young's
 //! modulus, m) in all three axes: these form S.
 
+use super::model::{ObservationPoint, SpMat, StructuralModel};
 use crate::common::{Direction, C64};
-use crate::fe::model::{ObservationPoint, SpMat, StructuralModel};
 use faer::sparse::Triplet;
 use rand::{RngExt, SeedableRng};
 

@@ -76,7 +76,7 @@ pub fn normal_cdf(z: f64) -> f64 {
 }
 
 /// Inverse standard normal CDF: the diagnostics' quantile function
-/// ([`super::diagnostics::norm_ppf`], accurate to about 1e-15 in both tails), with the support's
+/// ([`super::special::norm_ppf`], accurate to about 1e-15 in both tails), with the support's
 /// ends mapped to -inf and +inf.
 pub fn normal_quantile(u: f64) -> f64 {
     if u <= 0.0 {
@@ -85,7 +85,7 @@ pub fn normal_quantile(u: f64) -> f64 {
     if u >= 1.0 {
         return f64::INFINITY;
     }
-    super::diagnostics::norm_ppf(u)
+    super::special::norm_ppf(u)
 }
 
 const LN_SQRT_2PI: f64 = 0.918_938_533_204_672_8;
