@@ -76,6 +76,7 @@ pub mod experiment;
 pub mod fe;
 pub mod forward;
 pub mod frf;
+pub mod identify;
 pub mod iem;
 pub mod inference;
 pub mod linalg;

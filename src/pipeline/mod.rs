@@ -87,7 +87,7 @@ fn run_here(
     let built = stages::build(study)?;
     progress(Event::Finish);
     ex.lap("build model")?;
-    let mut data = stages::load_levels(study, &built)?;
+    let mut data = crate::stage::data::load_levels(study.measurements.as_ref(), &built, &study.file)?;
     stages::check_initial_values(study, &built, &data, &laws)?;
     ex.lap("load and check data")?;
     let mesh_error = if study.analyses.mesh_error {
@@ -121,7 +121,16 @@ fn run_here(
             Some(v) => (&v.engine, &v.built),
             None => (engine, &built),
         };
-        let mut r = stages::analyse_level(study, det_built, det_engine, level, &laws, &progress)?;
+        let inputs = crate::identify::LevelInputs {
+            built: det_built,
+            engine: det_engine,
+            level,
+            laws: &laws,
+            measurement: crate::runner::posterior::measurement_model(study, level)?,
+            file: &study.file,
+        };
+        let id = crate::identify::analyse_level(&plan.identification, &inputs, &progress)?;
+        let mut r = results::LevelResults::new(id);
         ex.lap(format!("analyses {}", level.name))?;
         if let Some(inf) = lowered.inference(&level.name) {
             r.posteriors = bayes::infer_level(study, inf, lik, level, &laws, &r.global, &progress)?;

@@ -8,13 +8,13 @@
 
 use super::RunError;
 use crate::closed_loop::ClosedLoopParams;
+pub use crate::identify::IdentificationParams;
 use crate::inference::prior::Prior;
-use crate::rfm::RfmParams;
 use crate::study::comparison::{BasinSettings, LevelSettings};
 use crate::study::inference::{
     CorrelationKind, Inference, NoiseSpec, NutsSettings, SteppingStoneSettings,
 };
-use crate::study::{Band, Engine, ModelSpec, Study};
+use crate::study::{Engine, Study};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -33,23 +33,6 @@ pub struct EngineParams {
 /// estimator and the truth sidecar of simulated data: the study's validated
 /// `[measurements]` section, as it is.
 pub type DataParams = crate::study::Measurements;
-
-/// The deterministic identification stage (per level): per-line RFM, Model 1 over bands,
-/// circle fit + IEM, global RFM per model, correlation, sensitivities.
-#[derive(Clone, Debug, PartialEq)]
-pub struct IdentificationParams {
-    /// The laws identified by the global RFM, with their initial values (SI).
-    pub models: Vec<ModelSpec>,
-    /// The RFM iteration's stopping rules and SVD truncation.
-    pub rfm: RfmParams,
-    pub per_line: bool,
-    pub correlation: bool,
-    pub sensitivity: bool,
-    /// The mesh's discretisation error per mode (Richardson; meshed joints only).
-    pub mesh_error: bool,
-    pub band_constant: Vec<Band>,
-    pub iem: Vec<Band>,
-}
 
 /// Settings of the MAP search and the samplers of an inference stage.
 #[derive(Clone, Debug, PartialEq)]

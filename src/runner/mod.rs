@@ -20,10 +20,8 @@ pub mod basins;
 pub mod bayes;
 pub mod closed_loop;
 pub mod compare;
-mod compute;
 pub mod declared;
 mod evidence_ref;
-mod leakage;
 pub mod levels;
 pub mod material;
 pub mod posterior;
@@ -40,12 +38,11 @@ pub(crate) mod write_compare;
 pub(crate) mod write_levels;
 
 pub use crate::stage::{Event, LevelData, LevelTruth, RunError};
-pub use compute::{
-    BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,
-};
+// Old paths, removed once every caller moved.
+pub use crate::identify::{BandConstantResult, GlobalResult, IemBandResult, SensitivityCurves};
+pub use crate::pipeline::results::LevelResults;
 
 use crate::common::C64;
-use crate::data::{DataError, FrfLevel, Quantity};
 use crate::frf::{FrfEngine, FrfError, Sweep};
 use crate::study::build::BuiltModel;
 use crate::study::{Engine, Study, StudyError};
@@ -105,255 +102,6 @@ pub struct CheckSummary {
     pub preflight: preflight::Preflight,
 }
 
-/// The truth of `level` in a sidecar written by `rfmlab simulate` (levels named by `"level"`),
-/// or in the `truth.json` of an independent virtual experiment (studies/data/virtual: levels
-/// numbered by `"id"` with their `"force_rms_N"`). A numbered level is the study's level when
-/// its force RMS equals the study level's `force_rms_n` (to 1e-6), or, without a force RMS in
-/// the study, when the study level is named `L<id>`.
-fn read_truth(
-    study: &Study,
-    path: &Path,
-    level: &crate::study::Level,
-) -> Result<Option<LevelTruth>, RunError> {
-    let name = level.name.as_str();
-    let bad = |m: String| {
-        study_err(
-            study,
-            "measurements.truth",
-            format!("{}: {m}", path.display()),
-        )
-    };
-    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-    let v: serde_json::Value = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
-    let Some(levels) = v.get("levels").and_then(|l| l.as_array()) else {
-        return Err(bad(
-            "no \"levels\" array: give the .truth.json of `rfmlab simulate` or the truth.json of a virtual experiment".into(),
-        ));
-    };
-    let numbered = |l: &serde_json::Value| {
-        let Some(id) = l.get("id").and_then(|n| n.as_u64()) else {
-            return false;
-        };
-        match (
-            level.force_rms_n,
-            l.get("force_rms_N").and_then(|f| f.as_f64()),
-        ) {
-            (Some(a), Some(b)) => (a - b).abs() <= 1e-6 * b.abs(),
-            _ => name == format!("L{id}"),
-        }
-    };
-    let Some(l) = levels
-        .iter()
-        .find(|l| l.get("level").and_then(|n| n.as_str()) == Some(name))
-        .or_else(|| levels.iter().find(|l| numbered(l)))
-    else {
-        return Ok(None);
-    };
-    let law = l
-        .get("law")
-        .and_then(|x| x.as_str())
-        .unwrap_or_default()
-        .to_string();
-    let m = crate::material::model_from_name(&law, None)
-        .map_err(|e| bad(format!("level {name}: {e}")))?;
-    let mut params = Vec::new();
-    for p in m.param_names() {
-        let x = l
-            .get("params")
-            .and_then(|ps| ps.get(&p))
-            .and_then(|x| x.as_f64())
-            .ok_or_else(|| bad(format!("level {name}: no parameter {p} of {law}")))?;
-        params.push(x);
-    }
-    Ok(Some(LevelTruth {
-        law,
-        model: m.into(),
-        params,
-    }))
-}
-
-fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) -> RunError {
-    RunError::Study(StudyError {
-        file: study.file.display().to_string(),
-        key: key.into(),
-        message: message.into(),
-    })
-}
-
-const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
-
-/// Convert an FRF value of `q` to accelerance at `freq_hz` (H' = -w^2 H = j w Y).
-fn to_accelerance(h: C64, freq_hz: f64, q: Quantity) -> C64 {
-    let w = TWO_PI * freq_hz;
-    match q {
-        Quantity::Accelerance => h,
-        Quantity::Mobility => C64::new(0.0, w) * h,
-        Quantity::Receptance => -w * w * h,
-    }
-}
-
-/// Load and check the measured data of every level; returns one [`LevelData`] per level.
-pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, RunError> {
-    let meas = study.measurements.as_ref().ok_or_else(|| {
-        study_err(
-            study,
-            "measurements",
-            "no [measurements] section: add [[measurements.levels]] with name and files",
-        )
-    })?;
-    let exc_point = &built.model.points[built.excitation];
-    let mut out = Vec::new();
-    for (li, level) in meas.levels.iter().enumerate() {
-        for (fi, f) in level.files.iter().enumerate() {
-            if !f.is_file() {
-                return Err(study_err(
-                    study,
-                    format!("measurements.levels[{li}].files[{fi}]"),
-                    format!(
-                        "data file {} does not exist; check the path (relative paths are relative to the study file's folder)",
-                        f.display()
-                    ),
-                ));
-            }
-        }
-        let files: Vec<(PathBuf, String)> = level
-            .files
-            .iter()
-            .map(|f| (f.clone(), level.name.clone()))
-            .collect();
-        let set = crate::data::frf_set_from_uff(&files, &crate::data::UffImportOptions::default())?;
-        let lvl: &FrfLevel = set
-            .levels
-            .iter()
-            .find(|l| l.name == level.name)
-            .ok_or_else(|| {
-                study_err(
-                    study,
-                    format!("measurements.levels[{li}]"),
-                    format!(
-                        "the files of level {} hold no FRFs of that level",
-                        level.name
-                    ),
-                )
-            })?;
-        crate::data::check_level(lvl, Some((exc_point.id, exc_point.direction)), meas.band_hz)
-            .map_err(|e| {
-                RunError::Data(DataError {
-                    message: format!(
-                        "{} (study {}: measurements.band_hz / structure.excitation)",
-                        e.message,
-                        study.file.display()
-                    ),
-                    ..e
-                })
-            })?;
-        let (lo, hi) = meas.band_hz.unwrap_or((0.0, f64::INFINITY));
-        let lines: Vec<usize> = (0..lvl.freq_hz.len())
-            .filter(|&l| lvl.freq_hz[l] > 0.0 && lvl.freq_hz[l] >= lo && lvl.freq_hz[l] <= hi)
-            .collect();
-        if lines.is_empty() {
-            return Err(study_err(
-                study,
-                "measurements.band_hz",
-                format!(
-                    "no positive frequency line of level {} in the band",
-                    level.name
-                ),
-            ));
-        }
-        // Channels: reference = excitation point, response among the model's points.
-        let mut outputs = Vec::new();
-        let mut ids = Vec::new();
-        let mut chans = Vec::new();
-        for ch in &lvl.channels {
-            if ch.reference_id != exc_point.id {
-                continue;
-            }
-            if let Some(sel) = &meas.channels {
-                if !sel.contains(&ch.response_id) {
-                    continue;
-                }
-            }
-            let Some(k) = built
-                .model
-                .points
-                .iter()
-                .position(|p| p.id == ch.response_id)
-            else {
-                continue;
-            };
-            if outputs.contains(&k) {
-                continue;
-            }
-            // Sign: a channel measured in the opposite direction of the model's point flips.
-            let sign = if ch.response_dir == built.model.points[k].direction {
-                1.0
-            } else {
-                -1.0
-            };
-            outputs.push(k);
-            ids.push(ch.response_id);
-            chans.push((ch, sign));
-        }
-        if outputs.is_empty() {
-            return Err(study_err(study, "measurements.channels", {
-                let mut held: Vec<String> = lvl
-                    .channels
-                    .iter()
-                    .map(|c| format!("{}->{}", c.reference_id, c.response_id))
-                    .collect();
-                held.dedup();
-                let pts: Vec<u32> = built.model.points.iter().map(|p| p.id).collect();
-                format!(
-                        "level {}: no channel with reference point {} and a response at one of the structure's points {pts:?}; the files hold (reference->response) {}: match structure.points / structure.excitation to these ids",
-                        level.name,
-                        exc_point.id,
-                        held.join(", ")
-                    )
-            }));
-        }
-        let n_out = outputs.len();
-        let mut acc = vec![C64::new(0.0, 0.0); lines.len() * n_out];
-        for (ll, &l) in lines.iter().enumerate() {
-            for (k, (ch, sign)) in chans.iter().enumerate() {
-                acc[ll * n_out + k] =
-                    to_accelerance(ch.values[l], lvl.freq_hz[l], lvl.quantity) * *sign;
-            }
-        }
-        let freq_hz: Vec<f64> = lines.iter().map(|&l| lvl.freq_hz[l]).collect();
-        let coherence = if chans.iter().all(|(ch, _)| ch.coherence.is_some()) {
-            let mut c = vec![0.0; lines.len() * n_out];
-            for (ll, &l) in lines.iter().enumerate() {
-                for (k, (ch, _)) in chans.iter().enumerate() {
-                    c[ll * n_out + k] = ch.coherence.as_ref().map_or(f64::NAN, |v| v[l]);
-                }
-            }
-            Some(c)
-        } else {
-            None
-        };
-        out.push(LevelData {
-            coherence,
-            n_averages: lvl.n_averages,
-            measurement: None,
-            name: level.name.clone(),
-            column: crate::rfm::MeasuredColumn {
-                omega_rad_s: freq_hz.iter().map(|f| TWO_PI * f).collect(),
-                input: built.excitation,
-                outputs,
-                accelerance: acc,
-            },
-            freq_hz,
-            response_ids: ids,
-            reference_id: exc_point.id,
-            truth: match &meas.truth {
-                Some(p) => read_truth(study, p, level)?,
-                None => None,
-            },
-        });
-    }
-    Ok(out)
-}
 
 /// The ROM with a prepared pencil for the band's lines; other grids fall back to the reduced
 /// model's LU sweep (both are certified over the same range).
@@ -650,15 +398,7 @@ pub(crate) fn build(study: &Study) -> Result<BuiltModel, RunError> {
 pub(crate) fn model_laws(
     study: &Study,
 ) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
-    let mut laws = Vec::new();
-    for (i, m) in study.models.iter().enumerate() {
-        let law = crate::material::model_from_name(&m.name, m.branches)
-            .map_err(|e| study_err(study, format!("models[{i}].name"), e.to_string()))?;
-        crate::material::check_params(law.as_ref(), &m.initial)
-            .map_err(|e| study_err(study, format!("models[{i}].initial"), e.to_string()))?;
-        laws.push(law);
-    }
-    Ok(laws)
+    crate::identify::model_laws(&study.models, &study.file)
 }
 
 /// Evaluate the full model at every model's initial E*(w) on 3 lines of each level
@@ -776,9 +516,8 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
 
 /// The stages of a run, for [`crate::pipeline`].
 pub(crate) mod stages {
-    pub(crate) use super::compute::analyse_level;
     pub(crate) use super::settings::rfm_params;
-    pub(crate) use super::{build, build_engine, check_initial_values, load_levels, model_laws};
+    pub(crate) use super::{build, build_engine, check_initial_values, model_laws};
 }
 
 /// The folder of cached ROMs of `study` (`.rom-cache/` beside its output folder): where
@@ -798,4 +537,19 @@ pub(crate) fn sibling(dir: &Path, suffix: &str) -> PathBuf {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "results".into());
     dir.with_file_name(format!("{name}.{suffix}"))
+}
+
+fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) -> RunError {
+    RunError::Study(StudyError {
+        file: study.file.display().to_string(),
+        key: key.into(),
+        message: message.into(),
+    })
+}
+
+const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
+
+/// Old path of [`crate::stage::data::load_levels`], removed once every caller moved.
+pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, RunError> {
+    crate::stage::data::load_levels(study.measurements.as_ref(), built, &study.file)
 }

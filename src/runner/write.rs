@@ -14,10 +14,11 @@
 //!
 //! Plus `manifest.json` (written last), `report.md` and figures `fig_*.png` / `.svg`.
 
-use super::compute::{frf_of, LevelResults};
 use super::{LevelData, RunError};
 use crate::common::C64;
+use crate::identify::frf_of;
 use crate::output::{Columns as Cols, Report, Table};
+use crate::pipeline::results::LevelResults;
 use crate::plot::{Curve, CurveStyle, FrfCurve};
 use crate::study::Study;
 use std::path::Path;

@@ -11,11 +11,11 @@
 //! parameters stop changing. At the fixed point the model's expected H1 matches the data,
 //! which is what a consistent estimator needs; the RFM inside is unchanged.
 
-use super::RunError;
 use crate::common::C64;
 use crate::forward::{MeasurementModel, Observation};
 use crate::frf::FrfEngine;
 use crate::rfm::MeasuredColumn;
+use crate::stage::RunError;
 
 /// Fixed-point passes stop when the largest relative change of the parameters is below this.
 pub const PASS_TOLERANCE: f64 = 1e-6;

@@ -6,6 +6,8 @@ use crate::common::C64;
 use crate::data::DataError;
 use crate::study::StudyError;
 
+pub mod data;
+
 /// Progress of a run, for progress bars.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Event {
@@ -82,4 +84,17 @@ impl LevelTruth {
     pub fn modulus(&self, omega_rad_s: f64) -> C64 {
         self.model.modulus(&self.params, omega_rad_s)
     }
+}
+
+/// An input error of the study file `file` at `key` (the CLI exits with code 2).
+pub fn input_error(
+    file: &std::path::Path,
+    key: impl Into<String>,
+    message: impl Into<String>,
+) -> RunError {
+    RunError::Study(StudyError {
+        file: file.display().to_string(),
+        key: key.into(),
+        message: message.into(),
+    })
 }
