@@ -29,7 +29,8 @@ pub(crate) mod results;
 pub use crate::runner::{Event, RunError, RunOptions, RunSummary};
 pub use executor::{Executor, Observer};
 pub use plan::{
-    DataParams, EngineParams, IdentificationParams, InferenceParams, Plan, SamplerParams,
+    engine_params, DataParams, EngineParams, IdentificationParams, InferenceParams, Plan,
+    SamplerParams,
 };
 pub use results::{IdentifiedParameters, Results, LOOP_DIR};
 
@@ -71,7 +72,7 @@ fn run_here(
     ex: &mut Executor,
     extra: &(dyn Fn(Event) + Sync),
 ) -> Result<Results, RunError> {
-    use crate::runner::{bayes, declared, levels, stages};
+    use crate::runner::{bayes, declared, levels};
     let t0 = Instant::now();
     let observers = ex.progress();
     let progress = |e: Event| {
@@ -79,16 +80,23 @@ fn run_here(
         extra(e);
     };
     let study = &lowered.study;
-    let laws = stages::model_laws(study)?;
+    let laws = crate::identify::model_laws(&plan.identification.models, &study.file)?;
     progress(Event::Start {
         step: "assembling the FE model".into(),
         total: 0,
     });
-    let built = stages::build(study)?;
+    let built = crate::stage::engine::build(&study.structure, &study.file)?;
     progress(Event::Finish);
     ex.lap("build model")?;
-    let mut data = crate::stage::data::load_levels(study.measurements.as_ref(), &built, &study.file)?;
-    stages::check_initial_values(study, &built, &data, &laws)?;
+    let mut data =
+        crate::stage::data::load_levels(study.measurements.as_ref(), &built, &study.file)?;
+    crate::stage::engine::check_initial_values(
+        &plan.identification.models,
+        &study.file,
+        &built,
+        &data,
+        &laws,
+    )?;
     ex.lap("load and check data")?;
     let mesh_error = if study.analyses.mesh_error {
         progress(Event::Start {
@@ -107,7 +115,19 @@ fn run_here(
         step: "building the FRF engine".into(),
         total: 0,
     });
-    let engines = stages::build_engine(study, &built, &mut data, &laws, ex.rom_cache_dir())?;
+    let models = crate::stage::engine::ModelsAndData {
+        models: &plan.identification.models,
+        laws: &laws,
+        estimator: plan.data.estimator.as_ref(),
+        file: &study.file,
+    };
+    let engines = crate::stage::engine::build_engine(
+        &plan.engine,
+        &models,
+        &built,
+        &mut data,
+        ex.rom_cache_dir(),
+    )?;
     progress(Event::Finish);
     ex.count("rom builds", engines.rom_builds);
     ex.lap("engine")?;
@@ -126,7 +146,11 @@ fn run_here(
             engine: det_engine,
             level,
             laws: &laws,
-            measurement: crate::runner::posterior::measurement_model(study, level)?,
+            measurement: crate::stage::engine::measurement_model(
+                plan.data.estimator.as_ref(),
+                level,
+                &study.file,
+            )?,
             file: &study.file,
         };
         let id = crate::identify::analyse_level(&plan.identification, &inputs, &progress)?;

@@ -10,24 +10,14 @@ use super::RunError;
 use crate::closed_loop::ClosedLoopParams;
 pub use crate::identify::IdentificationParams;
 use crate::inference::prior::Prior;
+pub use crate::stage::engine::EngineParams;
 use crate::study::comparison::{BasinSettings, LevelSettings};
 use crate::study::inference::{
     CorrelationKind, Inference, NoiseSpec, NutsSettings, SteppingStoneSettings,
 };
-use crate::study::{Engine, Study};
+use crate::study::Study;
 use std::path::PathBuf;
 use std::sync::Arc;
-
-/// The FRF engine stage.
-#[derive(Clone, Debug, PartialEq)]
-pub struct EngineParams {
-    /// Certified ROM (default) or the full sparse model.
-    pub engine: Engine,
-    /// Certificate tolerance of the ROM (relative FRF error). Default 1e-6.
-    pub rom_tolerance: f64,
-    /// Worker threads of the run (`None`: rayon's default, one per core).
-    pub threads: Option<usize>,
-}
 
 /// The data stage: which files make each level, over which band, with the analyser's H1
 /// estimator and the truth sidecar of simulated data: the study's validated
@@ -130,15 +120,11 @@ impl Plan {
             && s.closed_loop.as_ref().is_some_and(|c| c.enabled))
         .then(|| crate::runner::closed_loop::params_of(s));
         Ok(Plan {
-            engine: EngineParams {
-                engine: s.solver.engine,
-                rom_tolerance: s.solver.rom_tolerance,
-                threads: s.solver.threads,
-            },
+            engine: engine_params(s),
             data,
             identification: IdentificationParams {
                 models: s.models.clone(),
-                rfm: crate::runner::stages::rfm_params(s),
+                rfm: crate::runner::settings::rfm_params(s),
                 per_line: s.analyses.per_line,
                 correlation: s.analyses.correlation,
                 sensitivity: s.analyses.sensitivity,
@@ -175,5 +161,18 @@ pub(super) fn sampler_params(inf: &Inference) -> SamplerParams {
         map_max_iterations: inf.map_max_iterations,
         linearised_measurement: inf.linearised_measurement,
         channel_correlation: inf.channel_correlation,
+    }
+}
+
+/// The engine stage's parameters of a study.
+pub fn engine_params(s: &Study) -> EngineParams {
+    EngineParams {
+        engine: s.solver.engine,
+        rom_tolerance: s.solver.rom_tolerance,
+        threads: s.solver.threads,
+        likelihood: s
+            .inference
+            .as_ref()
+            .map(|_| crate::runner::closed_loop::needs_all_inputs(s)),
     }
 }

@@ -29,7 +29,7 @@ pub mod preflight;
 pub mod prepared;
 pub mod redundancy;
 mod sample;
-mod settings;
+pub(crate) mod settings;
 pub mod simulate;
 pub mod terms;
 pub mod write;
@@ -42,10 +42,8 @@ pub use crate::stage::{Event, LevelData, LevelTruth, RunError};
 pub use crate::identify::{BandConstantResult, GlobalResult, IemBandResult, SensitivityCurves};
 pub use crate::pipeline::results::LevelResults;
 
-use crate::common::C64;
-use crate::frf::{FrfEngine, FrfError, Sweep};
 use crate::study::build::BuiltModel;
-use crate::study::{Engine, Study, StudyError};
+use crate::study::{Study, StudyError};
 use std::path::{Path, PathBuf};
 
 /// Options of a run (beyond the study file).
@@ -102,296 +100,9 @@ pub struct CheckSummary {
     pub preflight: preflight::Preflight,
 }
 
-
-/// The ROM with a prepared pencil for the band's lines; other grids fall back to the reduced
-/// model's LU sweep (both are certified over the same range).
-struct RomEngine {
-    rom: crate::rom::ReducedModel,
-    /// Prepared pencils: the band's lines, and the measurement model's fine grid per level.
-    pencils: Vec<crate::rom::PencilSweep>,
-}
-
-impl FrfEngine for RomEngine {
-    fn n_out(&self) -> usize {
-        self.rom.n_out()
-    }
-    fn inputs(&self) -> &[usize] {
-        self.rom.inputs()
-    }
-    fn sweep_into(
-        &self,
-        omega_rad_s: &[f64],
-        modulus_pa: &[C64],
-        with_derivatives: bool,
-        out: &mut Sweep,
-    ) -> Result<(), FrfError> {
-        let same = |p: &crate::rom::PencilSweep| {
-            omega_rad_s.len() == p.omega_rad_s().len()
-                && omega_rad_s
-                    .iter()
-                    .zip(p.omega_rad_s())
-                    .all(|(a, b)| a.to_bits() == b.to_bits())
-        };
-        if let Some(p) = self.pencils.iter().find(|p| same(p)) {
-            p.sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
-        } else {
-            self.rom
-                .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
-        }
-    }
-    fn complex_modes(
-        &self,
-        modulus_pa: C64,
-        n_modes: usize,
-    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
-        FrfEngine::complex_modes(&self.rom, modulus_pa, n_modes)
-    }
-    fn complex_modes_with_masses(
-        &self,
-        modulus_pa: C64,
-        n_modes: usize,
-        masses: &[(usize, f64)],
-    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
-        FrfEngine::complex_modes_with_masses(&self.rom, modulus_pa, n_modes, masses)
-    }
-}
-
-/// The modulus range the ROM must cover: every model's initial E*(w) over the band, the
-/// default identification range of the ROM, widened by a factor 2 either way.
-fn modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange {
-    let mut r = crate::rom::ModulusRange::default();
-    for m in &study.models {
-        let Ok(law) = crate::material::model_from_name(&m.name, m.branches) else {
-            continue;
-        };
-        for k in 0..=20 {
-            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / 20.0;
-            let e = law.modulus(&m.initial, TWO_PI * f.max(1e-3));
-            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 {
-                r.e_storage_pa.0 = r.e_storage_pa.0.min(e.re / 2.0);
-                r.e_storage_pa.1 = r.e_storage_pa.1.max(e.re * 2.0);
-                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im.max(0.0) / 2.0);
-                r.e_loss_pa.1 = r.e_loss_pa.1.max(e.im * 2.0);
-            }
-        }
-    }
-    r
-}
-
-/// The run's FRF engines.
-pub(crate) struct Engines {
-    /// Inputs at every measured point.
-    pub engine: Box<dyn FrfEngine>,
-    /// Its description for the report and manifest.
-    pub note: String,
-    /// The likelihood's engine (the excitation column only, or every measured point for the
-    /// closed loop), when the study has an `[inference]` section and uses the ROM.
-    pub likelihood: Option<Box<dyn FrfEngine>>,
-    /// ROMs built and certified (0: full model, or loaded from the cache).
-    pub rom_builds: u64,
-}
-
-/// Build the FRF engine with inputs = all measured points of every level.
-pub(crate) fn build_engine(
-    study: &Study,
-    built: &BuiltModel,
-    levels: &mut [LevelData],
-    laws: &[Box<dyn crate::material::ConstitutiveModel>],
-    rom_cache: Option<&Path>,
-) -> Result<Engines, RunError> {
-    let mut inputs: Vec<usize> = Vec::new();
-    for l in levels.iter() {
-        for &k in l
-            .column
-            .outputs
-            .iter()
-            .chain(std::iter::once(&l.column.input))
-        {
-            if !inputs.contains(&k) {
-                inputs.push(k);
-            }
-        }
-    }
-    // The other directions of a measured point, when the model has them (the closed loop's
-    // sensor-mass candidate), are inputs too.
-    let ids: Vec<u32> = inputs.iter().map(|&k| built.model.points[k].id).collect();
-    for (k, p) in built.model.points.iter().enumerate() {
-        if ids.contains(&p.id) && !inputs.contains(&k) {
-            inputs.push(k);
-        }
-    }
-    inputs.sort_unstable();
-    match study.solver.engine {
-        Engine::Full => Ok(Engines {
-            engine: Box::new(
-                crate::frf::FullModel::new(
-                    &built.model,
-                    &inputs,
-                    crate::frf::FullParams::default(),
-                )
-                .map_err(|e| RunError::Engine(e.to_string()))?,
-            ),
-            note: format!("engine: full model, {} DOFs", built.model.n_dof()),
-            likelihood: None,
-            rom_builds: 0,
-        }),
-        Engine::Rom => {
-            let lo = levels
-                .iter()
-                .flat_map(|l| l.freq_hz.first().copied())
-                .fold(f64::INFINITY, f64::min);
-            let hi = levels
-                .iter()
-                .flat_map(|l| l.freq_hz.last().copied())
-                .fold(0.0, f64::max);
-            let params = crate::rom::RomParams {
-                band_hz: (lo, hi),
-                range: modulus_range(study, (lo, hi)),
-                tolerance: study.solver.rom_tolerance,
-                // An uncertified ROM is used with a warning in the manifest and report (its
-                // measured error is stated) rather than failing the run.
-                allow_uncertified: true,
-                ..Default::default()
-            };
-            let key = crate::rom::cache::key(&built.model, &inputs, &params);
-            let file = rom_cache.map(|d| d.join(format!("rom-{}.json", &key[..16])));
-            let cached = file
-                .as_deref()
-                .and_then(|f| crate::rom::cache::load(f, &key));
-            let from_cache = cached.is_some();
-            let (rom, cert) = match cached {
-                Some(rc) => rc,
-                None => {
-                    let rc = crate::rom::build_rom(&built.model, &inputs, &params)
-                        .map_err(|e| RunError::Engine(e.to_string()))?;
-                    if let Some(f) = &file {
-                        // A cache that cannot be written costs time next run, nothing else.
-                        let _ = crate::rom::cache::save(f, &key, &rc.0, &rc.1);
-                    }
-                    rc
-                }
-            };
-            let mut grid_note = String::new();
-            // The measurement model's grid, chosen per level by convergence at the first
-            // model's initial values (on the unprepared ROM: a one-off cost).
-            if let (Some(est), Some((law, m0))) = (
-                study
-                    .measurements
-                    .as_ref()
-                    .and_then(|m| m.estimator.as_ref()),
-                laws.iter().zip(&study.models).next(),
-            ) {
-                let probe = RomEngine {
-                    rom: rom.clone(),
-                    pencils: Vec::new(),
-                };
-                let modulus = |w: f64| law.modulus(&m0.initial, w);
-                for level in levels.iter_mut() {
-                    let c = &level.column;
-                    let obs = crate::forward::Observation::new(
-                        &probe,
-                        &c.omega_rad_s,
-                        c.input,
-                        &c.outputs,
-                        None,
-                    )
-                    .map_err(|e| RunError::Engine(e.to_string()))?;
-                    let chosen = obs
-                        .converged_measurement(
-                            posterior::estimator_spec(est, &level.freq_hz),
-                            &modulus,
-                            crate::forward::GRID_TOLERANCE,
-                        )
-                        .map_err(|e| study_err(study, "measurements.estimator", e.to_string()))?;
-                    let g = &chosen.1;
-                    grid_note += &format!(
-                        "; H1 measurement model of {}: {} points per line{} (largest change of E[H1] when the grid is doubled, relative to |H| per line: {})",
-                        level.name,
-                        g.points_per_line,
-                        if g.converged { "" } else { ", NOT CONVERGED to the tolerance" },
-                        g.history
-                            .iter()
-                            .map(|(m, c)| format!("{m}->{}: {c:.1e}", 2 * m))
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    );
-                    level.measurement = Some(chosen);
-                }
-            }
-            // Prepare the pencil for the first level's grid (all levels normally share it).
-            let omega = &levels[0].column.omega_rad_s;
-            let pencils = vec![rom
-                .prepare(omega)
-                .map_err(|e| RunError::Engine(e.to_string()))?];
-            // The likelihood's engine: the excitation column only, prepared on each level's
-            // lines and, with a measurement model, on its fine grid.
-            let lik_engine = match &study.inference {
-                None => None,
-                Some(_) => {
-                    // The closed loop and declared point masses need the receptances of
-                    // every measured point: then all inputs.
-                    let lik_inputs = if closed_loop::needs_all_inputs(study) {
-                        rom.inputs().to_vec()
-                    } else {
-                        vec![built.excitation]
-                    };
-                    let lik_rom = rom
-                        .with_inputs(&lik_inputs)
-                        .map_err(|e| RunError::Engine(e.to_string()))?;
-                    let mut lp: Vec<crate::rom::PencilSweep> = Vec::new();
-                    for level in levels {
-                        let mut grids = vec![level.column.omega_rad_s.clone()];
-                        if let Some(m) = posterior::measurement_model(study, level)? {
-                            grids.push(m.fine_omega());
-                        }
-                        for g in grids {
-                            if !lp.iter().any(|p| p.omega_rad_s() == g.as_slice()) {
-                                lp.push(
-                                    lik_rom
-                                        .prepare(&g)
-                                        .map_err(|e| RunError::Engine(e.to_string()))?,
-                                );
-                            }
-                        }
-                    }
-                    Some(Box::new(RomEngine {
-                        rom: lik_rom,
-                        pencils: lp,
-                    }) as Box<dyn FrfEngine>)
-                }
-            };
-            let note = format!(
-                "engine: ROM with {} basis vectors over {:.1}..{:.1} Hz, E' {:.3e}..{:.3e} Pa, E'' {:.3e}..{:.3e} Pa; certificate max relative error {:.2e} (tolerance {:.1e}){}",
-                cert.basis_size,
-                lo,
-                hi,
-                params.range.e_storage_pa.0,
-                params.range.e_storage_pa.1,
-                params.range.e_loss_pa.0,
-                params.range.e_loss_pa.1,
-                cert.max_rel_error,
-                params.tolerance,
-                if cert.passed { "" } else { ": WARNING, NOT CERTIFIED" }
-            ) + &match (&file, from_cache) {
-                (Some(f), true) => format!(" (loaded from the ROM cache {})", f.display()),
-                _ => String::new(),
-            } + &grid_note;
-            Ok(Engines {
-                engine: Box::new(RomEngine { rom, pencils }),
-                note,
-                likelihood: lik_engine,
-                rom_builds: u64::from(!from_cache),
-            })
-        }
-    }
-}
-
 /// Build the model of a study (errors name the study file).
 pub(crate) fn build(study: &Study) -> Result<BuiltModel, RunError> {
-    Ok(crate::study::build::build_model(
-        &study.structure,
-        &study.file.display().to_string(),
-    )?)
+    crate::stage::engine::build(&study.structure, &study.file)
 }
 
 /// Check every model spec: known name, parameters in range (the study validation does most).
@@ -401,61 +112,14 @@ pub(crate) fn model_laws(
     crate::identify::model_laws(&study.models, &study.file)
 }
 
-/// Evaluate the full model at every model's initial E*(w) on 3 lines of each level
-/// (both band ends included): a singular or ill-conditioned Z is an input error naming the model.
+/// Old path of [`crate::stage::engine::check_initial_values`].
 pub(crate) fn check_initial_values(
     study: &Study,
     built: &BuiltModel,
     levels: &[LevelData],
     laws: &[Box<dyn crate::material::ConstitutiveModel>],
 ) -> Result<usize, RunError> {
-    let full = crate::frf::FullModel::new(
-        &built.model,
-        &[built.excitation],
-        crate::frf::FullParams::default(),
-    )
-    .map_err(|e| RunError::Engine(e.to_string()))?;
-    let mut n_checked = 0;
-    for level in levels {
-        let n = level.freq_hz.len();
-        // Band ends and centre: a sparse LU per line on the full model is the expensive part
-        // of `rfmlab check`, and a law that is admissible (check_params) cannot make Z
-        // singular in between except at an undamped resonance, which the RFM reports itself.
-        let picks: Vec<usize> = if n <= 3 {
-            (0..n).collect()
-        } else {
-            vec![0, n / 2, n - 1]
-        };
-        let omega: Vec<f64> = picks.iter().map(|&l| level.column.omega_rad_s[l]).collect();
-        for (i, (m, law)) in study.models.iter().zip(laws).enumerate() {
-            if !m.levels.contains(&level.name) {
-                continue;
-            }
-            let moduli: Vec<C64> = omega.iter().map(|&w| law.modulus(&m.initial, w)).collect();
-            let sw = full.sweep(&omega, &moduli, false).map_err(|e| {
-                study_err(
-                    study,
-                    format!("models[{i}].initial"),
-                    format!(
-                        "the initial values of {} make the system singular at level {}: {e}; choose different initial values",
-                        m.name, level.name
-                    ),
-                )
-            })?;
-            if sw.h.iter().any(|z| !(z.re.is_finite() && z.im.is_finite())) {
-                return Err(study_err(
-                    study,
-                    format!("models[{i}].initial"),
-                    format!(
-                        "the initial values of {} give non-finite FRFs at level {}; choose different initial values",
-                        m.name, level.name
-                    ),
-                ));
-            }
-        }
-        n_checked += omega.len();
-    }
-    Ok(n_checked)
+    crate::stage::engine::check_initial_values(&study.models, &study.file, built, levels, laws)
 }
 
 /// Validate a study without running it: data files, channels, excitation channel, band,
@@ -514,12 +178,6 @@ pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
     })
 }
 
-/// The stages of a run, for [`crate::pipeline`].
-pub(crate) mod stages {
-    pub(crate) use super::settings::rfm_params;
-    pub(crate) use super::{build, build_engine, check_initial_values, model_laws};
-}
-
 /// The folder of cached ROMs of `study` (`.rom-cache/` beside its output folder): where
 /// `rfmlab run` keeps its certified ROM and `rfmlab diagnose` its term ROM.
 pub fn rom_cache_dir(study: &Study) -> PathBuf {
@@ -547,9 +205,33 @@ fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) 
     })
 }
 
-const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
-
 /// Old path of [`crate::stage::data::load_levels`], removed once every caller moved.
 pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, RunError> {
     crate::stage::data::load_levels(study.measurements.as_ref(), built, &study.file)
+}
+
+/// Old path of [`crate::stage::engine::build_engine`], removed once every caller moved.
+pub(crate) fn build_engine(
+    study: &Study,
+    built: &BuiltModel,
+    levels: &mut [LevelData],
+    laws: &[Box<dyn crate::material::ConstitutiveModel>],
+    rom_cache: Option<&Path>,
+) -> Result<crate::stage::engine::Engines, RunError> {
+    let params = crate::pipeline::engine_params(study);
+    let m = crate::stage::engine::ModelsAndData {
+        models: &study.models,
+        laws,
+        estimator: study
+            .measurements
+            .as_ref()
+            .and_then(|m| m.estimator.as_ref()),
+        file: &study.file,
+    };
+    crate::stage::engine::build_engine(&params, &m, built, levels, rom_cache)
+}
+
+/// Old path of [`crate::stage::engine::modulus_range`].
+pub(crate) fn modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange {
+    crate::stage::engine::modulus_range(&study.models, band_hz)
 }

@@ -77,7 +77,6 @@ fn read_truth(
     }))
 }
 
-
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
 /// Convert an FRF value of `q` to accelerance at `freq_hz` (H' = -w^2 H = j w Y).

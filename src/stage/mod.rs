@@ -7,6 +7,7 @@ use crate::data::DataError;
 use crate::study::StudyError;
 
 pub mod data;
+pub mod engine;
 
 /// Progress of a run, for progress bars.
 #[derive(Clone, Debug, PartialEq)]
