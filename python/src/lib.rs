@@ -277,7 +277,7 @@ impl Study {
     /// Check the study without running it (data, channels, band, initial values): a dict.
     fn check(&self, py: Python<'_>) -> PyResult<String> {
         let s = py
-            .detach(|| rfmlab::runner::check_study(&self.study))
+            .detach(|| rfmlab::pipeline::check_study(&self.study))
             .map_err(|e| run_error(py, &e))?;
         serde_json::to_string(&s).map_err(|e| error(py, "RunError", (e.to_string(),)))
     }

@@ -124,7 +124,7 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
 
 pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
     let study = super::common::load_study(&a.study)?;
-    let summary = rfmlab::runner::check_study(&study).map_err(wrap)?;
+    let summary = rfmlab::pipeline::check_study(&study).map_err(wrap)?;
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;
     } else if !g.quiet {

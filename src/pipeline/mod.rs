@@ -21,12 +21,14 @@
 //! # }
 //! ```
 
+mod check;
 mod executor;
 mod lower;
 mod plan;
 pub(crate) mod results;
 
 pub use crate::runner::{Event, RunError, RunOptions, RunSummary};
+pub use check::{check, check_study, CheckSummary};
 pub use executor::{Executor, Observer};
 pub use plan::{
     engine_params, DataParams, EngineParams, IdentificationParams, InferenceParams, Plan,
@@ -103,8 +105,14 @@ fn run_here(
             step: "estimating the mesh's discretisation error".into(),
             total: 0,
         });
-        let d =
-            crate::runner::preflight::mesh_error_at_initial_values(study, &built, &data, &laws)?;
+        let d = crate::stage::preflight::mesh_error_at_initial_values(
+            &plan.identification.models,
+            &study.structure,
+            &study.file,
+            &built,
+            &data,
+            &laws,
+        )?;
         progress(Event::Finish);
         ex.lap("mesh error")?;
         d

@@ -25,7 +25,8 @@ mod evidence_ref;
 pub mod levels;
 pub mod material;
 pub mod posterior;
-pub mod preflight;
+pub use crate::pipeline::{check_study, CheckSummary};
+pub use crate::stage::preflight; // old path // old paths
 pub mod prepared;
 pub mod redundancy;
 mod sample;
@@ -82,24 +83,6 @@ pub struct ModelSummary {
     pub frac: Vec<f64>,
 }
 
-/// What `rfmlab check` found.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct CheckSummary {
-    pub study: String,
-    /// Where `rfmlab run` writes the results (without `-o/--output`).
-    pub output_dir: PathBuf,
-    pub n_dof: usize,
-    /// Per level: name, number of lines in the band, channel (response) ids used.
-    pub levels: Vec<(String, usize, Vec<u32>)>,
-    /// Models checked (name and levels).
-    pub models: Vec<(String, Vec<String>)>,
-    /// Lines at which each model's initial values were evaluated on the full model.
-    pub lines_checked: usize,
-    /// Warnings, the engine's cost, the mesh's discretisation error per mode, the first
-    /// mode against the data's first peak.
-    pub preflight: preflight::Preflight,
-}
-
 /// Build the model of a study (errors name the study file).
 pub(crate) fn build(study: &Study) -> Result<BuiltModel, RunError> {
     crate::stage::engine::build(&study.structure, &study.file)
@@ -110,72 +93,6 @@ pub(crate) fn model_laws(
     study: &Study,
 ) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
     crate::identify::model_laws(&study.models, &study.file)
-}
-
-/// Old path of [`crate::stage::engine::check_initial_values`].
-pub(crate) fn check_initial_values(
-    study: &Study,
-    built: &BuiltModel,
-    levels: &[LevelData],
-    laws: &[Box<dyn crate::material::ConstitutiveModel>],
-) -> Result<usize, RunError> {
-    crate::stage::engine::check_initial_values(&study.models, &study.file, built, levels, laws)
-}
-
-/// Validate a study without running it: data files, channels, excitation channel, band,
-/// model parameters, and the full model evaluated at every model's initial values.
-pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
-    preflight::check_study_settings(study)?;
-    let laws = model_laws(study)?;
-    let spec = crate::study::build::joint_spec(&study.structure);
-    let cost = match &spec {
-        Some(spec) => Some(
-            crate::fe::joint::joint_cost_estimate(spec)
-                .map_err(|e| study_err(study, e.key().to_string(), e.detail()))?,
-        ),
-        None => None,
-    };
-    let built = build(study)?;
-    let levels = load_levels(study, &built)?;
-    let mut pf = preflight::Preflight {
-        cost: cost.map(|c| preflight::CostSummary {
-            n_dof: c.n_dof,
-            memory_bytes: c.memory_bytes,
-            factor_seconds: c.factor_seconds,
-            available_memory_bytes: crate::fe::cost::available_memory_bytes(),
-        }),
-        ..Default::default()
-    };
-    preflight::check_bands(study, &levels, &mut pf.warnings)?;
-    preflight::check_channels(&built, &levels, &mut pf.warnings);
-    let lines_checked = check_initial_values(study, &built, &levels, &laws)?;
-    preflight::check_first_mode(study, &built, &levels, &laws, &mut pf)?;
-    match preflight::mesh_error_at_initial_values(study, &built, &levels, &laws) {
-        Ok(d) => pf.discretisation = d,
-        // a refined mesh beyond the machine, or a solver that cannot resolve it, leaves the
-        // estimate out with a warning (the study's own mesh is fine)
-        Err(err) => pf.warnings.push(format!(
-            "structure.mesh: no discretisation-error estimate ({err})"
-        )),
-    }
-    pf.warnings
-        .extend(preflight::mesh_error_warnings(&pf.discretisation));
-    Ok(CheckSummary {
-        preflight: pf,
-        study: study.name.clone(),
-        output_dir: study.output_dir.clone(),
-        n_dof: built.model.n_dof(),
-        levels: levels
-            .iter()
-            .map(|l| (l.name.clone(), l.freq_hz.len(), l.response_ids.clone()))
-            .collect(),
-        models: study
-            .models
-            .iter()
-            .map(|m| (m.name.clone(), m.levels.clone()))
-            .collect(),
-        lines_checked,
-    })
 }
 
 /// The folder of cached ROMs of `study` (`.rom-cache/` beside its output folder): where

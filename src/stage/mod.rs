@@ -8,6 +8,7 @@ use crate::study::StudyError;
 
 pub mod data;
 pub mod engine;
+pub mod preflight;
 
 /// Progress of a run, for progress bars.
 #[derive(Clone, Debug, PartialEq)]

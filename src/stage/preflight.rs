@@ -21,10 +21,12 @@
 //! The modes are those of the real pencil (K_b + E' S, M) at the first model's initial storage
 //! modulus, paired in order.
 
-use super::{study_err, LevelData, RunError};
+use super::{input_error, LevelData, RunError};
 use crate::common::C64;
+use crate::identify::IdentificationParams;
 use crate::study::build::BuiltModel;
-use crate::study::Study;
+use crate::study::{ModelSpec, Structure};
+use std::path::Path;
 
 /// Order of convergence assumed by the Richardson estimate when the mesh's cells are no
 /// larger than the bond line's thickness in its plane (see the module doc).
@@ -95,15 +97,19 @@ pub struct Preflight {
 }
 
 /// Checks that need no model: at least one model, a writable output folder.
-pub fn check_study_settings(study: &Study) -> Result<(), RunError> {
-    if study.models.is_empty() {
-        return Err(study_err(
-            study,
+pub fn check_settings(
+    models: &[ModelSpec],
+    output_dir: &Path,
+    file: &Path,
+) -> Result<(), RunError> {
+    if models.is_empty() {
+        return Err(input_error(
+            file,
             "models",
             "no [[models]] to identify: add at least one, e.g. [[models]] name = \"model1\" with [models.initial] E0 and h",
         ));
     }
-    let dir = &study.output_dir;
+    let dir = output_dir;
     let parent = dir
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -113,8 +119,8 @@ pub fn check_study_settings(study: &Study) -> Result<(), RunError> {
         .and_then(|_| std::fs::write(&probe, b"check"))
         .and_then(|_| std::fs::remove_file(&probe));
     if let Err(e) = ok {
-        return Err(study_err(
-            study,
+        return Err(input_error(
+            file,
             "study.output_dir",
             format!(
                 "the results folder {} cannot be written ({e}): choose a folder you can write to",
@@ -128,19 +134,18 @@ pub fn check_study_settings(study: &Study) -> Result<(), RunError> {
 /// The analysis bands against each level's lines: an error when a band holds no line of a
 /// level, a warning when it reaches beyond the data.
 pub fn check_bands(
-    study: &Study,
+    params: &IdentificationParams,
+    file: &Path,
     levels: &[LevelData],
     warnings: &mut Vec<String>,
 ) -> Result<(), RunError> {
-    let bands = study
-        .analyses
+    let bands = params
         .band_constant
         .iter()
         .enumerate()
         .map(|(i, b)| (format!("analyses.band_constant[{i}]"), b))
         .chain(
-            study
-                .analyses
+            params
                 .iem
                 .iter()
                 .enumerate()
@@ -162,8 +167,8 @@ pub fn check_bands(
                 .filter(|&&f| f >= lo && f <= hi)
                 .count();
             if inside == 0 {
-                return Err(study_err(
-                    study,
+                return Err(input_error(
+                    file,
                     key,
                     format!(
                         "the band {lo}-{hi} Hz holds no line of level {} (its data cover {f0}-{f1} Hz within measurements.band_hz): move center_hz inside the data",
@@ -226,13 +231,13 @@ pub fn first_peak_hz(level: &LevelData) -> Option<f64> {
 /// first peak) against that peak: a warning when they are more than a factor
 /// [`FIRST_MODE_RATIO_WARN`] apart.
 pub fn check_first_mode(
-    study: &Study,
+    models: &[ModelSpec],
     built: &BuiltModel,
     levels: &[LevelData],
     laws: &[Box<dyn crate::material::ConstitutiveModel>],
     out: &mut Preflight,
 ) -> Result<(), RunError> {
-    let (Some(level), Some(spec), Some(law)) = (levels.first(), study.models.first(), laws.first())
+    let (Some(level), Some(spec), Some(law)) = (levels.first(), models.first(), laws.first())
     else {
         return Ok(());
     };
@@ -269,17 +274,19 @@ pub fn check_first_mode(
 /// [`discretisation_errors`] at the first model's initial storage modulus at the first level's
 /// first peak (20 Hz without data peaks).
 pub fn mesh_error_at_initial_values(
-    study: &Study,
+    models: &[ModelSpec],
+    structure: &Structure,
+    file: &Path,
     built: &BuiltModel,
     levels: &[LevelData],
     laws: &[Box<dyn crate::material::ConstitutiveModel>],
 ) -> Result<Vec<ModeDiscretisation>, RunError> {
-    let (Some(m), Some(law)) = (study.models.first(), laws.first()) else {
+    let (Some(m), Some(law)) = (models.first(), laws.first()) else {
         return Ok(Vec::new());
     };
     let f = levels.first().and_then(first_peak_hz).unwrap_or(20.0);
     let e = law.modulus(&m.initial, std::f64::consts::TAU * f).re;
-    discretisation_errors(study, built, e)
+    discretisation_errors(structure, file, built, e)
 }
 
 /// One warning per mode whose estimated error exceeds [`MESH_ERROR_WARN_REL`].
@@ -303,11 +310,12 @@ pub fn mesh_error_warnings(modes: &[ModeDiscretisation]) -> Vec<String> {
 /// Richardson estimate of each of the lowest modes' discretisation error on the study's
 /// mesh (module doc), at the storage modulus `e_storage_pa`.
 pub fn discretisation_errors(
-    study: &Study,
+    structure: &Structure,
+    file: &Path,
     built: &BuiltModel,
     e_storage_pa: f64,
 ) -> Result<Vec<ModeDiscretisation>, RunError> {
-    let Some(spec) = crate::study::build::joint_spec(&study.structure) else {
+    let Some(spec) = crate::study::build::joint_spec(structure) else {
         return Ok(Vec::new());
     };
     let fail = |message: String| RunError::Analysis {
@@ -322,7 +330,7 @@ pub fn discretisation_errors(
         )));
     }
     let (fine, _) = crate::fe::joint::build_joint_model_refined(&spec, 2)
-        .map_err(|e| study_err(study, e.key().to_string(), e.detail()))?;
+        .map_err(|e| input_error(file, e.key().to_string(), e.detail()))?;
     let n = N_MODES_CHECKED.min(built.model.n_dof() / 3).max(1);
     // the frequencies converge as the square of the residual: 1e-6 gives them to ~1e-12
     let params = crate::modes::EigenParams {

@@ -1,0 +1,98 @@
+//! `rfmlab check`: a study validated without running it. The data files, channels,
+//! excitation channel and band; the model parameters; the full model evaluated at every
+//! model's initial values; and the pre-flight ([`crate::stage::preflight`]): a writable
+//! results folder, the analysis bands against the lines, the first mode against the data's
+//! first peak, the engine's cost and the mesh's discretisation error.
+
+use super::plan::Plan;
+use crate::stage::preflight;
+use crate::stage::{engine, input_error, RunError};
+use crate::study::Study;
+use std::path::PathBuf;
+
+/// What `rfmlab check` found.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CheckSummary {
+    pub study: String,
+    /// Where `rfmlab run` writes the results (without `-o/--output`).
+    pub output_dir: PathBuf,
+    pub n_dof: usize,
+    /// Per level: name, number of lines in the band, channel (response) ids used.
+    pub levels: Vec<(String, usize, Vec<u32>)>,
+    /// Models checked (name and levels).
+    pub models: Vec<(String, Vec<String>)>,
+    /// Lines at which each model's initial values were evaluated on the full model.
+    pub lines_checked: usize,
+    /// Warnings, the engine's cost, the mesh's discretisation error per mode, the first
+    /// mode against the data's first peak.
+    pub preflight: preflight::Preflight,
+}
+
+/// Validate a study without running it: data files, channels, excitation channel, band,
+/// model parameters, and the full model evaluated at every model's initial values.
+pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
+    let study = plan.study();
+    let (models, file) = (&plan.identification.models, study.file.as_path());
+    preflight::check_settings(models, &plan.output_dir, file)?;
+    let laws = crate::identify::model_laws(models, file)?;
+    let spec = crate::study::build::joint_spec(&study.structure);
+    let cost = match &spec {
+        Some(spec) => Some(
+            crate::fe::joint::joint_cost_estimate(spec)
+                .map_err(|e| input_error(file, e.key().to_string(), e.detail()))?,
+        ),
+        None => None,
+    };
+    let built = engine::build(&study.structure, file)?;
+    let levels = crate::stage::data::load_levels(Some(&plan.data), &built, file)?;
+    let mut pf = preflight::Preflight {
+        cost: cost.map(|c| preflight::CostSummary {
+            n_dof: c.n_dof,
+            memory_bytes: c.memory_bytes,
+            factor_seconds: c.factor_seconds,
+            available_memory_bytes: crate::fe::cost::available_memory_bytes(),
+        }),
+        ..Default::default()
+    };
+    preflight::check_bands(&plan.identification, file, &levels, &mut pf.warnings)?;
+    preflight::check_channels(&built, &levels, &mut pf.warnings);
+    let lines_checked = engine::check_initial_values(models, file, &built, &levels, &laws)?;
+    preflight::check_first_mode(models, &built, &levels, &laws, &mut pf)?;
+    match preflight::mesh_error_at_initial_values(
+        models,
+        &study.structure,
+        file,
+        &built,
+        &levels,
+        &laws,
+    ) {
+        Ok(d) => pf.discretisation = d,
+        // a refined mesh beyond the machine, or a solver that cannot resolve it, leaves the
+        // estimate out with a warning (the study's own mesh is fine)
+        Err(err) => pf.warnings.push(format!(
+            "structure.mesh: no discretisation-error estimate ({err})"
+        )),
+    }
+    pf.warnings
+        .extend(preflight::mesh_error_warnings(&pf.discretisation));
+    Ok(CheckSummary {
+        preflight: pf,
+        study: study.name.clone(),
+        output_dir: plan.output_dir.clone(),
+        n_dof: built.model.n_dof(),
+        levels: levels
+            .iter()
+            .map(|l| (l.name.clone(), l.freq_hz.len(), l.response_ids.clone()))
+            .collect(),
+        models: models
+            .iter()
+            .map(|m| (m.name.clone(), m.levels.clone()))
+            .collect(),
+        lines_checked,
+    })
+}
+
+/// [`check`] of the plan of `study`.
+pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
+    check(&study.plan()?)
+}
