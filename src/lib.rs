@@ -21,6 +21,8 @@
 //! | [`correlation`] | FRAC, SCC, ACC (paper eq. 38-40) |
 //! | [`rfm`] | response function method updating (paper eq. 9-11, 37) |
 //! | [`iem`] | inverse eigensensitivity method (paper eq. 20) |
+//! | [`identify`] | the deterministic identification of a level: RFM per line, per band and per model, circle fit + IEM, correlation, sensitivities, the leakage fixed point |
+//! | [`simulate`] | the virtual experiment of an experiment file (`rfmlab simulate`) and its UFF58 + truth files |
 //! | [`study`] | study files: TOML as written -> validated typed study (outside the numerical core) |
 //! | [`output`] | parquet tables, manifest, atomic writes (outside the numerical core) |
 //! | [`plot`] | PNG/SVG figures (outside the numerical core) |
@@ -92,6 +94,7 @@ pub mod rfm;
 #[allow(clippy::needless_borrow)]
 pub mod rom;
 pub mod runner;
+pub mod simulate;
 pub mod stage;
 pub mod stats;
 pub mod study;

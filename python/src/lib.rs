@@ -131,10 +131,10 @@ fn simulate<'py>(
     experiment: PathBuf,
     out: Option<PathBuf>,
 ) -> PyResult<Bound<'py, PyTuple>> {
-    use rfmlab::runner::simulate::SimulateError;
+    use rfmlab::simulate::SimulateError;
     let result = py.detach(|| -> Result<_, SimulateError> {
         let ex = rfmlab::study::experiment::load_experiment(&experiment)?;
-        let sim = rfmlab::runner::simulate::simulate(&ex, &|| ())?;
+        let sim = rfmlab::simulate::simulate(&ex, &|| ())?;
         let files = match &out {
             Some(o) => {
                 let (mut w, s) = sim.write(o)?;

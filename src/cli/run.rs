@@ -1,8 +1,8 @@
 //! `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (the study runner, [`rfmlab::runner`]).
 
 use super::common::{print_json, Global, InputError};
+use rfmlab::pipeline::RunSummary;
 use rfmlab::pipeline::{self, Event, Executor, RunError};
-use rfmlab::runner::RunSummary;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
@@ -83,7 +83,7 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
         Executor::new().observer(move |e| on_event(e))
     };
     if !a.no_cache {
-        ex = ex.rom_cache(rfmlab::runner::rom_cache_dir(&study));
+        ex = ex.rom_cache(rfmlab::stage::rom_cache_dir(&study.output_dir));
     }
     let results = pipeline::run(&plan, &mut ex).map_err(wrap)?;
     let written =

@@ -2,7 +2,7 @@
 //! labelled as simulated) and a `<output>.truth.json` sidecar stating the truth.
 
 use super::common::{print_json, progress, Global};
-use rfmlab::runner::simulate::SimulateError;
+use rfmlab::simulate::SimulateError;
 use rfmlab::study::experiment::load_experiment;
 use serde_json::json;
 use std::path::PathBuf;
@@ -24,7 +24,7 @@ pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
     let out = a.out.clone().unwrap_or_else(|| ex.output.clone());
     // The bar stands at 0 while the model and the FRF engine are built.
     let pb = progress(g, ex.levels.len() as u64, "simulating levels");
-    let sim = rfmlab::runner::simulate::simulate(&ex, &|| pb.inc(1)).map_err(|e| match e {
+    let sim = rfmlab::simulate::simulate(&ex, &|| pb.inc(1)).map_err(|e| match e {
         // The study error itself in the chain: exit code 2.
         SimulateError::Study(e) => anyhow::Error::new(e),
         e => anyhow::Error::new(e),

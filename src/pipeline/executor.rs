@@ -3,7 +3,7 @@
 //! cancellation flag (checked between steps), and the timings and counters the manifest
 //! records.
 
-use crate::runner::{Event, RunError};
+use crate::stage::{Event, RunError};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

@@ -27,20 +27,45 @@ mod lower;
 mod plan;
 pub(crate) mod results;
 
-pub use crate::runner::{Event, RunError, RunOptions, RunSummary};
+pub use crate::stage::{Event, RunError};
 pub use check::{check, check_study, CheckSummary};
 pub use executor::{Executor, Observer};
 pub use plan::{
     engine_params, DataParams, EngineParams, IdentificationParams, InferenceParams, Plan,
     SamplerParams,
 };
+pub use results::ModelSummary;
 pub use results::{IdentifiedParameters, Results, LOOP_DIR};
 
 use crate::frf::FrfEngine;
 use crate::study::build::BuiltModel;
 use crate::study::Study;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
+
+/// Options of a run (beyond the study file).
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Skip figures even when the study asks for them (tests, benchmarks). Default false.
+    pub no_figures: bool,
+    /// Override the study's output folder. Default None (use `study.output_dir`).
+    pub output_dir: Option<PathBuf>,
+    /// Folder of certified ROMs reused across runs (keyed by model, points, band, range and
+    /// tolerance; see [`crate::rom::cache`]). Default None: build and certify every run.
+    pub rom_cache: Option<PathBuf>,
+}
+
+/// What a run produced (also printed by `rfmlab run --json`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunSummary {
+    pub study: String,
+    pub output_dir: PathBuf,
+    pub files: Vec<String>,
+    /// Per level and model: identified parameters (SI), stop reason and FRAC per FRF.
+    pub models: Vec<ModelSummary>,
+    pub seconds: f64,
+}
 
 /// Run `plan`: every stage in memory, nothing written (see [`crate::report::write`]).
 /// Timings and counters go to `executor` and into the results.

@@ -10,7 +10,7 @@ use crate::output::Table;
 use crate::runner::bayes::PosteriorResult;
 use crate::runner::closed_loop::LoopOutcome;
 use crate::runner::posterior::Draws;
-use crate::runner::{LevelData, ModelSummary, RunError};
+use crate::stage::{LevelData, RunError};
 use crate::study::Study;
 use polars::prelude::DataFrame;
 use std::sync::Arc;
@@ -63,6 +63,19 @@ pub struct IdentifiedParameters {
     /// FRAC per response channel at the initial and the identified parameters.
     pub frac_initial: Vec<f64>,
     pub frac_updated: Vec<f64>,
+}
+
+/// One global RFM run in the summary.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ModelSummary {
+    pub level: String,
+    pub model: String,
+    pub param_names: Vec<String>,
+    pub initial: Vec<f64>,
+    pub identified: Vec<f64>,
+    pub iterations: usize,
+    pub stop_reason: String,
+    pub frac: Vec<f64>,
 }
 
 /// A run's results in memory (see the module doc).

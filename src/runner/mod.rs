@@ -31,7 +31,6 @@ pub mod prepared;
 pub mod redundancy;
 mod sample;
 pub(crate) mod settings;
-pub mod simulate;
 pub mod terms;
 pub mod write;
 pub(crate) mod write_bayes;
@@ -42,46 +41,11 @@ pub use crate::stage::{Event, LevelData, LevelTruth, RunError};
 // Old paths, removed once every caller moved.
 pub use crate::identify::{BandConstantResult, GlobalResult, IemBandResult, SensitivityCurves};
 pub use crate::pipeline::results::LevelResults;
+pub use crate::pipeline::{ModelSummary, RunOptions, RunSummary};
 
 use crate::study::build::BuiltModel;
 use crate::study::{Study, StudyError};
 use std::path::{Path, PathBuf};
-
-/// Options of a run (beyond the study file).
-#[derive(Clone, Debug, Default)]
-pub struct RunOptions {
-    /// Skip figures even when the study asks for them (tests, benchmarks). Default false.
-    pub no_figures: bool,
-    /// Override the study's output folder. Default None (use `study.output_dir`).
-    pub output_dir: Option<PathBuf>,
-    /// Folder of certified ROMs reused across runs (keyed by model, points, band, range and
-    /// tolerance; see [`crate::rom::cache`]). Default None: build and certify every run.
-    pub rom_cache: Option<PathBuf>,
-}
-
-/// What a run produced (also printed by `rfmlab run --json`).
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct RunSummary {
-    pub study: String,
-    pub output_dir: PathBuf,
-    pub files: Vec<String>,
-    /// Per level and model: identified parameters (SI), stop reason and FRAC per FRF.
-    pub models: Vec<ModelSummary>,
-    pub seconds: f64,
-}
-
-/// One global RFM run in the summary.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct ModelSummary {
-    pub level: String,
-    pub model: String,
-    pub param_names: Vec<String>,
-    pub initial: Vec<f64>,
-    pub identified: Vec<f64>,
-    pub iterations: usize,
-    pub stop_reason: String,
-    pub frac: Vec<f64>,
-}
 
 /// Build the model of a study (errors name the study file).
 pub(crate) fn build(study: &Study) -> Result<BuiltModel, RunError> {
@@ -93,25 +57,6 @@ pub(crate) fn model_laws(
     study: &Study,
 ) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
     crate::identify::model_laws(&study.models, &study.file)
-}
-
-/// The folder of cached ROMs of `study` (`.rom-cache/` beside its output folder): where
-/// `rfmlab run` keeps its certified ROM and `rfmlab diagnose` its term ROM.
-pub fn rom_cache_dir(study: &Study) -> PathBuf {
-    study
-        .output_dir
-        .parent()
-        .unwrap_or(Path::new("."))
-        .join(".rom-cache")
-}
-
-/// Path helper: `<dir>.<suffix>` next to `dir`.
-pub(crate) fn sibling(dir: &Path, suffix: &str) -> PathBuf {
-    let name = dir
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "results".into());
-    dir.with_file_name(format!("{name}.{suffix}"))
 }
 
 fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) -> RunError {
@@ -152,3 +97,10 @@ pub(crate) fn build_engine(
 pub(crate) fn modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange {
     crate::stage::engine::modulus_range(&study.models, band_hz)
 }
+
+/// Old path of [`crate::stage::rom_cache_dir`].
+pub fn rom_cache_dir(study: &Study) -> PathBuf {
+    crate::stage::rom_cache_dir(&study.output_dir)
+}
+
+pub(crate) use crate::stage::sibling;

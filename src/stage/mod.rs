@@ -100,3 +100,21 @@ pub fn input_error(
         message: message.into(),
     })
 }
+
+/// The folder of cached ROMs of a study whose results go to `output_dir` (`.rom-cache/`
+/// beside it): where `rfmlab run` keeps its certified ROM and `rfmlab diagnose` its term ROM.
+pub fn rom_cache_dir(output_dir: &std::path::Path) -> std::path::PathBuf {
+    output_dir
+        .parent()
+        .unwrap_or(std::path::Path::new("."))
+        .join(".rom-cache")
+}
+
+/// `<dir>.<suffix>` next to `dir`.
+pub fn sibling(dir: &std::path::Path, suffix: &str) -> std::path::PathBuf {
+    let name = dir
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "results".into());
+    dir.with_file_name(format!("{name}.{suffix}"))
+}
