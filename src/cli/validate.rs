@@ -28,7 +28,7 @@ pub struct ValidateArgs {
 }
 
 pub fn run(a: &ValidateArgs, g: &Global) -> anyhow::Result<()> {
-    let shard = Shard::parse(&a.shard).map_err(InputError)?;
+    let shard = Shard::parse(&a.shard).map_err(|e| InputError(e.to_string()))?;
     let spec = load_validation(&a.file)?;
     let out = a.out.clone().unwrap_or_else(|| spec.output_dir.clone());
     std::fs::create_dir_all(&out)

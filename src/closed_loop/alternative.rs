@@ -128,7 +128,7 @@ pub fn fit_modulus_holding(
         let u: Vec<f64> = s.iter().zip(&bounds).map(|(p, b)| to_u(*p, *b)).collect();
         // f = |r|^2: gradient 2 J^T r, Gauss-Newton curvature 2 J^T J; held parameters get a
         // zero gradient and a unit curvature (their step is zero).
-        let quadratic = |u: &[f64]| -> Result<crate::inference::lm::Quadratic, String> {
+        let quadratic = |u: &[f64]| -> Result<crate::inference::lm::Quadratic, &str> {
             let (cost, r, j) = eval(u, true).ok_or("the law's modulus is not finite")?;
             let mut a = vec![0.0; n * n];
             let mut g = vec![0.0; n];

@@ -13,14 +13,19 @@ pub enum Window {
     Rectangular,
 }
 
+/// A window name that is neither `"hann"` nor `"rectangular"`.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("\"{0}\": use \"hann\" or \"rectangular\"")]
+pub struct UnknownWindow(pub String);
+
 impl std::str::FromStr for Window {
-    type Err = String;
+    type Err = UnknownWindow;
     /// `"hann"` or `"rectangular"`; the error says which names exist.
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, UnknownWindow> {
         match s {
             "hann" => Ok(Window::Hann),
             "rectangular" => Ok(Window::Rectangular),
-            o => Err(format!("\"{o}\": use \"hann\" or \"rectangular\"")),
+            o => Err(UnknownWindow(o.to_string())),
         }
     }
 }

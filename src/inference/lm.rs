@@ -45,15 +45,16 @@ pub struct LmOutcome {
 /// gradient and curvature (`Err` with a reason where they are not finite); `value(x)` the value
 /// alone (`INFINITY` where it is not finite). A start without a finite quadratic model ends at
 /// once with reason "failed: ...".
-pub fn levenberg_marquardt<Q, V>(
+pub fn levenberg_marquardt<Q, V, E>(
     x0: &[f64],
     mut quadratic: Q,
     mut value: V,
     params: &LmParams,
 ) -> LmOutcome
 where
-    Q: FnMut(&[f64]) -> Result<Quadratic, String>,
+    Q: FnMut(&[f64]) -> Result<Quadratic, E>,
     V: FnMut(&[f64]) -> f64,
+    E: std::fmt::Display,
 {
     let d = x0.len();
     let (mut f, mut g, mut h) = match quadratic(x0) {
@@ -144,11 +145,16 @@ mod tests {
         }
     }
 
+    /// The tests' objectives fail only by not being finite.
+    #[derive(Debug, thiserror::Error)]
+    #[error("not finite")]
+    struct NotFinite;
+
     #[test]
     fn rosenbrock_valley_reaches_its_minimum() {
         // r = (10 (y - x^2), 1 - x): f = |r|^2, g = 2 J^T r, H = 2 J^T J.
         let res = |p: &[f64]| [10.0 * (p[1] - p[0] * p[0]), 1.0 - p[0]];
-        let q = |p: &[f64]| -> Result<Quadratic, String> {
+        let q = |p: &[f64]| -> Result<Quadratic, NotFinite> {
             let r = res(p);
             let j = [[-20.0 * p[0], 10.0], [-1.0, 0.0]];
             let f = r[0] * r[0] + r[1] * r[1];
@@ -179,7 +185,7 @@ mod tests {
     #[test]
     fn linear_least_squares_converge_in_a_few_steps_and_bad_starts_fail() {
         // f = (x - 3)^2 + 4 (y + 1)^2.
-        let q = |p: &[f64]| -> Result<Quadratic, String> {
+        let q = |p: &[f64]| -> Result<Quadratic, NotFinite> {
             Ok((
                 (p[0] - 3.0).powi(2) + 4.0 * (p[1] + 1.0).powi(2),
                 vec![2.0 * (p[0] - 3.0), 8.0 * (p[1] + 1.0)],
@@ -192,7 +198,7 @@ mod tests {
         assert!((out.x[0] - 3.0).abs() < 1e-9 && (out.x[1] + 1.0).abs() < 1e-9);
         let bad = levenberg_marquardt(
             &[0.0, 0.0],
-            |_: &[f64]| -> Result<Quadratic, String> { Err("nan".into()) },
+            |_: &[f64]| -> Result<Quadratic, NotFinite> { Err(NotFinite) },
             |_: &[f64]| f64::NAN,
             &params(),
         );

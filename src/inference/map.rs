@@ -348,15 +348,13 @@ fn gauss_newton_search(
             ))
         }
     };
-    let quadratic = |x: &[f64]| -> Result<Quadratic, String> {
+    let quadratic = |x: &[f64]| -> Result<Quadratic, DensityError> {
         if let Some(q) = first.take() {
             return Ok(q);
         }
         count.fetch_add(1, Relaxed);
-        match gn_objective(post, x, physical) {
-            Some(r) => r.map_err(|e| e.to_string()),
-            None => Err("the posterior has no curvature".into()),
-        }
+        gn_objective(post, x, physical)
+            .unwrap_or_else(|| Err(DensityError::Fatal("the posterior has no curvature".into())))
     };
     let value = |x: &[f64]| {
         count.fetch_add(1, Relaxed);

@@ -20,15 +20,18 @@ pub struct Shard {
     pub count: usize,
 }
 
+/// A `--shard` value that is not `i/n` with `0 <= i < n`.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("--shard {0}: give i/n with 0 <= i < n, e.g. 0/3 (Slurm: $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT)")]
+pub struct BadShard(pub String);
+
 impl Shard {
     /// The whole run in one process.
     pub const ALL: Shard = Shard { index: 0, count: 1 };
 
     /// Parse `i/n` (0 <= i < n).
-    pub fn parse(s: &str) -> Result<Shard, String> {
-        let bad = || {
-            format!("--shard {s}: give i/n with 0 <= i < n, e.g. 0/3 (Slurm: $SLURM_ARRAY_TASK_ID/$SLURM_ARRAY_TASK_COUNT)")
-        };
+    pub fn parse(s: &str) -> Result<Shard, BadShard> {
+        let bad = || BadShard(s.to_string());
         let (a, b) = s.split_once('/').ok_or_else(bad)?;
         let index: usize = a.trim().parse().map_err(|_| bad())?;
         let count: usize = b.trim().parse().map_err(|_| bad())?;
@@ -153,7 +156,12 @@ fn empty_like(c: &ColumnData) -> ColumnData {
     }
 }
 
-fn append(acc: &mut ColumnData, c: &ColumnData) -> Result<(), String> {
+/// Two parts of one column hold different kinds of values.
+#[derive(Debug, thiserror::Error)]
+#[error("{0} in one part, {1} in another")]
+struct KindMismatch(&'static str, &'static str);
+
+fn append(acc: &mut ColumnData, c: &ColumnData) -> Result<(), KindMismatch> {
     match (acc, c) {
         (ColumnData::F64(a), ColumnData::F64(b)) => a.extend_from_slice(b),
         (ColumnData::I64(a), ColumnData::I64(b)) => a.extend_from_slice(b),
@@ -163,7 +171,7 @@ fn append(acc: &mut ColumnData, c: &ColumnData) -> Result<(), String> {
         (ColumnData::OptF64(a), ColumnData::OptF64(b)) => a.extend_from_slice(b),
         // A f64 column without nulls in one part and with nulls in another.
         (ColumnData::OptF64(a), ColumnData::F64(b)) => a.extend(b.iter().map(|v| Some(*v))),
-        (a, b) => return Err(format!("{} in one part, {} in another", a.kind(), b.kind())),
+        (a, b) => return Err(KindMismatch(a.kind(), b.kind())),
     }
     Ok(())
 }

@@ -239,7 +239,11 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         chain.n_averages = v;
     }
     if let Some(w) = &c.window {
-        chain.window = w.parse().map_err(|m: String| ctx.err("chain.window", m))?;
+        chain.window = w
+            .parse()
+            .map_err(|m: crate::experiment::spec::UnknownWindow| {
+                ctx.err("chain.window", m.to_string())
+            })?;
     }
     match (c.force_noise_rms, c.force_noise_fraction) {
         (Some(_), Some(_)) => {

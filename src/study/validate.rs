@@ -522,10 +522,12 @@ fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measure
         None => None,
         Some(e) => {
             let key = "measurements.estimator";
-            let window = e
-                .window
-                .parse()
-                .map_err(|msg: String| ctx.err(format!("{key}.window"), msg))?;
+            let window =
+                e.window
+                    .parse()
+                    .map_err(|e: crate::experiment::spec::UnknownWindow| {
+                        ctx.err(format!("{key}.window"), e.to_string())
+                    })?;
             let block_s = ctx.positive(&format!("{key}.block_s"), e.block_s, "s")?;
             let fs_hz = match e.fs_hz {
                 Some(f) => ctx.positive(&format!("{key}.fs_hz"), f, "Hz")?,

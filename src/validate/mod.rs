@@ -67,6 +67,30 @@ pub enum ValidateError {
     Plot(String),
 }
 
+/// Why one validation unit failed: the unit's rows say so in their `status` and the run
+/// continues with the next unit.
+#[derive(Debug, thiserror::Error)]
+pub enum UnitError {
+    #[error("virtual experiment: {0}")]
+    Experiment(#[from] crate::experiment::ExperimentError),
+    #[error("forward model: {0}")]
+    Forward(#[from] crate::forward::ForwardError),
+    #[error("likelihood: {0}")]
+    Likelihood(#[from] crate::inference::likelihood::LikelihoodError),
+    #[error("MAP: {0}")]
+    Map(#[from] crate::inference::map::MapError),
+    #[error("re-linearisation at the MAP: {0}")]
+    Refine(#[from] crate::inference::refine::RefineError),
+    #[error("stepping-stone: {0}")]
+    Evidence(#[from] crate::inference::SamplerError),
+    #[error(transparent)]
+    Setup(#[from] ValidateError),
+    /// A numerical condition the unit cannot go on without (a covariance that is not positive
+    /// definite, no finite density on a grid).
+    #[error("{0}")]
+    Numerical(&'static str),
+}
+
 /// Central credible levels whose coverage is checked.
 pub const LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
 
@@ -253,7 +277,7 @@ impl Setup {
         law: &dyn ConstitutiveModel,
         params: &[f64],
         seed: u64,
-    ) -> Result<SimData, String> {
+    ) -> Result<SimData, UnitError> {
         let modulus = |w: f64| law.modulus(params, w);
         let plant = EnginePlant {
             engine: &self.rom,
@@ -265,7 +289,7 @@ impl Setup {
             seed,
             ..self.chain.clone()
         };
-        let sim = simulate_level(&plant, &chain).map_err(|e| e.to_string())?;
+        let sim = simulate_level(&plant, &chain)?;
         let n_out = sim.channels.len();
         let n_lines = sim.freq_hz.len();
         let mut values = Vec::with_capacity(n_lines * n_out);
@@ -288,9 +312,8 @@ impl Setup {
                     self.excitation,
                     &outputs,
                     Some(self.measurement.clone()),
-                )
-                .map_err(|e| e.to_string())?;
-                let mean = forward.predict(params, false).map_err(|e| e.to_string())?;
+                )?;
+                let mean = forward.predict(params, false)?;
                 let mut rng = unit_rng(seed, 0x006e_6f69_7365);
                 let mut v = Vec::with_capacity(values.len());
                 for (o, (x, g2)) in values.iter_mut().zip(&coherence).enumerate() {
@@ -328,7 +351,7 @@ impl Setup {
         sim: &SimData,
         median: &[f64],
         sigma_ln: f64,
-    ) -> Result<FrfPosterior<'a>, String> {
+    ) -> Result<FrfPosterior<'a>, UnitError> {
         let outputs: Vec<usize> = (0..self.point_ids.len()).collect();
         let forward = ForwardModel::new(
             &self.rom,
@@ -337,8 +360,7 @@ impl Setup {
             self.excitation,
             &outputs,
             Some(self.measurement.clone()),
-        )
-        .map_err(|e| e.to_string())?;
+        )?;
         let noise = NoiseModel {
             scale: match &sim.variances {
                 Some(v) => Scale::Fixed {
@@ -352,8 +374,7 @@ impl Setup {
             errors: ErrorLaw::Gaussian,
             model_error: 0.0,
         };
-        let lik = FrfLikelihood::new(forward, sim.data.clone(), noise, &self.point_ids)
-            .map_err(|e| e.to_string())?;
+        let lik = FrfLikelihood::new(forward, sim.data.clone(), noise, &self.point_ids)?;
         let priors = median
             .iter()
             .map(|&m| Prior::LogNormal {
@@ -361,7 +382,7 @@ impl Setup {
                 sigma_ln,
             })
             .collect();
-        FrfPosterior::new(lik, priors).map_err(|e| e.to_string())
+        Ok(FrfPosterior::new(lik, priors)?)
     }
 }
 
@@ -514,22 +535,21 @@ fn fit(
     median: &[f64],
     starts: usize,
     seed: u64,
-) -> Result<MapResult, String> {
+) -> Result<MapResult, UnitError> {
     let nl = median.len();
-    post.likelihood
-        .forward
-        .linearise_measurement(median)
-        .map_err(|e| e.to_string())?;
+    post.likelihood.forward.linearise_measurement(median)?;
     let x0 = post.unconstrained(median);
     let params = MapParams {
         n_starts: starts,
         seed,
         ..MapParams::default()
     };
-    let mut map = find_map(post, Some(&x0), &params, &|| ()).map_err(|e| e.to_string())?;
-    relinearise_to_map(post, &mut map, &params, nl).map_err(|e| e.to_string())?;
+    let mut map = find_map(post, Some(&x0), &params, &|| ())?;
+    relinearise_to_map(post, &mut map, &params, nl)?;
     if !map.laplace.positive_definite {
-        return Err("the Hessian at the MAP is not positive definite".into());
+        return Err(UnitError::Numerical(
+            "the Hessian at the MAP is not positive definite",
+        ));
     }
     Ok(map)
 }
@@ -575,7 +595,8 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
                 let mut post = setup.posterior(law.as_ref(), &sim, &truth, s.sigma_ln)?;
                 let map = fit(&mut post, &truth, spec.map_starts, map_seed)?;
                 let d = map.laplace.dim();
-                let l = cholesky(&map.laplace.cov_x, d).ok_or("Laplace covariance")?;
+                let l = cholesky(&map.laplace.cov_x, d)
+                    .ok_or(UnitError::Numerical("Laplace covariance"))?;
                 let mut ranks = vec![0usize; d];
                 for _ in 0..s.posterior_draws {
                     let z: Vec<f64> = (0..d)
@@ -591,12 +612,12 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
                         ranks[i] += (p[i] < theta[i]) as usize;
                     }
                 }
-                Ok::<_, String>((map.map_physical.clone(), map.laplace.sd_physical(), ranks))
+                Ok::<_, UnitError>((map.map_physical.clone(), map.laplace.sd_physical(), ranks))
             })();
             for (i, name) in names.iter().enumerate() {
                 let (map, sd, rank, status) = match &res {
                     Ok((m, sd, r)) => (m[i], sd[i], r[i], "ok".to_string()),
-                    Err(e) => (f64::NAN, f64::NAN, 0, e.clone()),
+                    Err(e) => (f64::NAN, f64::NAN, 0, e.to_string()),
                 };
                 rows.sbc.push(SbcRow {
                     unit: k,
@@ -629,13 +650,13 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
                 let b: Vec<[(f64, f64); 3]> = (0..names.len())
                     .map(|i| LEVELS.map(|lv| interval(&post, &map, i, lv)))
                     .collect();
-                Ok::<_, String>((map.map_physical.clone(), map.laplace.sd_physical(), b))
+                Ok::<_, UnitError>((map.map_physical.clone(), map.laplace.sd_physical(), b))
             })();
             for (i, name) in names.iter().enumerate() {
                 let nan = (f64::NAN, f64::NAN);
                 let (map, sd, bounds, status) = match &res {
                     Ok((m, sd, b)) => (m[i], sd[i], b[i], "ok".to_string()),
-                    Err(e) => (f64::NAN, f64::NAN, [nan; 3], e.clone()),
+                    Err(e) => (f64::NAN, f64::NAN, [nan; 3], e.to_string()),
                 };
                 rows.coverage.push(CoverageRow {
                     unit: k,
@@ -660,17 +681,15 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
             let sim_seed: u64 = rng.random();
             let map_seed: u64 = rng.random();
             let gen_name = &s.models[*generating];
-            let data = law_and_truth(setup, gen_name).and_then(|(law, truth)| {
-                setup
-                    .simulate(law.as_ref(), &truth, sim_seed)
-                    .map_err(ValidateError::Setup)
-            });
+            let data = law_and_truth(setup, gen_name)
+                .map_err(UnitError::from)
+                .and_then(|(law, truth)| setup.simulate(law.as_ref(), &truth, sim_seed));
             let mut cand: Vec<SelectionRow> = Vec::new();
             for (ci, name) in s.models.iter().enumerate() {
                 let res = match &data {
                     Err(e) => Err(e.to_string()),
                     Ok(sim) => law_and_truth(setup, name)
-                        .map_err(|e| e.to_string())
+                        .map_err(UnitError::from)
                         .and_then(|(law, truth)| {
                             let mut post =
                                 setup.posterior(law.as_ref(), sim, &truth, s.sigma_ln)?;
@@ -681,7 +700,8 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
                                 map_seed ^ (ci as u64 + 1),
                             )?;
                             Ok((map.laplace.log_evidence, map.laplace.log_likelihood))
-                        }),
+                        })
+                        .map_err(|e| e.to_string()),
                 };
                 let (le, ll, status) = match res {
                     Ok((le, ll)) => (le, ll, "ok".to_string()),
@@ -719,7 +739,7 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
             let map_seed: u64 = rng.random();
             let ss_seed: u64 = rng.random();
             let res = (|| {
-                let (law, truth) = law_and_truth(setup, name).map_err(|e| e.to_string())?;
+                let (law, truth) = law_and_truth(setup, name)?;
                 let sim = setup.simulate(law.as_ref(), &truth, sim_seed)?;
                 let mut post = setup.posterior(law.as_ref(), &sim, &truth, q.sigma_ln)?;
                 let map = fit(&mut post, &truth, spec.map_starts, map_seed)?;
@@ -741,8 +761,7 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
                             ..SteppingStoneParams::default()
                         },
                         &crate::inference::no_progress,
-                    )
-                    .map_err(|e| e.to_string())?;
+                    )?;
                     out.push((
                         "stepping_stone".to_string(),
                         r.log_evidence,
@@ -750,7 +769,7 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
                         r.n_loglik as usize,
                     ));
                 }
-                Ok::<_, String>(out)
+                Ok::<_, UnitError>(out)
             })();
             match res {
                 Ok(v) => {
@@ -775,7 +794,7 @@ fn run_unit(spec: &ValidationSpec, setup: &Setup, k: usize, unit: &Unit) -> Rows
                     log_evidence: f64::NAN,
                     se: f64::NAN,
                     evaluations: 0,
-                    status: e,
+                    status: e.to_string(),
                 }),
             }
         }
@@ -794,10 +813,12 @@ pub fn quadrature_log_evidence(
     map: &MapResult,
     n: usize,
     h: f64,
-) -> Result<(f64, usize), String> {
+) -> Result<(f64, usize), UnitError> {
     let lap = &map.laplace;
     let d = lap.dim();
-    let l = cholesky(&lap.cov_x, d).ok_or("the Laplace covariance is not positive definite")?;
+    let l = cholesky(&lap.cov_x, d).ok_or(UnitError::Numerical(
+        "the Laplace covariance is not positive definite",
+    ))?;
     let logdet_l: f64 = (0..d).map(|i| l[i * d + i].ln()).sum();
     let step = 2.0 * h / (n - 1) as f64;
     let total = n.pow(d as u32);
@@ -826,7 +847,9 @@ pub fn quadrature_log_evidence(
         .collect();
     let mx = vals.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !mx.is_finite() {
-        return Err("no finite posterior density on the quadrature grid".into());
+        return Err(UnitError::Numerical(
+            "no finite posterior density on the quadrature grid",
+        ));
     }
     let s: f64 = vals.iter().map(|v| (v - mx).exp()).sum();
     Ok((mx + s.ln() + d as f64 * step.ln() + logdet_l, total))
