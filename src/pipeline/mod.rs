@@ -26,6 +26,7 @@ mod executor;
 mod lower;
 mod plan;
 pub(crate) mod results;
+pub(crate) mod tables;
 
 pub use crate::stage::{Event, RunError};
 pub use check::{check, check_study, CheckSummary};
@@ -39,7 +40,6 @@ pub use results::{IdentifiedParameters, Results, LOOP_DIR};
 
 use crate::frf::FrfEngine;
 use crate::study::build::BuiltModel;
-use crate::study::Study;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
@@ -239,32 +239,4 @@ fn run_here(
         closed_loop,
         mesh_error,
     )
-}
-
-/// Run a study: identification, correlation, tables, figures, report and manifest in
-/// `study.output_dir` (or `opts.output_dir`), replaced atomically as a whole (module doc).
-/// The same path as [`run`] then [`crate::report::write`].
-pub fn run_study(
-    study: &Study,
-    opts: &RunOptions,
-    progress: &(dyn Fn(Event) + Sync),
-) -> Result<RunSummary, RunError> {
-    let mut plan = study.plan()?;
-    if let Some(d) = &opts.output_dir {
-        plan.output_dir = d.clone();
-    }
-    plan.figures &= !opts.no_figures;
-    let mut ex = Executor::new();
-    if let Some(d) = &opts.rom_cache {
-        ex = ex.rom_cache(d.clone());
-    }
-    let results = run_with(&plan, &mut ex, progress)?;
-    let written = crate::report::write_with(&results, &plan.output_dir, progress)?;
-    Ok(RunSummary {
-        study: study.name.clone(),
-        output_dir: plan.output_dir.clone(),
-        files: written.files,
-        models: results.model_summaries(),
-        seconds: results.seconds() + written.seconds,
-    })
 }

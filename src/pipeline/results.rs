@@ -112,7 +112,7 @@ impl Results {
         mesh_error: Vec<crate::runner::preflight::ModeDiscretisation>,
     ) -> Result<Results, RunError> {
         let mut tables = Vec::new();
-        for t in crate::runner::write::tables(&levels, &level_results)? {
+        for t in crate::pipeline::tables::all(&levels, &level_results)? {
             let df = t.to_dataframe()?;
             tables.push((t.name().to_string(), t, df));
         }
@@ -258,7 +258,7 @@ impl Results {
     /// `model` at `level`, parameters in the order of [`PosteriorResult::names`].
     pub fn summaries(&self, level: &str, model: &str) -> Vec<(String, Vec<Summary>)> {
         self.posterior(level, model)
-            .map(crate::runner::write_bayes::summaries)
+            .map(crate::pipeline::tables::summaries)
             .unwrap_or_default()
     }
     /// The plan's results folder (where `rfmlab run` writes these results).

@@ -6,12 +6,20 @@
 //! into a temporary sibling `<dir>.tmp-<pid>` that is then swapped with `dir`. A failed or
 //! killed write leaves the previous results intact; a temporary folder left by a killed run is
 //! deleted by the next write to the same folder.
+//!
+//! What is written comes from `tables` (every parquet table, its columns and units),
+//! `figures` (the PNG and SVG figures) and `markdown` (the sections of report.md).
+//! [`run_study`] runs a study and writes its results in one call.
+
+mod figures;
+mod markdown;
 
 use crate::output::{Manifest, ResultsDir};
 use crate::pipeline::results::{Results, LOOP_DIR};
-use crate::runner::preflight::ModeDiscretisation;
-use crate::runner::{closed_loop, write, write_bayes, write_compare, write_levels};
+use crate::pipeline::{Executor, RunOptions, RunSummary};
+use crate::runner::closed_loop;
 use crate::runner::{Event, RunError};
+use crate::study::Study;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -47,6 +55,34 @@ pub fn write_with(
     })
 }
 
+/// Run a study: identification, correlation, tables, figures, report and manifest in
+/// `study.output_dir` (or `opts.output_dir`), replaced atomically as a whole (module doc).
+/// The same path as [`crate::pipeline::run`] then [`write`].
+pub fn run_study(
+    study: &Study,
+    opts: &RunOptions,
+    progress: &(dyn Fn(Event) + Sync),
+) -> Result<RunSummary, RunError> {
+    let mut plan = study.plan()?;
+    if let Some(d) = &opts.output_dir {
+        plan.output_dir = d.clone();
+    }
+    plan.figures &= !opts.no_figures;
+    let mut ex = Executor::new();
+    if let Some(d) = &opts.rom_cache {
+        ex = ex.rom_cache(d.clone());
+    }
+    let results = crate::pipeline::run_with(&plan, &mut ex, progress)?;
+    let written = write_with(&results, &plan.output_dir, progress)?;
+    Ok(RunSummary {
+        study: study.name.clone(),
+        output_dir: plan.output_dir.clone(),
+        files: written.files,
+        models: results.model_summaries(),
+        seconds: results.seconds() + written.seconds,
+    })
+}
+
 /// Write every result file of `results` into the (new, empty) folder `dir`: tables, figures
 /// when asked for, report.md, and manifest.json last. Returns the files written.
 fn fill(
@@ -62,8 +98,6 @@ fn fill(
         .unwrap_or_default();
     let mut out = ResultsDir::create(&parent, &name)?;
     let study = results.study();
-    let levels = results.levels();
-    let level_results = results.level_results();
     progress(Event::Start {
         step: "writing results".into(),
         total: 0,
@@ -71,11 +105,8 @@ fn fill(
     for table in results.top_tables() {
         out.write_table(table)?;
     }
-    let posts: Vec<&crate::runner::bayes::PosteriorResult> = results.posteriors().collect();
     let figs = if results.figures {
-        let mut f = write::draw_figures(out.path(), levels, level_results)?;
-        f.extend(write_bayes::figures(out.path(), &posts)?);
-        f.extend(write_levels::figures(out.path(), level_results)?);
+        let f = figures::draw(out.path(), results)?;
         for (png, _) in &f {
             out.record(png);
             out.record(png.replace(".png", ".svg"));
@@ -84,22 +115,7 @@ fn fill(
     } else {
         Vec::new()
     };
-    let engine_note = results.engine_note();
-    let loop_status = results
-        .closed_loop()
-        .map(|o| closed_loop::status_line(&o.summary.levels));
-    let mut report = write::build_report(
-        study,
-        levels,
-        level_results,
-        &figs,
-        engine_note,
-        loop_status.as_deref(),
-    );
-    mesh_error_section(&mut report, results.mesh_error());
-    write_bayes::report(&mut report, levels, &posts, &figs);
-    write_compare::report(&mut report, &posts);
-    write_levels::report(&mut report, level_results, &figs);
+    let mut report = markdown::build(results, &figs);
     if let Some(o) = results.closed_loop() {
         let sub = LOOP_DIR;
         let mut d = ResultsDir::create(out.path(), sub)?;
@@ -118,7 +134,7 @@ fn fill(
     for (name, n) in results.counters() {
         manifest.add_count(name.clone(), *n);
     }
-    manifest.add_note(engine_note.to_string());
+    manifest.add_note(results.engine_note().to_string());
     manifest.add_note(
         "results written into a temporary folder and swapped into place at the end".to_string(),
     );
@@ -127,42 +143,4 @@ fn fill(
     let mut files = out.written().to_vec();
     files.push("manifest.json".into());
     Ok(files)
-}
-
-/// The mesh's discretisation error per low mode (`[analyses] mesh_error`), with the warnings
-/// `rfmlab check` gives.
-fn mesh_error_section(report: &mut crate::output::Report, modes: &[ModeDiscretisation]) {
-    let Some(first) = modes.first() else {
-        return;
-    };
-    report.heading(2, "Mesh discretisation error");
-    report.paragraph(&format!(
-        "Richardson extrapolation from the study's mesh and the mesh refined twice per direction (order {}), real modes at the first model's initial storage modulus. The posterior's intervals do not include this error.",
-        first.order
-    ));
-    let rows: Vec<Vec<String>> = modes
-        .iter()
-        .map(|d| {
-            vec![
-                d.mode.to_string(),
-                format!("{:.4}", d.freq_hz),
-                format!("{:.4}", d.freq_refined_hz),
-                format!("{:+.3e}", d.error_hz),
-                format!("{:+.3}", 100.0 * d.rel_error),
-            ]
-        })
-        .collect();
-    report.table(
-        &[
-            "mode",
-            "f, study mesh (Hz)",
-            "f, refined (Hz)",
-            "estimated error (Hz)",
-            "error (%)",
-        ],
-        &rows,
-    );
-    for w in crate::runner::preflight::mesh_error_warnings(modes) {
-        report.paragraph(&format!("**Warning**: {w}"));
-    }
 }

@@ -6,8 +6,8 @@
 //! likelihood per line with PSIS-LOO
 //! and WAIC, and posterior predictive criteria (FRAC per FRF, SCC(w), ACC(w) over thinned
 //! draws; standardised residuals and a chi-square test per channel at the MAP). Across models
-//! (Bayes factors, model probabilities) it is done when writing, in
-//! [`super::write_compare`].
+//! (Bayes factors, model probabilities) it is done when writing, in the report's
+//! model-comparison table (`report/tables/comparison.rs`).
 //!
 //! # Priors widened ten-fold
 //! Each law parameter's prior keeps its centre and family and gets ten times its width in its

@@ -578,7 +578,7 @@ mod study_run {
             output_dir: Some(root.join("results/bayes_compare")),
             ..Default::default()
         };
-        let s = crate::pipeline::run_study(&study, &opts, &|_| ()).unwrap();
+        let s = crate::report::run_study(&study, &opts, &|_| ()).unwrap();
         println!("total {:.1} s, files {:?}", s.seconds, s.files);
         let m = std::fs::read_to_string(root.join("results/bayes_compare/manifest.json")).unwrap();
         println!("{m}");

@@ -13,8 +13,9 @@
 //!    and the analyses: per-line RFM (paper eq. 10-11, Fig. 13/18), Model 1 over bands (case
 //!    study 1), circle fit (Table 2) and IEM (eq. 20, Table 3), global RFM per model (eq. 37,
 //!    Tables 4-5), correlation (FRAC eq. 38, SCC eq. 39, ACC eq. 40) and sensitivities (Fig. 9);
-//! 4. the tables, figures and report sections of the results ([`write`] lists the tables, their
-//!    columns and units), written by [`crate::report::write`] in one atomic folder swap.
+//! 4. the tables, figures and report sections of the results (`report/tables/` lists the
+//!    tables, their columns and units), written by [`crate::report::write`] in one atomic
+//!    folder swap.
 
 pub mod basins;
 pub mod bayes;
@@ -32,13 +33,10 @@ pub mod redundancy;
 mod sample;
 pub(crate) mod settings;
 pub mod terms;
-pub mod write;
-pub(crate) mod write_bayes;
-pub(crate) mod write_compare;
-pub(crate) mod write_levels;
 
 pub use crate::stage::{Event, LevelData, LevelTruth, RunError};
 // Old paths, removed once every caller moved.
+pub(crate) use crate::identify::frf_of;
 pub use crate::identify::{BandConstantResult, GlobalResult, IemBandResult, SensitivityCurves};
 pub use crate::pipeline::results::LevelResults;
 pub use crate::pipeline::{ModelSummary, RunOptions, RunSummary};

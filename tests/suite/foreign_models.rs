@@ -16,7 +16,8 @@ use rfmlab::common::C64;
 use rfmlab::fe::foreign::{import_model_files, ImportFiles, ImportFormat, Units};
 use rfmlab::fe::harwell_boeing::{format_hb, parse_hb};
 use rfmlab::fe::model::StructuralModel;
-use rfmlab::pipeline::{run_study, RunOptions};
+use rfmlab::pipeline::RunOptions;
+use rfmlab::report::run_study;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 

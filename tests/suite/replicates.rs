@@ -36,7 +36,8 @@ use rfmlab::experiment::{
     simulate_level, ChainParams, ChannelLabel, ExperimentError, Mode, NoiseLevel, Plant,
 };
 use rfmlab::output::{ColumnData, Table};
-use rfmlab::pipeline::{run_study, RunOptions};
+use rfmlab::pipeline::RunOptions;
+use rfmlab::report::run_study;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::Mutex;

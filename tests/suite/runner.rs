@@ -7,7 +7,8 @@ use crate::python_checks::{check_parquet, python_for_parquet};
 use crate::runner_common::*;
 
 use rfmlab::output::Table;
-use rfmlab::pipeline::{run_study, RunOptions};
+use rfmlab::pipeline::RunOptions;
+use rfmlab::report::run_study;
 
 fn no_progress(_: rfmlab::runner::Event) {}
 
