@@ -1,5 +1,5 @@
 //! `rfmlab material STUDY.toml`: the material-level loop on measured E'(w), E''(w)
-//! ([`rfmlab::runner::material`]).
+//! ([`rfmlab::report::material`]).
 
 use super::common::{print_json, Global};
 use std::path::PathBuf;
@@ -23,7 +23,7 @@ pub fn run(a: &MaterialArgs, g: &Global) -> anyhow::Result<()> {
         study.output_dir = o.clone();
     }
     let sp = super::common::spinner(g, "material loop");
-    let summary = rfmlab::runner::material::run_material(&study)?;
+    let summary = rfmlab::report::material::run_material(&study)?;
     sp.finish_and_clear();
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;

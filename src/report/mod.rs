@@ -13,6 +13,7 @@
 
 mod figures;
 mod markdown;
+pub mod material;
 
 use crate::output::{Manifest, ResultsDir};
 use crate::pipeline::results::{Results, LOOP_DIR};

@@ -24,7 +24,6 @@ pub mod compare;
 pub mod declared;
 mod evidence_ref;
 pub mod levels;
-pub mod material;
 pub mod posterior;
 pub use crate::pipeline::{check_study, CheckSummary};
 pub use crate::stage::preflight; // old path // old paths
