@@ -23,6 +23,7 @@
 //! | [`study`] | study files: TOML as written -> validated typed study (outside the numerical core) |
 //! | [`output`] | parquet tables, manifest, atomic writes (outside the numerical core) |
 //! | [`plot`] | PNG/SVG figures (outside the numerical core) |
+//! | [`diagnose`] | the closed loop as a stage of a run and `rfmlab diagnose`: candidate effects and their term ROM, the loop at every level, its verdict, tables and markdown (outside the numerical core) |
 //! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
 //!
 //! Numerical modules never import `study`, `output`, `plot` or the CLI.
@@ -70,6 +71,7 @@ pub mod closed_loop;
 pub mod common;
 pub mod correlation;
 pub mod data;
+pub mod diagnose;
 pub mod experiment;
 pub mod fe;
 pub mod forward;

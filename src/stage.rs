@@ -83,4 +83,3 @@ impl LevelTruth {
         self.model.modulus(&self.params, omega_rad_s)
     }
 }
-

@@ -145,7 +145,7 @@ impl Plan {
         }
         let closed_loop = (s.inference.is_some()
             && s.closed_loop.as_ref().is_some_and(|c| c.enabled))
-        .then(|| crate::runner::closed_loop::params_of(s));
+        .then(|| crate::diagnose::params_of(s));
         Ok(Plan {
             engine: EngineParams {
                 engine: s.solver.engine,

@@ -18,7 +18,6 @@
 
 pub mod basins;
 pub mod bayes;
-pub mod closed_loop;
 pub mod compare;
 mod compute;
 pub mod declared;
@@ -28,18 +27,22 @@ pub mod levels;
 pub mod material;
 pub mod posterior;
 pub mod preflight;
-pub mod prepared;
 pub mod redundancy;
 mod sample;
 mod settings;
 pub mod simulate;
-pub mod terms;
 pub mod write;
 pub(crate) mod write_bayes;
 pub(crate) mod write_compare;
 pub(crate) mod write_levels;
 
 pub use crate::stage::{Event, LevelData, LevelTruth, RunError};
+// Old paths of the closed loop's stage (now `crate::diagnose`), removed once every caller
+// moved.
+pub mod closed_loop {
+    pub use crate::diagnose::*;
+}
+pub use crate::diagnose::{prepared, terms};
 pub use compute::{
     BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,
 };
@@ -408,28 +411,6 @@ impl FrfEngine for RomEngine {
     }
 }
 
-/// The modulus range the ROM must cover: every model's initial E*(w) over the band, the
-/// default identification range of the ROM, widened by a factor 2 either way.
-fn modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange {
-    let mut r = crate::rom::ModulusRange::default();
-    for m in &study.models {
-        let Ok(law) = crate::material::model_from_name(&m.name, m.branches) else {
-            continue;
-        };
-        for k in 0..=20 {
-            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / 20.0;
-            let e = law.modulus(&m.initial, TWO_PI * f.max(1e-3));
-            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 {
-                r.e_storage_pa.0 = r.e_storage_pa.0.min(e.re / 2.0);
-                r.e_storage_pa.1 = r.e_storage_pa.1.max(e.re * 2.0);
-                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im.max(0.0) / 2.0);
-                r.e_loss_pa.1 = r.e_loss_pa.1.max(e.im * 2.0);
-            }
-        }
-    }
-    r
-}
-
 /// The run's FRF engines.
 pub(crate) struct Engines {
     /// Inputs at every measured point.
@@ -498,7 +479,7 @@ pub(crate) fn build_engine(
                 .fold(0.0, f64::max);
             let params = crate::rom::RomParams {
                 band_hz: (lo, hi),
-                range: modulus_range(study, (lo, hi)),
+                range: crate::study::build::initial_modulus_range(&study.models, (lo, hi)),
                 tolerance: study.solver.rom_tolerance,
                 // An uncertified ROM is used with a warning in the manifest and report (its
                 // measured error is stated) rather than failing the run.
@@ -582,7 +563,10 @@ pub(crate) fn build_engine(
                 Some(_) => {
                     // The closed loop and declared point masses need the receptances of
                     // every measured point: then all inputs.
-                    let lik_inputs = if closed_loop::needs_all_inputs(study) {
+                    let lik_inputs = if crate::study::effects::needs_all_inputs(
+                        study.closed_loop.as_ref(),
+                        &study.declared_effects,
+                    ) {
                         rom.inputs().to_vec()
                     } else {
                         vec![built.excitation]
