@@ -1,7 +1,7 @@
 //! Wall time of the closed loop for one level (candidates ranked by the score test, the top
 //! three refitted, the winner confirmed by evidence, then a second round that accepts
 //! nothing) on `studies/closed_loop_mass.toml` (the default rig, ROM engine, 12 g undeclared
-//! mass at point 4): median of a few runs of [`rfmlab::runner::closed_loop::diagnose_study`],
+//! mass at point 4): median of a few runs of [`rfmlab::diagnose::diagnose_study`],
 //! the loop alone (`loop_seconds`) and the whole command (engine build included). The old path
 //! (every refit a full multistart search) runs side by side when RFMLAB_BENCH_OLD=1.
 //! Run with `cargo bench --bench closed_loop`; RFMLAB_BENCH_RUNS sets the runs (default 3).
@@ -53,8 +53,7 @@ fn main() {
         let (mut loop_s, mut total_s) = (Vec::new(), Vec::new());
         let mut conclusion = String::new();
         for _ in 0..runs {
-            let s = rfmlab::runner::closed_loop::diagnose_study(&study, None, &params)
-                .expect("diagnose");
+            let s = rfmlab::diagnose::diagnose_study(&study, None, &params).expect("diagnose");
             loop_s.push(s.levels.iter().map(|l| l.loop_seconds).sum::<f64>());
             total_s.push(s.seconds);
             conclusion = s

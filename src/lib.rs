@@ -27,6 +27,7 @@
 //! | [`output`] | parquet tables, manifest, atomic writes (outside the numerical core) |
 //! | [`plot`] | PNG/SVG figures (outside the numerical core) |
 //! | [`stage`] | what every stage of a run shares: a level's measured data, progress events, the run's error |
+//! | [`diagnose`] | the closed loop as a stage of a run and `rfmlab diagnose`: candidate effects and their term ROM, the loop at every level, its verdict, tables and markdown (outside the numerical core) |
 //! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
 //!
 //! Numerical modules never import `study`, `output`, `plot` or the CLI.
@@ -74,6 +75,7 @@ pub mod closed_loop;
 pub mod common;
 pub mod correlation;
 pub mod data;
+pub mod diagnose;
 pub mod experiment;
 pub mod fe;
 pub mod forward;

@@ -9,9 +9,9 @@
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 use rfmlab::data::FrfSet;
+use rfmlab::diagnose::prepared::Prepared;
 use rfmlab::inference::likelihood::FrfPosterior;
 use rfmlab::inference::{DensityError, Posterior as _};
-use rfmlab::runner::prepared::Prepared;
 use rfmlab::runner::RunError;
 use rfmlab::study::StudyError;
 use std::path::PathBuf;

@@ -144,7 +144,7 @@ pub(crate) fn diagnose(
 ) -> PyResult<String> {
     use rfmlab::closed_loop::{ClosedLoopParams, Progress as LoopProgress};
     let r = drive(py, callback, move |tx, _cancel| {
-        let from_study = rfmlab::runner::closed_loop::params_of(study);
+        let from_study = rfmlab::diagnose::params_of(study);
         let tx = std::sync::Mutex::new(tx);
         let params = ClosedLoopParams {
             threshold_nats: threshold_nats.unwrap_or(from_study.threshold_nats),
@@ -175,7 +175,7 @@ pub(crate) fn diagnose(
                 (t.clone(), "diagnose".to_string(), Some(t))
             }
         };
-        let s = rfmlab::runner::closed_loop::diagnose_into(
+        let s = rfmlab::diagnose::diagnose_into(
             study,
             model.as_deref(),
             &params,
@@ -213,7 +213,7 @@ pub(crate) fn execute(
                     message: "the closed loop needs an [inference] section (its noise model and priors define the likelihood the loop tests); add one as in studies/bayes.toml".into(),
                 }));
             }
-            plan.closed_loop = Some(rfmlab::runner::closed_loop::params_of(study));
+            plan.closed_loop = Some(rfmlab::diagnose::params_of(study));
         }
         Some(false) => plan.closed_loop = None,
         _ => {}

@@ -1,4 +1,4 @@
-//! `rfmlab diagnose STUDY.toml`: the closed loop ([`rfmlab::runner::closed_loop`]).
+//! `rfmlab diagnose STUDY.toml`: the closed loop ([`rfmlab::diagnose`]).
 
 use super::common::{print_json, Global, InputError};
 use rfmlab::closed_loop::ClosedLoopParams;
@@ -43,7 +43,7 @@ pub fn run(a: &DiagnoseArgs, g: &Global) -> anyhow::Result<()> {
     }
     let study = super::common::load_study(&a.study)?;
     let sp = super::common::spinner(g, "closing the loop");
-    let from_study = rfmlab::runner::closed_loop::params_of(&study);
+    let from_study = rfmlab::diagnose::params_of(&study);
     let shown = sp.clone();
     let params = ClosedLoopParams {
         threshold_nats: a.threshold_nats.unwrap_or(from_study.threshold_nats),
@@ -63,7 +63,7 @@ pub fn run(a: &DiagnoseArgs, g: &Global) -> anyhow::Result<()> {
         ..from_study
     };
     let summary = match &a.output {
-        None => rfmlab::runner::closed_loop::diagnose_study(&study, a.model.as_deref(), &params),
+        None => rfmlab::diagnose::diagnose_study(&study, a.model.as_deref(), &params),
         Some(o) => {
             let parent = o
                 .parent()
@@ -73,7 +73,7 @@ pub fn run(a: &DiagnoseArgs, g: &Global) -> anyhow::Result<()> {
                 .file_name()
                 .map(|n| n.to_string_lossy().into_owned())
                 .ok_or_else(|| InputError(format!("-o {}: give a folder name", o.display())))?;
-            rfmlab::runner::closed_loop::diagnose_into(
+            rfmlab::diagnose::diagnose_into(
                 &study,
                 a.model.as_deref(),
                 &params,

@@ -32,8 +32,7 @@ pub use crate::stage::{Event, RunError};
 pub use check::{check, check_study, CheckSummary};
 pub use executor::{Executor, Observer};
 pub use plan::{
-    engine_params, DataParams, EngineParams, IdentificationParams, InferenceParams, Plan,
-    SamplerParams,
+    DataParams, EngineParams, IdentificationParams, InferenceParams, Plan, SamplerParams,
 };
 pub use results::ModelSummary;
 pub use results::{IdentifiedParameters, Results, LOOP_DIR};
@@ -217,9 +216,15 @@ fn run_here(
                     total: 0,
                 })
             });
-            let o = crate::runner::closed_loop::loop_stage(
-                study, &built, &data, &laws, lik, None, &params,
-            )?;
+            let stage = crate::diagnose::DiagnoseParams::of(study, None)?;
+            let inputs = crate::diagnose::LoopInputs {
+                built: &built,
+                levels: &data,
+                laws: &laws,
+                engine: lik,
+                posterior: &crate::diagnose::StudyPosterior(study),
+            };
+            let o = crate::diagnose::loop_stage(&stage, &params, &inputs)?;
             progress(Event::Finish);
             ex.lap("closed loop")?;
             Some(o)

@@ -118,9 +118,9 @@ impl Plan {
         }
         let closed_loop = (s.inference.is_some()
             && s.closed_loop.as_ref().is_some_and(|c| c.enabled))
-        .then(|| crate::runner::closed_loop::params_of(s));
+        .then(|| crate::diagnose::params_of(s));
         Ok(Plan {
-            engine: engine_params(s),
+            engine: EngineParams::of(s),
             data,
             identification: IdentificationParams {
                 models: s.models.clone(),
@@ -161,18 +161,5 @@ pub(super) fn sampler_params(inf: &Inference) -> SamplerParams {
         map_max_iterations: inf.map_max_iterations,
         linearised_measurement: inf.linearised_measurement,
         channel_correlation: inf.channel_correlation,
-    }
-}
-
-/// The engine stage's parameters of a study.
-pub fn engine_params(s: &Study) -> EngineParams {
-    EngineParams {
-        engine: s.solver.engine,
-        rom_tolerance: s.solver.rom_tolerance,
-        threads: s.solver.threads,
-        likelihood: s
-            .inference
-            .as_ref()
-            .map(|_| crate::runner::closed_loop::needs_all_inputs(s)),
     }
 }

@@ -4,11 +4,11 @@
 //! writes as parquet, as polars `DataFrame`s named by the file stems (`parameters`, `draws`,
 //! `summary`, ...).
 
+use crate::diagnose::LoopOutcome;
 use crate::identify::{GlobalResult, Identification};
 use crate::inference::diagnostics::Summary;
 use crate::output::Table;
 use crate::runner::bayes::PosteriorResult;
-use crate::runner::closed_loop::LoopOutcome;
 use crate::runner::posterior::Draws;
 use crate::stage::{LevelData, RunError};
 use crate::study::Study;
@@ -117,7 +117,7 @@ impl Results {
             tables.push((t.name().to_string(), t, df));
         }
         if let Some(o) = &closed_loop {
-            for t in crate::runner::closed_loop::loop_tables(o)? {
+            for t in crate::diagnose::loop_tables(o)? {
                 let df = t.to_dataframe()?;
                 tables.push((format!("{}/{}", LOOP_DIR, t.name()), t, df));
             }

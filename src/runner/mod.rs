@@ -19,19 +19,16 @@
 
 pub mod basins;
 pub mod bayes;
-pub mod closed_loop;
 pub mod compare;
 pub mod declared;
 mod evidence_ref;
 pub mod levels;
 pub mod posterior;
 pub use crate::pipeline::{check_study, CheckSummary};
-pub use crate::stage::preflight; // old path // old paths
-pub mod prepared;
+pub use crate::stage::preflight;
 pub mod redundancy;
 mod sample;
 pub(crate) mod settings;
-pub mod terms;
 
 pub use crate::stage::{Event, LevelData, LevelTruth, RunError};
 // Old paths, removed once every caller moved.
@@ -39,22 +36,14 @@ pub(crate) use crate::identify::frf_of;
 pub use crate::identify::{BandConstantResult, GlobalResult, IemBandResult, SensitivityCurves};
 pub use crate::pipeline::results::LevelResults;
 pub use crate::pipeline::{ModelSummary, RunOptions, RunSummary};
+pub mod closed_loop {
+    pub use crate::diagnose::*;
+}
+pub use crate::diagnose::{prepared, terms};
 
 use crate::study::build::BuiltModel;
 use crate::study::{Study, StudyError};
-use std::path::{Path, PathBuf};
-
-/// Build the model of a study (errors name the study file).
-pub(crate) fn build(study: &Study) -> Result<BuiltModel, RunError> {
-    crate::stage::engine::build(&study.structure, &study.file)
-}
-
-/// Check every model spec: known name, parameters in range (the study validation does most).
-pub(crate) fn model_laws(
-    study: &Study,
-) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
-    crate::identify::model_laws(&study.models, &study.file)
-}
+use std::path::PathBuf;
 
 fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) -> RunError {
     RunError::Study(StudyError {
@@ -69,35 +58,7 @@ pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, 
     crate::stage::data::load_levels(study.measurements.as_ref(), built, &study.file)
 }
 
-/// Old path of [`crate::stage::engine::build_engine`], removed once every caller moved.
-pub(crate) fn build_engine(
-    study: &Study,
-    built: &BuiltModel,
-    levels: &mut [LevelData],
-    laws: &[Box<dyn crate::material::ConstitutiveModel>],
-    rom_cache: Option<&Path>,
-) -> Result<crate::stage::engine::Engines, RunError> {
-    let params = crate::pipeline::engine_params(study);
-    let m = crate::stage::engine::ModelsAndData {
-        models: &study.models,
-        laws,
-        estimator: study
-            .measurements
-            .as_ref()
-            .and_then(|m| m.estimator.as_ref()),
-        file: &study.file,
-    };
-    crate::stage::engine::build_engine(&params, &m, built, levels, rom_cache)
-}
-
-/// Old path of [`crate::stage::engine::modulus_range`].
-pub(crate) fn modulus_range(study: &Study, band_hz: (f64, f64)) -> crate::rom::ModulusRange {
-    crate::stage::engine::modulus_range(&study.models, band_hz)
-}
-
 /// Old path of [`crate::stage::rom_cache_dir`].
 pub fn rom_cache_dir(study: &Study) -> PathBuf {
     crate::stage::rom_cache_dir(&study.output_dir)
 }
-
-pub(crate) use crate::stage::sibling;

@@ -14,8 +14,6 @@ use crate::study::build::BuiltModel;
 use crate::study::{Engine, Estimator, ModelSpec, Structure};
 use std::path::Path;
 
-const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
-
 /// The FRF engine stage.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EngineParams {
@@ -29,6 +27,22 @@ pub struct EngineParams {
     /// point as an input (`Some(true)`: the closed loop and declared point masses need their
     /// receptances) or the excitation column only (`Some(false)`).
     pub likelihood: Option<bool>,
+}
+
+impl EngineParams {
+    /// The engine stage's parameters of a study (`[solver]`; a likelihood engine with
+    /// `[inference]`, with every measured point as an input for the closed loop and declared
+    /// point masses).
+    pub fn of(s: &crate::study::Study) -> EngineParams {
+        EngineParams {
+            engine: s.solver.engine,
+            rom_tolerance: s.solver.rom_tolerance,
+            threads: s.solver.threads,
+            likelihood: s.inference.as_ref().map(|_| {
+                crate::study::effects::needs_all_inputs(s.closed_loop.as_ref(), &s.declared_effects)
+            }),
+        }
+    }
 }
 
 /// The laws and the measurement the engine is built for.
@@ -132,28 +146,6 @@ impl FrfEngine for RomEngine {
     }
 }
 
-/// The modulus range the ROM must cover: every model's initial E*(w) over the band, the
-/// default identification range of the ROM, widened by a factor 2 either way.
-pub fn modulus_range(models: &[ModelSpec], band_hz: (f64, f64)) -> crate::rom::ModulusRange {
-    let mut r = crate::rom::ModulusRange::default();
-    for m in models {
-        let Ok(law) = crate::material::model_from_name(&m.name, m.branches) else {
-            continue;
-        };
-        for k in 0..=20 {
-            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / 20.0;
-            let e = law.modulus(&m.initial, TWO_PI * f.max(1e-3));
-            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 {
-                r.e_storage_pa.0 = r.e_storage_pa.0.min(e.re / 2.0);
-                r.e_storage_pa.1 = r.e_storage_pa.1.max(e.re * 2.0);
-                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im.max(0.0) / 2.0);
-                r.e_loss_pa.1 = r.e_loss_pa.1.max(e.im * 2.0);
-            }
-        }
-    }
-    r
-}
-
 /// The run's FRF engines.
 pub struct Engines {
     /// Inputs at every measured point.
@@ -228,7 +220,7 @@ pub fn build_engine(
                 .fold(0.0, f64::max);
             let params = crate::rom::RomParams {
                 band_hz: (lo, hi),
-                range: modulus_range(models, (lo, hi)),
+                range: crate::study::build::initial_modulus_range(models, (lo, hi)),
                 tolerance: engine_params.rom_tolerance,
                 // An uncertified ROM is used with a warning in the manifest and report (its
                 // measured error is stated) rather than failing the run.
@@ -426,4 +418,45 @@ pub fn check_initial_values(
         n_checked += omega.len();
     }
     Ok(n_checked)
+}
+
+/// What a command that runs one stage of a study starts from (`rfmlab diagnose`, a prepared
+/// posterior): the laws, the built model, the levels' data and the engines, made as
+/// `rfmlab run` makes them.
+pub struct Setup {
+    pub laws: Vec<Box<dyn ConstitutiveModel>>,
+    pub built: BuiltModel,
+    pub levels: Vec<LevelData>,
+    pub engines: Engines,
+}
+
+/// The [`Setup`] of `study`, reusing certified ROMs from `rom_cache` when given. The one
+/// function of the stages that reads a whole study: it is where a single-stage command enters.
+pub fn setup(study: &crate::study::Study, rom_cache: Option<&Path>) -> Result<Setup, RunError> {
+    let file = study.file.as_path();
+    let laws = crate::identify::model_laws(&study.models, file)?;
+    let built = build(&study.structure, file)?;
+    let mut levels = super::data::load_levels(study.measurements.as_ref(), &built, file)?;
+    let models = ModelsAndData {
+        models: &study.models,
+        laws: &laws,
+        estimator: study
+            .measurements
+            .as_ref()
+            .and_then(|m| m.estimator.as_ref()),
+        file,
+    };
+    let engines = build_engine(
+        &EngineParams::of(study),
+        &models,
+        &built,
+        &mut levels,
+        rom_cache,
+    )?;
+    Ok(Setup {
+        laws,
+        built,
+        levels,
+        engines,
+    })
 }

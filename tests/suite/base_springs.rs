@@ -109,7 +109,7 @@ fn the_acceptance_case_lowers_the_first_mode_by_3_percent() {
     );
 }
 
-/// The loop's base-springs engine (rfmlab::runner::terms::base_springs_term: a term ROM over
+/// The loop's base-springs engine (rfmlab::diagnose::terms::base_springs_term: a term ROM over
 /// the free-base joint with a compliance term) against independent full models: the joint on
 /// springs as `rfmlab simulate` builds it (fe::base::joint_model_on_springs) at the
 /// acceptance case's size, and the fixed-base joint at compliance 0; dH/dc against
@@ -121,7 +121,7 @@ fn base_springs_term_rom_matches_the_full_models_and_its_derivative() {
     let spec = crate::runner_common::joint_spec();
     let built = crate::runner_common::built_structure();
     let inputs = [built.excitation];
-    let (model, term) = rfmlab::runner::terms::base_springs_term(&spec, 3.5).unwrap();
+    let (model, term) = rfmlab::diagnose::terms::base_springs_term(&spec, 3.5).unwrap();
     let params = crate::rom_terms::params();
     let (rom, cert) = rfmlab::rom::term_build::build_term_rom(
         &model,
@@ -224,7 +224,7 @@ fn forward_model_column_of_the_base_springs_matches_differences() {
     let inputs = [0, 1, 2, 3];
     let params = crate::rom_terms::params();
     let (plain, _) = rfmlab::rom::build_rom(&built.model, &inputs, &params).unwrap();
-    let (model, term) = rfmlab::runner::terms::base_springs_term(&spec, 3.5).unwrap();
+    let (model, term) = rfmlab::diagnose::terms::base_springs_term(&spec, 3.5).unwrap();
     let (tr, cert) = build_term_rom(&model, &inputs, &params, std::slice::from_ref(&term)).unwrap();
     assert!(cert.passed);
     let eng = WithTerms::new(&plain, &tr).unwrap();

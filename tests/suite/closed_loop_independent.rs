@@ -20,7 +20,7 @@
 use crate::closed_loop_td::judge;
 use rfmlab::common::C64;
 use rfmlab::data::uff58::{read_uff, write_uff, Ordinate};
-use rfmlab::runner::closed_loop::{diagnose_study, params_of, DiagnoseLevel};
+use rfmlab::diagnose::{diagnose_study, params_of, DiagnoseLevel};
 use std::path::{Path, PathBuf};
 
 fn root() -> PathBuf {

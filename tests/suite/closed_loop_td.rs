@@ -19,7 +19,7 @@
 //! term ROM (opt-in in `[closed_loop] candidates`: a degraded bond strip at the block's inner
 //! end, an adherend structural loss factor), with every candidate type named.
 
-use rfmlab::runner::closed_loop::{diagnose_study, params_of, DiagnoseLevel};
+use rfmlab::diagnose::{diagnose_study, params_of, DiagnoseLevel};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -211,7 +211,7 @@ fn time_domain_null_data_accept_nothing() {
     );
 }
 
-/// The cases whose candidates need the term ROM (src/runner/terms.rs): a 10 mm strip at the
+/// The cases whose candidates need the term ROM (src/diagnose/terms.rs): a 10 mm strip at the
 /// block's inner end (x = 40-50 mm) at 5 % modulus, and an adherend structural loss factor
 /// g = 0.002, each with the default candidate types and its own opt-in type named (each
 /// evaluation with a term is a dense LU of the term ROM per fine line). Only with RFMLAB_LONG=1; the chi-square limit is 1.2 (the clean case's 0.669 x 1.1

@@ -29,8 +29,8 @@ use rfmlab::closed_loop::conclude::conclude;
 use rfmlab::closed_loop::null::{calibrate, Chain, NullParams};
 use rfmlab::closed_loop::verdict::{Status, VerdictParams};
 use rfmlab::closed_loop::{default_candidates, run_closed_loop, ClosedLoopParams};
+use rfmlab::diagnose::{diagnose_study, params_of, DiagnoseLevel};
 use rfmlab::forward::Effect;
-use rfmlab::runner::closed_loop::{diagnose_study, params_of, DiagnoseLevel};
 use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};
 

@@ -78,7 +78,7 @@ p_threshold = 0.05
         (cl.max_effects, cl.evidence_threshold_nats, cl.p_threshold),
         (2, 6.0, 0.05)
     );
-    let p = rfmlab::runner::closed_loop::params_of(&rfmlab::study::load(&f).unwrap());
+    let p = rfmlab::diagnose::params_of(&rfmlab::study::load(&f).unwrap());
     assert_eq!(
         (p.threshold_nats, p.p_threshold, p.max_rounds),
         (6.0, 0.05, 3)

@@ -428,7 +428,7 @@ fn adherend_damping_effect_equals_the_full_model_with_beam_damping() {
     assert!(model.d_b.is_none());
     let inputs = [0, 1, 2, 3];
     let (plain, _) = build_rom(model, &inputs, &params()).unwrap();
-    let ts = vec![rfmlab::runner::terms::adherend_damping_term(model)];
+    let ts = vec![rfmlab::diagnose::terms::adherend_damping_term(model)];
     let (tr, cert) = build_term_rom(model, &inputs, &params(), &ts).unwrap();
     eprintln!(
         "adherend damping term ROM: n_r {}, certificate {:.3e} ({:?})",

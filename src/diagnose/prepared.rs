@@ -17,10 +17,11 @@
 //! (physical values of every coordinate, e.g. the MAP of the run); without it the
 //! measurement model is the exact kernel operator, and a channel correlation cannot be formed.
 
-use super::{LevelData, RunError};
+use super::params::key_error;
 use crate::frf::FrfEngine;
 use crate::inference::likelihood::FrfPosterior;
 use crate::material::ConstitutiveModel;
+use crate::stage::{LevelData, RunError};
 use crate::study::Study;
 use std::path::Path;
 
@@ -37,12 +38,14 @@ pub struct Prepared {
 
 impl Prepared {
     /// Build the model, load the data and build the engines as `rfmlab run` does, reusing
-    /// certified ROMs from `rom_cache` when given (see [`super::rom_cache_dir`]).
+    /// certified ROMs from `rom_cache` when given (see [`crate::stage::rom_cache_dir`]).
     pub fn new(study: &Study, rom_cache: Option<&Path>) -> Result<Prepared, RunError> {
-        let laws = super::model_laws(study)?;
-        let built = super::build(study)?;
-        let mut levels = super::load_levels(study, &built)?;
-        let engines = super::build_engine(study, &built, &mut levels, &laws, rom_cache)?;
+        let crate::stage::engine::Setup {
+            laws,
+            built: _,
+            levels,
+            engines,
+        } = crate::stage::engine::setup(study, rom_cache)?;
         Ok(Prepared {
             study: study.clone(),
             levels,
@@ -75,8 +78,8 @@ impl Prepared {
     ) -> Result<FrfPosterior<'_>, RunError> {
         let study = &self.study;
         let inf = study.inference.as_ref().ok_or_else(|| {
-            super::study_err(
-                study,
+            key_error(
+                &study.file,
                 "inference",
                 "no [inference] section: add one (models, levels, noise model and priors) to evaluate a posterior",
             )
@@ -88,22 +91,22 @@ impl Prepared {
             .find(|(_, m)| m.name.eq_ignore_ascii_case(model))
         else {
             let names: Vec<&str> = study.models.iter().map(|m| m.name.as_str()).collect();
-            return Err(super::study_err(
-                study,
+            return Err(key_error(
+                &study.file,
                 "models",
                 format!("no model named {model:?}; the study has {names:?}"),
             ));
         };
         let Some(lv) = self.levels.iter().find(|l| l.name == level) else {
             let names: Vec<&str> = self.levels.iter().map(|l| l.name.as_str()).collect();
-            return Err(super::study_err(
-                study,
+            return Err(key_error(
+                &study.file,
                 "measurements.levels",
                 format!("no level named {level:?}; the study has {names:?}"),
             ));
         };
         let engine = self.lik_engine.as_deref().unwrap_or(self.engine.as_ref());
-        let mut post = super::posterior::build_posterior(
+        let mut post = crate::runner::posterior::build_posterior(
             study,
             inf,
             engine,

@@ -1,0 +1,80 @@
+//! The term ROM's modulus box ([`term_modulus_range`]; the rule in `terms.rs`'s module doc),
+//! how far a law's modulus leaves it ([`outside_box`]), and the band of the levels' lines
+//! ([`band_of`]).
+
+use super::params::TermParams;
+use crate::stage::LevelData;
+
+/// The term ROM's modulus box (see `terms.rs`'s module doc): E*(w) of the initial values of
+/// the box's models (`p.box_models`: the `[inference]` models) over `band_hz`, widened by 2
+/// either way. Falls back to the effect-free ROM's box of every model when none gives a
+/// modulus.
+pub fn term_modulus_range(p: &TermParams, band_hz: (f64, f64)) -> crate::rom::ModulusRange {
+    let mut r = crate::rom::ModulusRange {
+        e_storage_pa: (f64::INFINITY, 0.0),
+        e_loss_pa: (f64::INFINITY, 0.0),
+    };
+    for m in &p.box_models {
+        let Ok(law) = crate::material::model_from_name(&m.name, m.branches) else {
+            continue;
+        };
+        for k in 0..=50 {
+            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / 50.0;
+            let e = law.modulus(&m.initial, std::f64::consts::TAU * f.max(1e-3));
+            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 && e.im >= 0.0 {
+                r.e_storage_pa.0 = r.e_storage_pa.0.min(e.re / 2.0);
+                r.e_storage_pa.1 = r.e_storage_pa.1.max(e.re * 2.0);
+                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im / 2.0);
+                r.e_loss_pa.1 = r.e_loss_pa.1.max(e.im * 2.0);
+            }
+        }
+    }
+    if r.e_storage_pa.0 < r.e_storage_pa.1 && r.e_loss_pa.0 < r.e_loss_pa.1 {
+        r
+    } else {
+        crate::study::build::initial_modulus_range(&p.all_models, band_hz)
+    }
+}
+
+/// The largest factor by which `law` at `params` leaves `range` on `freq_hz` (1: inside; 2:
+/// somewhere twice above the top or half below the bottom of E' or E'').
+pub fn outside_box(
+    law: &dyn crate::material::ConstitutiveModel,
+    params: &[f64],
+    freq_hz: &[f64],
+    range: &crate::rom::ModulusRange,
+) -> f64 {
+    let ratio = |x: f64, (lo, hi): (f64, f64)| {
+        if x < lo {
+            if x > 0.0 {
+                lo / x
+            } else {
+                f64::INFINITY
+            }
+        } else if x > hi {
+            x / hi
+        } else {
+            1.0
+        }
+    };
+    freq_hz
+        .iter()
+        .map(|&f| {
+            let e = law.modulus(params, std::f64::consts::TAU * f);
+            ratio(e.re, range.e_storage_pa).max(ratio(e.im, range.e_loss_pa))
+        })
+        .fold(1.0, f64::max)
+}
+
+/// The band (Hz) of the levels' lines.
+pub fn band_of(levels: &[LevelData]) -> (f64, f64) {
+    let lo = levels
+        .iter()
+        .flat_map(|l| l.freq_hz.first().copied())
+        .fold(f64::INFINITY, f64::min);
+    let hi = levels
+        .iter()
+        .flat_map(|l| l.freq_hz.last().copied())
+        .fold(0.0, f64::max);
+    (lo, hi)
+}
