@@ -24,8 +24,10 @@
 //! | [`output`] | parquet tables, manifest, atomic writes (outside the numerical core) |
 //! | [`plot`] | PNG/SVG figures (outside the numerical core) |
 //! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
+//! | [`bayes`] | the Bayesian stages of a run: posterior per model and level, MAP, samplers, evidence and comparison criteria, redundancy, basins, the comparison across levels |
 //!
-//! Numerical modules never import `study`, `output`, `plot` or the CLI.
+//! Numerical modules never import `study`, `output`, `plot` or the CLI; `bayes` sits outside
+//! the numerical core below the pipeline (it takes its stage parameters, never the study).
 //!
 //! # The public API
 //! A study file -> [`Study::load`] -> [`Study::plan`] (typed `*Params` per stage) ->
@@ -66,6 +68,7 @@
 // the deliberate NaN-rejecting form of a positivity check.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod bayes;
 pub mod closed_loop;
 pub mod common;
 pub mod correlation;

@@ -63,8 +63,8 @@ pub struct LevelData {
     pub n_averages: Option<u32>,
     /// The H1 estimator's model on these lines with its grid chosen by convergence
     /// ([`crate::forward::Observation::converged_measurement`]), set with the engine; `None`
-    /// before, or without an estimator (then [`crate::runner::posterior::measurement_model`] uses the default
-    /// grid).
+    /// before, or without an estimator (then [`crate::bayes::posterior::measurement_model`]
+    /// uses the default grid).
     pub measurement: Option<(crate::forward::MeasurementModel, crate::forward::GridChoice)>,
 }
 
@@ -83,4 +83,3 @@ impl LevelTruth {
         self.model.modulus(&self.params, omega_rad_s)
     }
 }
-

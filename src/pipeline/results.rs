@@ -4,11 +4,11 @@
 //! writes as parquet, as polars `DataFrame`s named by the file stems (`parameters`, `draws`,
 //! `summary`, ...).
 
+use crate::bayes::posterior::Draws;
+use crate::bayes::PosteriorResult;
 use crate::inference::diagnostics::Summary;
 use crate::output::Table;
-use crate::runner::bayes::PosteriorResult;
 use crate::runner::closed_loop::LoopOutcome;
-use crate::runner::posterior::Draws;
 use crate::runner::{GlobalResult, LevelData, LevelResults, ModelSummary, RunError};
 use crate::study::Study;
 use polars::prelude::DataFrame;

@@ -71,7 +71,7 @@ fn fill(
     for table in results.top_tables() {
         out.write_table(table)?;
     }
-    let posts: Vec<&crate::runner::bayes::PosteriorResult> = results.posteriors().collect();
+    let posts: Vec<&crate::bayes::PosteriorResult> = results.posteriors().collect();
     let figs = if results.figures {
         let mut f = write::draw_figures(out.path(), levels, level_results)?;
         f.extend(write_bayes::figures(out.path(), &posts)?);

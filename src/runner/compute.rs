@@ -94,9 +94,9 @@ pub struct LevelResults {
     pub global: Vec<GlobalResult>,
     pub sensitivity: Option<SensitivityCurves>,
     /// Posteriors of the `[inference]` models at this level.
-    pub posteriors: Vec<super::bayes::PosteriorResult>,
+    pub posteriors: Vec<crate::bayes::PosteriorResult>,
     /// The change from the lower `[inference]` level to this one (set on the higher level).
-    pub across_levels: Option<super::levels::LevelComparison>,
+    pub across_levels: Option<crate::bayes::levels::LevelComparison>,
 }
 
 fn analysis(name: impl Into<String>, e: impl std::fmt::Display) -> RunError {

@@ -16,21 +16,12 @@
 //! 4. the tables, figures and report sections of the results ([`write`] lists the tables, their
 //!    columns and units), written by [`crate::report::write`] in one atomic folder swap.
 
-pub mod basins;
-pub mod bayes;
 pub mod closed_loop;
-pub mod compare;
 mod compute;
-pub mod declared;
-mod evidence_ref;
 mod leakage;
-pub mod levels;
 pub mod material;
-pub mod posterior;
 pub mod preflight;
 pub mod prepared;
-pub mod redundancy;
-mod sample;
 mod settings;
 pub mod simulate;
 pub mod terms;
@@ -40,6 +31,15 @@ pub(crate) mod write_compare;
 pub(crate) mod write_levels;
 
 pub use crate::stage::{Event, LevelData, LevelTruth, RunError};
+
+// Old paths of the Bayesian stages, removed once every caller moved.
+mod bayes_paths;
+pub use crate::bayes::{basins, compare, levels, redundancy};
+pub use bayes_paths::{declared, posterior};
+/// Old path of [`crate::bayes`], removed once every caller moved.
+pub mod bayes {
+    pub use crate::bayes::*;
+}
 pub use compute::{
     BandConstantResult, GlobalResult, IemBandResult, LevelResults, SensitivityCurves,
 };

@@ -10,8 +10,8 @@
 //!
 //! The draws table is what `scripts/to_arviz.py` turns into an ArviZ InferenceData.
 
-use super::bayes::PosteriorResult;
 use super::{LevelData, RunError};
+use crate::bayes::PosteriorResult;
 use crate::inference::diagnostics::{summarize_with_hdi, Summary, DEFAULT_HDI_PROB};
 use crate::inference::Sampler;
 use crate::output::{Columns as Cols, Report, Table};

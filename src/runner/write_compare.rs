@@ -1,4 +1,4 @@
-//! Tables and report section of the model comparison ([`super::compare`]). Tables (parquet):
+//! Tables and report section of the model comparison ([`crate::bayes::compare`]). Tables (parquet):
 //!
 //! | table | columns (unit) |
 //! |---|---|
@@ -12,8 +12,8 @@
 //! of `[inference] models` at a level and one estimator for all of them: stepping-stone when it
 //! ran for every model, else TMCMC, else Laplace.
 
-use super::bayes::PosteriorResult;
 use super::RunError;
+use crate::bayes::PosteriorResult;
 use crate::output::{Columns as Cols, Report, Table};
 
 /// Estimators in order of preference for the Bayes factors.
@@ -199,7 +199,10 @@ pub fn tables(posts: &[&PosteriorResult]) -> Result<Vec<Table>, RunError> {
                 for (l, v) in row.iter().enumerate() {
                     pw.s("level", level.clone());
                     pw.s("model", p.model.clone());
-                    pw.s("sampler", c.draws_from.clone());
+                    pw.s(
+                        "sampler",
+                        c.draws_from.map(|s| s.to_string()).unwrap_or_default(),
+                    );
                     pw.i("chain", *ch as i64);
                     pw.i("draw", *dr as i64);
                     pw.i("line", l as i64);

@@ -8,9 +8,9 @@
 //! | `redundancy` | level, model, kind (svd / parameter), index, parameter, singular_value (1), condition_number (1), direction (text), v_<param> (right singular vector, d ln p), posterior_sd_x, prior_sd_x, sd_ratio (1; unconstrained coordinates), corr_<param> (posterior correlation, unconstrained coordinates) |
 //! | `basins` | level, model, method (map / rfm), start, kind (initial / design), basin (-1: failed), objective (map: -log posterior up to log Z, nats; rfm: relative FRF residual), iterations, stop_reason, basin_distance_sd (the basin's distance from the MAP in Laplace sd), start_<param>, end_<param> (SI) |
 
-use super::bayes::PosteriorResult;
-use super::levels::LevelComparison;
 use super::{LevelResults, RunError};
+use crate::bayes::levels::LevelComparison;
+use crate::bayes::PosteriorResult;
 use crate::output::{Columns as Cols, Report, Table};
 
 fn union_names<'a>(names: impl Iterator<Item = &'a [String]>) -> Vec<String> {
@@ -353,7 +353,7 @@ pub fn figures(
             let mut curves = Vec::new();
             let n_show = m.basins.len().min(4);
             for k in 0..=n_show {
-                let pick: Vec<&super::basins::BasinStart> = m
+                let pick: Vec<&crate::bayes::basins::BasinStart> = m
                     .starts
                     .iter()
                     .filter(|s| match s.basin {
@@ -381,7 +381,7 @@ pub fn figures(
                     pick.iter().map(|s| s.start[j].log10()).collect(),
                 ));
             }
-            let failed: Vec<&super::basins::BasinStart> =
+            let failed: Vec<&crate::bayes::basins::BasinStart> =
                 m.starts.iter().filter(|s| s.basin.is_none()).collect();
             if !failed.is_empty() {
                 curves.push(Curve::points(
