@@ -1,5 +1,5 @@
 """ArviZ's PSIS-LOO and WAIC, and scipy's chi-square tail, on the pointwise log likelihood and
-PPC residuals that `rfmlab run` wrote (the independent reference of src/runner/compare.rs).
+PPC residuals that `rfmlab run` wrote (the independent reference of src/bayes/compare/criteria.rs).
 
 Usage: loo_reference.py RESULTS_DIR  -> prints JSON {"LEVEL/MODEL": {...}} on stdout.
 

@@ -29,8 +29,10 @@
 //! | [`stage`] | what every stage of a run shares: a level's measured data, progress events, the run's error |
 //! | [`diagnose`] | the closed loop as a stage of a run and `rfmlab diagnose`: candidate effects and their term ROM, the loop at every level, its verdict, tables and markdown (outside the numerical core) |
 //! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
+//! | [`bayes`] | the Bayesian stages of a run: posterior per model and level, MAP, samplers, evidence and comparison criteria, redundancy, basins, the comparison across levels |
 //!
-//! Numerical modules never import `study`, `output`, `plot` or the CLI.
+//! Numerical modules never import `study`, `output`, `plot` or the CLI; `bayes` sits outside
+//! the numerical core below the pipeline (it takes its stage parameters, never the study).
 //!
 //! # The public API
 //! A study file -> [`Study::load`] -> [`Study::plan`] (typed `*Params` per stage) ->
@@ -71,6 +73,7 @@
 // the deliberate NaN-rejecting form of a positivity check.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod bayes;
 pub mod closed_loop;
 pub mod common;
 pub mod correlation;

@@ -856,8 +856,8 @@ impl ForwardModel<'_> {
     /// the neglected term is 2.7e-4 of `|H|` at the worst line 1 % from `p0` on the test
     /// chain, a quarter of that at 0.5 % (tests/suite/inference_likelihood.rs), so within a
     /// posterior (sds of a fraction of a per cent) it is far below the H1 random error; each
-    /// run checks it on posterior draws (`runner::bayes`). Without a measurement model this
-    /// does nothing.
+    /// run checks it on posterior draws (`bayes::linearisation`). Without a measurement model
+    /// this does nothing.
     pub fn linearise_measurement(&mut self, p0: &[f64]) -> Result<(), ForwardError> {
         self.linear_bias = None;
         if self.obs.measurement.is_none() || !self.effects.is_empty() {

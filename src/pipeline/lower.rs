@@ -1,5 +1,6 @@
-//! Lowering a [`Plan`] to the study the stages read: the study the plan was made from with
-//! the plan's parameters written in, and one `[inference]` section per level.
+//! Lowering a [`Plan`] to the study the runner's stages read: the study the plan was made from
+//! with the plan's parameters written in (the inference stages as one `[inference]` section,
+//! whose sampler settings and priors per model the stages must share).
 
 use super::plan::{sampler_params, InferenceParams, Plan};
 use super::RunError;
@@ -10,8 +11,8 @@ use crate::study::Study;
 use std::collections::BTreeMap;
 
 impl Plan {
-    /// The study the stages read: the original with this plan's parameters written in, and
-    /// the `[inference]` section per level (`None` for a level without inference stages).
+    /// The study the runner's stages read: the original with this plan's parameters written
+    /// in.
     pub(crate) fn lowered(&self) -> Result<Lowered, RunError> {
         let mut s = self.study().clone();
         let bad = |key: &str, message: String| {
@@ -53,8 +54,7 @@ impl Plan {
         s.analyses.iem = id.iem.clone();
         s.analyses.figures = self.figures;
         s.output_dir = self.output_dir.clone();
-        // Inference: one section per level, and the union for the comparison across levels.
-        let mut per_level: Vec<(String, Inference)> = Vec::new();
+        // Inference: one section for all stages.
         let mut union: Option<Inference> = None;
         for st in &self.inference {
             if !s
@@ -72,14 +72,6 @@ impl Plan {
             }
             let u = union.get_or_insert_with(|| inference_of(st, &self.comparison, &self.basins));
             merge(u, st).map_err(|m| bad("inference", m))?;
-            match per_level.iter_mut().find(|(l, _)| *l == st.level) {
-                Some((_, inf)) => merge(inf, st).map_err(|m| bad("inference", m))?,
-                None => {
-                    let mut inf = inference_of(st, &self.comparison, &self.basins);
-                    merge(&mut inf, st).map_err(|m| bad("inference", m))?;
-                    per_level.push((st.level.clone(), inf));
-                }
-            }
         }
         s.inference = union;
         s.closed_loop = match (&self.closed_loop, s.closed_loop.take()) {
@@ -91,27 +83,13 @@ impl Plan {
             }),
             (None, None) => None,
         };
-        Ok(Lowered {
-            study: s,
-            per_level,
-        })
+        Ok(Lowered { study: s })
     }
 }
 
-/// A study as the stages read it (see [`Plan::lowered`]).
+/// A study as the runner's stages read it (see [`Plan::lowered`]).
 pub(crate) struct Lowered {
     pub study: Study,
-    pub per_level: Vec<(String, Inference)>,
-}
-
-impl Lowered {
-    /// The inference section of `level`, when it has inference stages.
-    pub fn inference(&self, level: &str) -> Option<&Inference> {
-        self.per_level
-            .iter()
-            .find(|(l, _)| l == level)
-            .map(|(_, i)| i)
-    }
 }
 
 /// An empty `[inference]` section with the settings of stage `st`.

@@ -98,7 +98,7 @@ fn run_here(
     ex: &mut Executor,
     extra: &(dyn Fn(Event) + Sync),
 ) -> Result<Results, RunError> {
-    use crate::runner::{bayes, declared, levels};
+    use crate::bayes::{self, declared, levels};
     let t0 = Instant::now();
     let observers = ex.progress();
     let progress = |e: Event| {
@@ -165,10 +165,34 @@ fn run_here(
     ex.lap("engine")?;
     let engine: &dyn FrfEngine = engines.engine.as_ref();
     let lik: &dyn FrfEngine = engines.likelihood.as_deref().unwrap_or(engine);
+    let point_ids: Vec<u32> = study.structure.points.iter().map(|p| p.id).collect();
+    let checkpoints = checkpoint_folder(&plan.output_dir);
+    let bayes_run = bayes::RunContext {
+        posterior: bayes::PosteriorInputs {
+            file: &study.file,
+            estimator: plan.data.estimator.as_ref(),
+            point_ids: &point_ids,
+            declared: &study.declared_effects,
+        },
+        seed: study.seed,
+        models: &plan.identification.models,
+        laws: &laws,
+        checkpoints: bayes::Checkpoints {
+            folder: &checkpoints,
+            study: &study.name,
+            study_sha256: &study.sha256,
+        },
+    };
     let mut results = Vec::new();
     for level in &data {
         // Declared point masses and beam factor change the deterministic analyses' structure.
-        let view = declared::deterministic_view(study, engine, &built, level)?;
+        let view = declared::deterministic_view(
+            &study.declared_effects,
+            &study.file,
+            engine,
+            &built,
+            level,
+        )?;
         let (det_engine, det_built): (&dyn FrfEngine, &BuiltModel) = match &view {
             Some(v) => (&v.engine, &v.built),
             None => (engine, &built),
@@ -188,18 +212,43 @@ fn run_here(
         let id = crate::identify::analyse_level(&plan.identification, &inputs, &progress)?;
         let mut r = results::LevelResults::new(id);
         ex.lap(format!("analyses {}", level.name))?;
-        if let Some(inf) = lowered.inference(&level.name) {
-            r.posteriors = bayes::infer_level(study, inf, lik, level, &laws, &r.global, &progress)?;
+        let stages = bayes::stages_at(&plan.inference, &level.name);
+        if !stages.is_empty() {
+            let fits: Vec<&crate::rfm::RfmResult> = r.global.iter().map(|g| &g.result).collect();
+            r.posteriors = bayes::infer_level(&bayes_run, &stages, lik, level, &fits, &progress)?;
             ex.lap(format!("inference {}", level.name))?;
-            bayes::basins_of_level(study, inf, lik, engine, level, &laws, &mut r.posteriors)?;
-            if inf.basins.is_some() {
+            if let Some(settings) = &plan.basins {
+                bayes::basins_of_level(
+                    &bayes_run,
+                    &stages,
+                    settings,
+                    &plan.identification.rfm,
+                    lik,
+                    engine,
+                    level,
+                    &mut r.posteriors,
+                )?;
                 ex.lap(format!("basins {}", level.name))?;
             }
         }
         results.push(r);
     }
-    if let Some(inf) = &study.inference {
-        if let Some(c) = levels::compare(study, inf, lik, &data, &laws, &results)? {
+    if !plan.inference.is_empty() {
+        let settings = plan.comparison.clone().unwrap_or_default();
+        let posteriors: Vec<(&str, &[bayes::PosteriorResult])> = results
+            .iter()
+            .map(|r| (r.level.as_str(), r.posteriors.as_slice()))
+            .collect();
+        let across = levels::compare(
+            &bayes_run,
+            &plan.inference,
+            &settings,
+            &plan.data,
+            lik,
+            &data,
+            &posteriors,
+        )?;
+        if let Some(c) = across {
             if let Some(r) = results.iter_mut().find(|r| r.level == c.high) {
                 r.across_levels = Some(c);
             }
@@ -244,4 +293,13 @@ fn run_here(
         closed_loop,
         mesh_error,
     )
+}
+
+/// The samplers' and the stepping-stone's checkpoints of a run writing to `output_dir`:
+/// `.checkpoints/` beside it.
+fn checkpoint_folder(output_dir: &std::path::Path) -> std::path::PathBuf {
+    output_dir
+        .parent()
+        .unwrap_or(std::path::Path::new("."))
+        .join(".checkpoints")
 }

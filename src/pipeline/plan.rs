@@ -2,19 +2,18 @@
 //! [`Study`] by [`Study::plan`]. A program may edit the plan before [`super::run`]: drop a
 //! model, change the sampler settings of one inference stage, switch the engine.
 //!
-//! The stages of the runner still read their settings from a study; [`Plan::lowered`] writes
-//! the plan's parameters back into a copy of the study the plan was made from, so an edited
-//! plan is what runs.
+//! The inference stages ([`crate::bayes`]) take their `InferenceParams` directly; the stages
+//! of the runner still read their settings from a study: [`Plan::lowered`] writes the plan's
+//! parameters back into a copy of the study the plan was made from, so an edited plan is what
+//! runs.
 
 use super::RunError;
+pub use crate::bayes::{InferenceParams, SamplerParams};
 use crate::closed_loop::ClosedLoopParams;
 pub use crate::identify::IdentificationParams;
-use crate::inference::prior::Prior;
 pub use crate::stage::engine::EngineParams;
 use crate::study::comparison::{BasinSettings, LevelSettings};
-use crate::study::inference::{
-    CorrelationKind, Inference, NoiseSpec, NutsSettings, SteppingStoneSettings,
-};
+use crate::study::inference::Inference;
 use crate::study::Study;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -23,32 +22,6 @@ use std::sync::Arc;
 /// estimator and the truth sidecar of simulated data: the study's validated
 /// `[measurements]` section, as it is.
 pub type DataParams = crate::study::Measurements;
-
-/// Settings of the MAP search and the samplers of an inference stage.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SamplerParams {
-    pub nuts: Option<NutsSettings>,
-    pub tmcmc_particles: Option<usize>,
-    pub stepping_stone: Option<SteppingStoneSettings>,
-    pub noise: NoiseSpec,
-    pub noise_scale_prior: Prior,
-    pub nu_prior: Prior,
-    pub map_starts: usize,
-    pub map_max_iterations: u64,
-    pub linearised_measurement: bool,
-    pub channel_correlation: Option<(CorrelationKind, usize)>,
-}
-
-/// The posterior of one model at one level: MAP, samplers, evidence, model-comparison
-/// criteria and redundancy.
-#[derive(Clone, Debug, PartialEq)]
-pub struct InferenceParams {
-    pub level: String,
-    pub model: String,
-    /// One prior per law parameter, then the noise parameters'.
-    pub priors: Vec<Prior>,
-    pub samplers: SamplerParams,
-}
 
 /// A run's stages. Made by [`Study::plan`]; run by [`super::run`].
 #[derive(Clone, Debug)]
@@ -150,16 +123,5 @@ impl Plan {
 
 /// The sampler settings of an `[inference]` section.
 pub(super) fn sampler_params(inf: &Inference) -> SamplerParams {
-    SamplerParams {
-        nuts: inf.nuts.clone(),
-        tmcmc_particles: inf.tmcmc_particles,
-        stepping_stone: inf.stepping_stone.clone(),
-        noise: inf.noise.clone(),
-        noise_scale_prior: inf.noise_scale_prior.clone(),
-        nu_prior: inf.nu_prior.clone(),
-        map_starts: inf.map_starts,
-        map_max_iterations: inf.map_max_iterations,
-        linearised_measurement: inf.linearised_measurement,
-        channel_correlation: inf.channel_correlation,
-    }
+    SamplerParams::from(inf)
 }

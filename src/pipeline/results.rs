@@ -4,12 +4,12 @@
 //! writes as parquet, as polars `DataFrame`s named by the file stems (`parameters`, `draws`,
 //! `summary`, ...).
 
+use crate::bayes::posterior::Draws;
+use crate::bayes::PosteriorResult;
 use crate::diagnose::LoopOutcome;
 use crate::identify::{GlobalResult, Identification};
 use crate::inference::diagnostics::Summary;
 use crate::output::Table;
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::posterior::Draws;
 use crate::stage::{LevelData, RunError};
 use crate::study::Study;
 use polars::prelude::DataFrame;

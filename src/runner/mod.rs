@@ -17,17 +17,8 @@
 //!    tables, their columns and units), written by [`crate::report::write`] in one atomic
 //!    folder swap.
 
-pub mod basins;
-pub mod bayes;
-pub mod compare;
-pub mod declared;
-mod evidence_ref;
-pub mod levels;
-pub mod posterior;
 pub use crate::pipeline::{check_study, CheckSummary};
 pub use crate::stage::preflight;
-pub mod redundancy;
-mod sample;
 pub(crate) mod settings;
 
 pub use crate::stage::{Event, LevelData, LevelTruth, RunError};
@@ -40,18 +31,17 @@ pub mod closed_loop {
     pub use crate::diagnose::*;
 }
 pub use crate::diagnose::{prepared, terms};
+mod bayes_paths;
+pub use crate::bayes::{basins, compare, levels, redundancy};
+pub use bayes_paths::{declared, posterior};
+/// Old path of [`crate::bayes`], removed once every caller moved.
+pub mod bayes {
+    pub use crate::bayes::*;
+}
 
 use crate::study::build::BuiltModel;
-use crate::study::{Study, StudyError};
+use crate::study::Study;
 use std::path::PathBuf;
-
-fn study_err(study: &Study, key: impl Into<String>, message: impl Into<String>) -> RunError {
-    RunError::Study(StudyError {
-        file: study.file.display().to_string(),
-        key: key.into(),
-        message: message.into(),
-    })
-}
 
 /// Old path of [`crate::stage::data::load_levels`], removed once every caller moved.
 pub fn load_levels(study: &Study, built: &BuiltModel) -> Result<Vec<LevelData>, RunError> {

@@ -67,8 +67,8 @@ pub struct LevelData {
     pub n_averages: Option<u32>,
     /// The H1 estimator's model on these lines with its grid chosen by convergence
     /// ([`crate::forward::Observation::converged_measurement`]), set with the engine; `None`
-    /// before, or without an estimator (then [`crate::runner::posterior::measurement_model`] uses the default
-    /// grid).
+    /// before, or without an estimator (then [`crate::bayes::posterior::measurement_model`]
+    /// uses the default grid).
     pub measurement: Option<(crate::forward::MeasurementModel, crate::forward::GridChoice)>,
 }
 

@@ -528,7 +528,7 @@ pub fn run_shard(
 /// A unit's MAP search: the prior median plus `map_starts` space-filling starts, on the
 /// measurement bias linearised at the prior median, then re-linearised at the MAP until the
 /// MAP stops moving (there the linearised and the exact likelihood have the same value and
-/// gradient, as in `runner::bayes`); the posterior is left linearised at the MAP, so its
+/// gradient, as in `bayes::infer_level`); the posterior is left linearised at the MAP, so its
 /// Laplace approximation and any later evaluation use the cheap operator.
 fn fit(
     post: &mut FrfPosterior<'_>,

@@ -239,3 +239,22 @@ print(json.dumps(clean({'mc': m.to_dict('records'), 'pw': p.groupby(['level','mo
     assert_eq!(best.0, "model4", "{p:?}");
     assert_eq!(mc[0]["estimator"], "stepping_stone");
 }
+
+/// `studies/bayes_compare.toml` end to end with every comparison part (stepping-stone, the
+/// comparison across levels, basins; minutes: `cargo test --release --test suite
+/// bayes_study_with_comparison -- --ignored --nocapture`); results in
+/// `results/bayes_compare/`, timings printed.
+#[test]
+#[ignore]
+fn bayes_study_with_comparison() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let study = rfmlab::Study::load(root.join("studies/bayes_compare.toml")).unwrap();
+    let opts = rfmlab::pipeline::RunOptions {
+        output_dir: Some(root.join("results/bayes_compare")),
+        ..Default::default()
+    };
+    let s = rfmlab::report::run_study(&study, &opts, &|_| ()).unwrap();
+    println!("total {:.1} s, files {:?}", s.seconds, s.files);
+    let m = std::fs::read_to_string(root.join("results/bayes_compare/manifest.json")).unwrap();
+    println!("{m}");
+}

@@ -1,4 +1,4 @@
-//! The tables of the model comparison ([`crate::runner::compare`]). Tables (parquet):
+//! The tables of the model comparison ([`crate::bayes::compare`]). Tables (parquet):
 //!
 //! | table | columns (unit) |
 //! |---|---|
@@ -12,9 +12,9 @@
 //! of `[inference] models` at a level and one estimator for all of them: stepping-stone when it
 //! ran for every model, else TMCMC, else Laplace.
 
+use crate::bayes::PosteriorResult;
 use crate::output::{Columns as Cols, Table};
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::RunError;
+use crate::stage::RunError;
 
 /// Estimators in order of preference for the Bayes factors.
 pub(crate) const PREFERENCE: [&str; 4] = ["stepping_stone", "tmcmc_is", "tmcmc", "laplace"];
@@ -201,7 +201,10 @@ pub(super) fn tables(posts: &[&PosteriorResult]) -> Result<Vec<Table>, RunError>
                 for (l, v) in row.iter().enumerate() {
                     pw.s("level", level.clone());
                     pw.s("model", p.model.clone());
-                    pw.s("sampler", c.draws_from.clone());
+                    pw.s(
+                        "sampler",
+                        c.draws_from.map(|s| s.to_string()).unwrap_or_default(),
+                    );
                     pw.i("chain", *ch as i64);
                     pw.i("draw", *dr as i64);
                     pw.i("line", l as i64);

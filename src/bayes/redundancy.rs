@@ -1,7 +1,11 @@
 //! Parameter redundancy of one posterior: the SVD of the whitened,
 //! log-scaled sensitivity at the MAP, the posterior correlation matrix and per-parameter
 //! identifiability (posterior sd over prior sd in unconstrained coordinates). The numerics are
-//! in [`crate::inference::identifiability`].
+//! in [`crate::inference::identifiability`] (and checked by its unit tests).
+//!
+//! The sensitivity is `S_ok = p_k dE[H1]_o/dp_k / sqrt(v_o)` (real and imaginary parts as
+//! rows, `v_o` the noise variance at the MAP): its singular values say how many combinations
+//! of `ln p` the data determine, the weakest right singular vector which one they do not.
 
 use super::posterior::SamplerResult;
 use crate::forward::ForwardError;
@@ -27,7 +31,7 @@ pub struct Redundancy {
     /// Posterior correlation (row-major) of the unconstrained coordinates, from the draws of
     /// `sampler`.
     pub correlation: Vec<f64>,
-    pub sampler: String,
+    pub sampler: Sampler,
     pub posterior_sd_x: Vec<f64>,
     pub prior_sd_x: Vec<f64>,
 }
@@ -102,7 +106,7 @@ pub fn analyse(
         svd,
         names: post.names.clone(),
         correlation: correlation_matrix(&xcols),
-        sampler: s.sampler.to_string(),
+        sampler: s.sampler,
         posterior_sd_x: xcols.iter().map(|c| sd(c)).collect(),
         prior_sd_x: post.priors.iter().map(prior_sd_x).collect(),
     })

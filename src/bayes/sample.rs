@@ -1,9 +1,15 @@
 //! Samplers of the `[inference]` part of a run: NUTS (from dispersed starts around the Laplace
 //! approximation) and TMCMC (from the prior), with checkpoints per level, model and sampler so
 //! that an interrupted run resumes where it stopped and ends with the same draws.
+//!
+//! NUTS samples in coordinates whitened by the Laplace approximation, `x = m + L z` with
+//! `L L^T` the Laplace covariance, from starts `z ~ N(0, 4 I)` (twice the Laplace spread).
+//! Checked by the suite's `bayes_run` (draws against ArviZ's diagnostics; a run killed while
+//! sampling and run again ends with the same draws; one thread gives the same draws) and
+//! `inference_samplers` tests.
 
 use super::posterior::{Draws, SamplerResult};
-use super::{Event, LevelData, RunError};
+use super::{fail, At, Checkpoints, SamplerParams};
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::{cholesky, MapResult};
 use crate::inference::whiten::Whitened;
@@ -11,44 +17,12 @@ use crate::inference::Sampler;
 use crate::inference::{
     sample_nuts, sample_tmcmc, unit_rng, NutsParams, Posterior, Progress, TmcmcParams,
 };
-use crate::study::inference::Inference;
-use crate::study::Study;
+use crate::stage::{Event, RunError};
 use rand_distr::{Distribution, StandardNormal};
-use std::path::PathBuf;
 use std::time::Instant;
 
 /// Stream offset of the NUTS starts (chain c uses unit `START_STREAM + c`).
 const START_STREAM: u64 = 0x5354_4152_5400;
-
-/// Folder of a sampler's checkpoints: beside the results, keyed by the study, level, model and
-/// a hash of the data (the samplers key their files by their own settings).
-pub fn checkpoint_dir(study: &Study, level: &LevelData, model: &str, sampler: &str) -> PathBuf {
-    let mut h = 0xcbf2_9ce4_8422_2325u64;
-    let mut eat = |b: u64| {
-        for k in 0..8 {
-            h = (h ^ ((b >> (8 * k)) & 0xff)).wrapping_mul(0x0000_0100_0000_01B3);
-        }
-    };
-    for v in &level.column.accelerance {
-        eat(v.re.to_bits());
-        eat(v.im.to_bits());
-    }
-    for c in level.coherence.iter().flatten() {
-        eat(c.to_bits());
-    }
-    for b in study.sha256.bytes() {
-        eat(b as u64);
-    }
-    study
-        .output_dir
-        .parent()
-        .unwrap_or(std::path::Path::new("."))
-        .join(".checkpoints")
-        .join(format!(
-            "{}-{}-{}-{}-{:016x}",
-            study.name, level.name, model, sampler, h
-        ))
-}
 
 /// Dispersed NUTS starts: the Laplace mode plus twice its spread, one stream per chain.
 pub fn dispersed_starts(map: &MapResult, chains: usize, seed: u64) -> Vec<Vec<f64>> {
@@ -73,26 +47,18 @@ pub fn dispersed_starts(map: &MapResult, chains: usize, seed: u64) -> Vec<Vec<f6
         .collect()
 }
 
-fn fail(what: String, e: impl std::fmt::Display) -> RunError {
-    RunError::Analysis {
-        analysis: what,
-        message: e.to_string(),
-    }
-}
-
-#[allow(clippy::too_many_arguments)]
+/// The samplers of `inf` (NUTS, then TMCMC) on `post` for the stage `at` (its seed), with
+/// their checkpoints in `checkpoints`.
 pub fn run_samplers(
-    study: &Study,
-    inf: &Inference,
+    checkpoints: &Checkpoints<'_>,
+    inf: &SamplerParams,
     post: &FrfPosterior<'_>,
     map: &MapResult,
-    seed: u64,
-    level: &LevelData,
-    model: &str,
+    at: &At<'_>,
     progress: &(dyn Fn(Event) + Sync),
 ) -> Result<Vec<SamplerResult>, RunError> {
+    let (seed, level, model) = (at.seed, at.level, at.model);
     let mut out = Vec::new();
-    let names = post.names();
     let d = post.dim();
     if let Some(n) = &inf.nuts {
         let params = NutsParams {
@@ -140,7 +106,7 @@ pub fn run_samplers(
                 .collect(),
             None => dispersed_starts(map, n.chains, seed),
         };
-        let dir = checkpoint_dir(study, level, model, Sampler::Nuts.name());
+        let dir = checkpoints.dir(level, model, Sampler::Nuts.name());
         let t0 = Instant::now();
         let run = sample_nuts(target, &starts, &params, Some(&dir), &|p| match p {
             Progress::NutsDraws { .. } => progress(Event::Advance),
@@ -209,7 +175,7 @@ pub fn run_samplers(
             step: format!("{}: TMCMC on {model} ({particles} particles)", level.name),
             total: 0,
         });
-        let dir = checkpoint_dir(study, level, model, Sampler::Tmcmc.name());
+        let dir = checkpoints.dir(level, model, Sampler::Tmcmc.name());
         let t0 = Instant::now();
         let run = sample_tmcmc(post, &params, Some(&dir), &|p| {
             if let Progress::TmcmcStage { .. } = p {
@@ -254,6 +220,5 @@ pub fn run_samplers(
             notes,
         });
     }
-    let _ = names;
     Ok(out)
 }

@@ -1,105 +1,21 @@
-//! Initial-value sensitivity: the argmin search of the MAP and the
-//! deterministic global RFM from the same space-filling starts over the prior box (a Latin
-//! hypercube in prior quantiles, plus the study's initial values = the paper's Table 4), end
-//! points clustered into basins ([`crate::inference::basins`]).
-//!
-//! Distances are measured in Laplace posterior sd of the unconstrained coordinates at the MAP:
-//! end points within `tolerance_sd` of a basin's best point in every coordinate share it. The
-//! search's end points are first Newton-polished to their basin's stationary point
-//! ([`polish_end_point`]): L-BFGS stops on a gradient tolerance, a fraction of an sd short of
-//! it, which a 0.1-sd tolerance would otherwise count as separate basins. For
-//! the search, basin 0 is the global MAP's (lowest `-log p`). The RFM minimises another
-//! objective (its fixed point weighs lines by the modulus sensitivity, not by the noise), so its
-//! basins are ordered by its own FRF residual and reported with their distance to the MAP.
-//! The RFM here runs on the measured column without the leakage-corrected second pass of the
-//! deterministic analysis (one pass per start).
-//!
-//! Starts run in parallel (rayon); results are collected in start order, so they do not depend
-//! on the thread count.
+//! The basin study's two methods from the same starts: the argmin search of the MAP (end
+//! points Newton-polished to their basin's stationary point) and the deterministic global RFM
+//! (law parameters only, one pass per start on the measured column), each clustered into
+//! basins in Laplace sd units ([`crate::inference::basins::cluster`]). Starts run in parallel;
+//! results are collected in start order.
 
-use super::{LevelData, RunError};
+use super::{BasinStart, BasinStudy, MethodBasins};
 use crate::frf::FrfEngine;
-use crate::inference::basins::{cluster, Basin};
+use crate::inference::basins::cluster;
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::{find_map, polish_end_point, MapParams, MapResult};
 use crate::inference::Posterior;
 use crate::material::ConstitutiveModel;
+use crate::rfm::RfmParams;
+use crate::stage::{LevelData, RunError};
 use crate::study::comparison::BasinSettings;
-use crate::study::Study;
 use rayon::prelude::*;
 use std::time::Instant;
-
-/// One start of one method.
-#[derive(Clone, Debug)]
-pub struct BasinStart {
-    pub index: usize,
-    /// "initial" (the study's initial values) or "design".
-    pub kind: &'static str,
-    /// Physical values (SI) at the start and the end (`None` when the method failed).
-    pub start: Vec<f64>,
-    pub end: Option<Vec<f64>>,
-    /// `-log p` (search) or the relative FRF residual (RFM) at the end.
-    pub objective: f64,
-    pub iterations: u64,
-    pub stop_reason: String,
-    pub basin: Option<usize>,
-}
-
-/// The starts of one method and their basins.
-#[derive(Clone, Debug)]
-pub struct MethodBasins {
-    /// "map" (argmin L-BFGS on -log posterior) or "rfm" (global RFM fixed point).
-    pub method: &'static str,
-    pub starts: Vec<BasinStart>,
-    pub basins: Vec<Basin>,
-    /// Largest distance (Laplace sd, max over coordinates) of each basin's point from the MAP.
-    pub distance_to_map_sd: Vec<f64>,
-    pub seconds: f64,
-}
-
-impl MethodBasins {
-    /// Fraction of starts in basin 0.
-    pub fn fraction_best(&self) -> f64 {
-        let n = self.starts.len().max(1) as f64;
-        self.starts.iter().filter(|s| s.basin == Some(0)).count() as f64 / n
-    }
-    /// Fraction of starts ending within the tolerance of the MAP.
-    pub fn fraction_at_map(&self, tol: f64) -> f64 {
-        let n = self.starts.len().max(1) as f64;
-        self.starts
-            .iter()
-            .filter(|s| s.basin.is_some_and(|b| self.distance_to_map_sd[b] <= tol))
-            .count() as f64
-            / n
-    }
-    /// The initial values' basin.
-    pub fn initial_basin(&self) -> Option<usize> {
-        self.starts
-            .iter()
-            .find(|s| s.kind == "initial")
-            .and_then(|s| s.basin)
-    }
-    /// Stop reasons with their counts, most frequent first.
-    pub fn stop_reasons(&self) -> Vec<(String, usize)> {
-        let mut out: Vec<(String, usize)> = Vec::new();
-        for s in &self.starts {
-            match out.iter_mut().find(|(r, _)| *r == s.stop_reason) {
-                Some(e) => e.1 += 1,
-                None => out.push((s.stop_reason.clone(), 1)),
-            }
-        }
-        out.sort_by_key(|b| std::cmp::Reverse(b.1));
-        out
-    }
-}
-
-/// The basin study of one model at one level.
-#[derive(Clone, Debug)]
-pub struct BasinStudy {
-    pub names: Vec<String>,
-    pub tolerance_sd: f64,
-    pub methods: Vec<MethodBasins>,
-}
 
 /// Coordinates in Laplace sd units.
 fn scaled(post: &FrfPosterior<'_>, phys: &[f64], sd: &[f64]) -> Vec<f64> {
@@ -124,11 +40,12 @@ fn at_prior_bound(post: &FrfPosterior<'_>, x: &[f64]) -> Option<String> {
 
 /// Run the basin study around `map` (the MAP of the level's posterior of `law`, found from
 /// `initial_x`; `label` names model and level in errors) with `post` rebuilt in the
-/// state the MAP search saw (measurement bias linearised at the MAP when the study does so).
+/// state the MAP search saw (measurement bias linearised at the MAP when the study does so);
+/// the RFM runs with `rfm`.
 #[allow(clippy::too_many_arguments)]
 pub fn run(
-    study: &Study,
     settings: &BasinSettings,
+    rfm: &RfmParams,
     post: &FrfPosterior<'_>,
     square_engine: &dyn FrfEngine,
     level: &LevelData,
@@ -236,7 +153,6 @@ pub fn run(
     // 2. The deterministic RFM from the same starts (law parameters only).
     if settings.rfm && nl == d {
         let t0 = Instant::now();
-        let rp = super::settings::rfm_params(study);
         let starts_phys: Vec<(&'static str, Vec<f64>)> = methods[0]
             .starts
             .iter()
@@ -246,7 +162,7 @@ pub fn run(
             .par_iter()
             .enumerate()
             .map(|(i, (kind, p0))| {
-                match crate::rfm::rfm_global(square_engine, &level.column, law, p0, &rp) {
+                match crate::rfm::rfm_global(square_engine, &level.column, law, p0, rfm) {
                     Ok(r) => {
                         let res = r
                             .history

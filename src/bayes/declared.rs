@@ -1,31 +1,37 @@
 //! The study's declared effects ([`crate::study::effects`]) as forward-model effects of one
-//! level: point ids to engine point indices, channel ids to the level's output order; and
-//! the closed loop's candidate list under a study's `[closed_loop]` settings.
+//! level: point ids to engine point indices, channel ids to the level's output order (errors
+//! name the effect's key in the study file); the deterministic analyses' view of a level with
+//! fixed point masses and beam factor ([`FixedEffectsEngine`]); and the closed loop's
+//! candidate list under a study's `[closed_loop]` settings. Checked by the suite's
+//! `declared_effects` and `fixed_effects` tests.
 
-use super::{LevelData, RunError};
+use super::input_err;
 use crate::forward::fixed::FixedEffectsEngine;
 use crate::forward::{Effect, EffectTerm, Effects};
 use crate::inference::prior::Prior;
-use crate::study::effects::{ClosedLoopSettings, DeclaredKind};
-use crate::study::Study;
+use crate::stage::{LevelData, RunError};
+use crate::study::effects::{ClosedLoopSettings, DeclaredEffect, DeclaredKind};
+use std::path::Path;
 
-/// The forward-model effects of `study`'s declared effects at `level` (engine points
-/// `engine_point_ids`, in the engine's order), and the priors of the free ones in order.
+/// The forward-model effects of the declared effects `declared` (of the study file `file`)
+/// at `level` (engine points `engine_point_ids`, in the engine's order), and the priors of
+/// the free ones in order.
 pub fn level_effects(
-    study: &Study,
+    declared: &[DeclaredEffect],
+    file: &Path,
     engine_point_ids: &[u32],
     level: &LevelData,
 ) -> Result<(Effects, Vec<Prior>), RunError> {
     let mut terms = Vec::new();
     let mut priors = Vec::new();
-    for d in &study.declared_effects {
+    for d in declared {
         let point = |id: u32, k: &str| {
             engine_point_ids
                 .iter()
                 .position(|&p| p == id)
                 .ok_or_else(|| {
-                    super::study_err(
-                        study,
+                    input_err(
+                        file,
                         format!("{}.{k}", d.key),
                         format!("point {id} is not a point of the structure's model"),
                     )
@@ -37,8 +43,8 @@ pub fn level_effects(
                 .iter()
                 .position(|&r| r == id)
                 .ok_or_else(|| {
-                    super::study_err(
-                        study,
+                    input_err(
+                        file,
                         format!("{}.channel", d.key),
                         format!(
                             "level {}: no response channel at point {id} (channels {:?}); declare gains and delays on measured channels",
@@ -112,18 +118,20 @@ pub struct DeterministicView<'a> {
     pub built: crate::study::build::BuiltModel,
 }
 
-/// [`DeterministicView`] of `level`, or `None` when no declared effect changes the structure.
+/// [`DeterministicView`] of `level` under the declared effects `declared` (of the study file
+/// `file`), or `None` when no declared effect changes the structure.
 pub fn deterministic_view<'a>(
-    study: &Study,
+    declared: &[DeclaredEffect],
+    file: &Path,
     engine: &'a dyn crate::frf::FrfEngine,
     built: &crate::study::build::BuiltModel,
     level: &LevelData,
 ) -> Result<Option<DeterministicView<'a>>, RunError> {
-    if study.declared_effects.is_empty() {
+    if declared.is_empty() {
         return Ok(None);
     }
     let ids: Vec<u32> = built.model.points.iter().map(|p| p.id).collect();
-    let (effects, _) = level_effects(study, &ids, level)?;
+    let (effects, _) = level_effects(declared, file, &ids, level)?;
     let fail = |m: String| RunError::Analysis {
         analysis: format!(
             "declared effects in the deterministic analyses at {}",
@@ -162,12 +170,12 @@ pub fn deterministic_view<'a>(
 /// A report sentence on the declared effects in the deterministic analyses: point masses and
 /// the beam factor enter the RFM, IEM and FRAC; gains, delays, the shaker and law effects
 /// only the likelihood and the closed loop. `None` without declared effects.
-pub fn deterministic_note(study: &Study) -> Option<String> {
-    if study.declared_effects.is_empty() {
+pub fn deterministic_note(declared: &[DeclaredEffect]) -> Option<String> {
+    if declared.is_empty() {
         return None;
     }
     let (mut inside, mut outside) = (Vec::new(), Vec::new());
-    for d in &study.declared_effects {
+    for d in declared {
         match d.kind {
             DeclaredKind::PointMass { .. } | DeclaredKind::BeamModulus => {
                 inside.push(d.key.clone())

@@ -1,14 +1,19 @@
-//! The posterior of one model at one level, as the run builds it from the study: the forward
-//! model through the level's measurement model, the likelihood with the study's noise model,
-//! and the priors; and the typed results the inference stages return (MAP, Laplace, draws).
+//! The posterior of one model at one level: the forward model through the level's
+//! measurement model (the H1 estimator's expected value, [`crate::forward::MeasurementModel`]),
+//! the declared effects, the likelihood with the stage's noise model
+//! ([`crate::inference::likelihood::FrfLikelihood`]) and the priors (law, free effects, noise
+//! scales, nu); and the typed results the inference stages return (draws per sampler).
+//! Checked by the suite's `bayes_run` and `measurement_model` tests.
 
-use super::{LevelData, RunError};
+use super::{fail, input_err, InferenceParams, PosteriorInputs};
 use crate::forward::{EstimatorSpec, ForwardModel, MeasurementModel, MeasurementParams};
 use crate::frf::FrfEngine;
 use crate::inference::likelihood::{FrfData, FrfLikelihood, FrfPosterior, NoiseModel, Scale};
 use crate::material::ConstitutiveModel;
-use crate::study::inference::Inference;
-use crate::study::{Estimator, Study};
+use crate::stage::{LevelData, RunError};
+use crate::study::inference::NoiseSpec;
+use crate::study::Estimator;
+use std::path::Path;
 
 /// Draws of one sampler, flattened over chains (physical values, SI).
 #[derive(Clone, Debug, Default)]
@@ -69,16 +74,14 @@ pub fn estimator_spec(estimator: &Estimator, freq_hz: &[f64]) -> EstimatorSpec {
     }
 }
 
-/// The measurement model of a level, when the study declares its estimator.
+/// The measurement model of a level, when the study declares its estimator: the one chosen
+/// with the engine ([`LevelData::measurement`]), else the default grid (errors name `file`).
 pub fn measurement_model(
-    study: &Study,
+    estimator: Option<&Estimator>,
+    file: &Path,
     level: &LevelData,
 ) -> Result<Option<MeasurementModel>, RunError> {
-    let Some(est) = study
-        .measurements
-        .as_ref()
-        .and_then(|m| m.estimator.as_ref())
-    else {
+    let Some(est) = estimator else {
         return Ok(None);
     };
     if let Some((m, _)) = &level.measurement {
@@ -90,57 +93,50 @@ pub fn measurement_model(
         &MeasurementParams::default(),
     )
     .map(Some)
-    .map_err(|e| super::study_err(study, "measurements.estimator", e.to_string()))
-}
-
-pub(super) fn fail(what: String, e: impl std::fmt::Display) -> RunError {
-    RunError::Analysis {
-        analysis: what,
-        message: e.to_string(),
-    }
+    .map_err(|e| input_err(file, "measurements.estimator", e.to_string()))
 }
 
 /// Equivalent number of independent averages of a level's H1: the study's value, else the
 /// file's block count corrected for the declared estimator's overlap (Welch 1967; Hann at
 /// 50 %: n / 1.056), else an error naming the key.
-fn n_averages(study: &Study, inf: &Inference, level: &LevelData) -> Result<f64, RunError> {
-    if let Some(n) = inf.noise.n_averages {
+fn n_averages(
+    inputs: &PosteriorInputs<'_>,
+    noise: &NoiseSpec,
+    level: &LevelData,
+) -> Result<f64, RunError> {
+    if let Some(n) = noise.n_averages {
         return Ok(n);
     }
-    if !inf.noise.uses_coherence() {
+    if !noise.uses_coherence() {
         return Ok(1.0);
     }
     let Some(n) = level.n_averages else {
-        return Err(super::study_err(
-            study,
+        return Err(input_err(
+            inputs.file,
             "inference.noise.n_averages",
             format!("the files of level {} do not say how many averages H1 has: give n_averages (equivalent independent averages, e.g. 189.5 for 200 Hann blocks at 50 % overlap)", level.name),
         ));
     };
-    Ok(
-        match study
-            .measurements
-            .as_ref()
-            .and_then(|m| m.estimator.as_ref())
-        {
-            Some(e) => {
-                let nb = (e.fs_hz * e.block_s).round() as usize;
-                crate::experiment::estimator::effective_averages(e.window, nb, nb / 2, n as usize)
-            }
-            None => n as f64,
-        },
-    )
+    Ok(match inputs.estimator {
+        Some(e) => {
+            let nb = (e.fs_hz * e.block_s).round() as usize;
+            crate::experiment::estimator::effective_averages(e.window, nb, nb / 2, n as usize)
+        }
+        None => n as f64,
+    })
 }
 
-/// Build the posterior of `law` at `level` (the caller keeps it alive while sampling).
+/// Build the posterior of stage `stage` (its model's law `law`) at `level` (the caller keeps
+/// it alive while sampling).
 pub fn build_posterior<'a>(
-    study: &Study,
-    inf: &Inference,
+    inputs: &PosteriorInputs<'_>,
+    stage: &InferenceParams,
     engine: &'a dyn FrfEngine,
     level: &LevelData,
     law: &'a dyn ConstitutiveModel,
-    model_name: &str,
 ) -> Result<FrfPosterior<'a>, RunError> {
+    let model_name = stage.model.as_str();
+    let sp = &stage.samplers;
     let col = &level.column;
     let forward = ForwardModel::new(
         engine,
@@ -148,7 +144,7 @@ pub fn build_posterior<'a>(
         &col.omega_rad_s,
         col.input,
         &col.outputs,
-        measurement_model(study, level)?,
+        measurement_model(inputs.estimator, inputs.file, level)?,
     )
     .map_err(|e| {
         fail(
@@ -159,14 +155,14 @@ pub fn build_posterior<'a>(
     // Declared effects (`[[structure.effects]]`): fixed ones change the model, free ones are
     // parameters after the law's.
     let mut forward = forward;
-    let ids: Vec<u32> = study.structure.points.iter().map(|p| p.id).collect();
-    let (effects, effect_priors) = super::declared::level_effects(study, &ids, level)?;
+    let (effects, effect_priors) =
+        super::declared::level_effects(inputs.declared, inputs.file, inputs.point_ids, level)?;
     if !effects.is_empty() {
         forward
             .set_effects(effects)
             .map_err(|e| fail(format!("declared effects at {}", level.name), e))?;
     }
-    let noise = inf.noise.resolve(n_averages(study, inf, level)?);
+    let noise = sp.noise.resolve(n_averages(inputs, &sp.noise, level)?);
     let data = FrfData {
         freq_hz: level.freq_hz.clone(),
         n_out: col.outputs.len(),
@@ -174,26 +170,26 @@ pub fn build_posterior<'a>(
         coherence: level.coherence.clone(),
     };
     let lik = FrfLikelihood::new(forward, data, noise, &level.response_ids).map_err(|e| {
-        super::study_err(
-            study,
+        input_err(
+            inputs.file,
             "inference.noise",
             format!("level {}: {e}", level.name),
         )
     })?;
-    let mut priors = inf.priors.get(model_name).cloned().unwrap_or_default();
+    let mut priors = stage.priors.clone();
     priors.extend(effect_priors);
     for _ in 0..lik.n_tau() {
-        priors.push(inf.noise_scale_prior.clone());
+        priors.push(sp.noise_scale_prior.clone());
     }
     if lik.n_noise() > lik.n_tau() {
-        priors.push(inf.nu_prior.clone());
+        priors.push(sp.nu_prior.clone());
     }
     FrfPosterior::new(lik, priors).map_err(|e| fail(format!("posterior of {model_name}"), e))
 }
 
 /// Initial unconstrained point: law parameters from `p_law`, noise scales at the RMS relative
 /// residual of the fit per channel (so a start is never absurd), nu at 10.
-pub(crate) fn initial_x(post: &FrfPosterior<'_>, p_law: &[f64]) -> Vec<f64> {
+pub fn initial_x(post: &FrfPosterior<'_>, p_law: &[f64]) -> Vec<f64> {
     let mut phys = p_law.to_vec();
     let lik = &post.likelihood;
     // Declared free effects start at their declared values.

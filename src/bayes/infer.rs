@@ -1,13 +1,19 @@
-//! The `[inference]` part of a run: per level and model, the posterior over the law's
-//! parameters (and inferred noise scales) through one forward model, the multistart MAP with
-//! its Laplace approximation, and the samplers. Orchestration only: the numerics are in
-//! [`crate::forward`] and [`crate::inference`].
+//! MAP and samplers of every inference stage of one level ([`infer_level`]): per model, the
+//! posterior ([`super::posterior::build_posterior`]), the multistart MAP with its Laplace
+//! approximation (starts: the study's initial values, a space-filling design and the
+//! deterministic RFM's end point), with the measurement bias linearised and re-linearised at
+//! the optimum until it stops moving (then the exact MAP), the channels' correlation as a
+//! fixed point of the MAP's residuals, the samplers ([`super::sample`]), the linearisation
+//! check and exact evidence ([`super::linearisation`]), the comparison criteria
+//! ([`super::compare`]) and the redundancy ([`super::redundancy`]). Orchestration only: the
+//! numerics are in [`crate::forward`] and [`crate::inference`]. Checked by the suite's
+//! `bayes_run`, `model_comparison` and `inference_samplers` tests.
 
-use super::posterior::{build_posterior, fail, initial_x, level_hash, SamplerResult};
-use super::{Event, LevelData, RunError};
+use super::posterior::{build_posterior, initial_x, level_hash, SamplerResult};
+use super::{fail, InferenceParams, RunContext};
 use crate::frf::FrfEngine;
+use crate::inference::likelihood::ChannelCorrelation;
 use crate::inference::likelihood::NoiseModel;
-use crate::inference::likelihood::{ChannelCorrelation, FrfPosterior};
 use crate::inference::map::{find_map, MapParams, MapResult};
 use crate::inference::prior::Prior;
 use crate::inference::refine::{
@@ -15,9 +21,8 @@ use crate::inference::refine::{
 };
 use crate::inference::Posterior;
 use crate::inference::Sampler;
-use crate::material::ConstitutiveModel;
-use crate::study::inference::Inference;
-use crate::study::Study;
+use crate::rfm::RfmResult;
+use crate::stage::{Event, LevelData, RunError};
 use std::time::Instant;
 
 /// The posterior of one model at one level.
@@ -58,42 +63,37 @@ impl PosteriorResult {
     }
 }
 
-/// MAP and samplers of every `[inference]` model at one level.
+/// MAP and samplers of the inference stages `stages` of `level` (one per model, in order: a
+/// model's streams derive from its place there), with the deterministic fits `rfm` of the
+/// level as extra MAP starts.
 pub fn infer_level(
-    study: &Study,
-    inf: &Inference,
+    run: &RunContext<'_>,
+    stages: &[&InferenceParams],
     engine: &dyn FrfEngine,
     level: &LevelData,
-    laws: &[Box<dyn ConstitutiveModel>],
-    rfm: &[super::GlobalResult],
+    rfm: &[&RfmResult],
     progress: &(dyn Fn(Event) + Sync),
 ) -> Result<Vec<PosteriorResult>, RunError> {
-    if !inf.levels.contains(&level.name) {
-        return Ok(Vec::new());
-    }
     let mut out = Vec::new();
-    for (mi, name) in inf.models.iter().enumerate() {
-        let Some((spec, law)) = study
-            .models
-            .iter()
-            .zip(laws)
-            .find(|(m, _)| m.name.eq_ignore_ascii_case(name))
-        else {
+    for (mi, stage) in stages.iter().enumerate() {
+        let name = &stage.model;
+        let inf = &stage.samplers;
+        let Some((spec, law)) = run.model(name) else {
             continue;
         };
-        let mut post = build_posterior(study, inf, engine, level, law.as_ref(), name)?;
+        let mut post = build_posterior(&run.posterior, stage, engine, level, law)?;
         let x0 = initial_x(&post, &spec.initial);
         // The deterministic fit's end point is a natural extra start.
         let rfm_x = rfm
             .iter()
-            .find(|g| g.result.model_name.eq_ignore_ascii_case(name))
+            .find(|g| g.model_name.eq_ignore_ascii_case(name))
             .filter(|g| {
                 post.priors
                     .iter()
-                    .zip(&g.result.params)
+                    .zip(&g.params)
                     .all(|(p, v)| p.contains(*v))
             })
-            .map(|g| initial_x(&post, &g.result.params));
+            .map(|g| initial_x(&post, &g.params));
         let t0 = Instant::now();
         let nl = law.n_params();
         // With the measurement bias linearised (the default), the search runs on the bias
@@ -117,7 +117,7 @@ pub fn infer_level(
             step: format!("{}: MAP of {name} ({n_starts} starts)", level.name),
             total: n_starts as u64,
         });
-        let seed = study.seed ^ ((mi as u64 + 1) << 32) ^ level_hash(&level.name);
+        let seed = run.seed ^ ((mi as u64 + 1) << 32) ^ level_hash(&level.name);
         let params = MapParams {
             n_starts: inf.map_starts,
             max_iters: inf.map_max_iterations,
@@ -182,29 +182,24 @@ pub fn infer_level(
         }
         progress(Event::Finish);
         let map_seconds = t0.elapsed().as_secs_f64();
-        let mut samplers =
-            super::sample::run_samplers(study, inf, &post, &map, seed, level, name, progress)?;
-        let linearisation_check = match post.likelihood.forward.linear_bias.take() {
-            Some(lb) => {
-                let r = linearisation_error(&post, &samplers, nl);
-                post.likelihood.forward.linear_bias = Some(lb);
-                // The evidence of the exact likelihood, by importance sampling (see above).
-                for smp in &mut samplers {
-                    if let Some((lz, se)) = smp.log_evidence {
-                        smp.log_evidence = Some((lz + r.2, se));
-                        smp.notes.push(format!(
-                            "log evidence corrected from the linearised to the exact measurement model by {:+.3} nats (importance weights on {} posterior draws)",
-                            r.2, r.0
-                        ));
-                    }
-                }
-                Some(r)
-            }
-            None => None,
+        let at = super::At {
+            level,
+            model: name,
+            seed,
         };
+        let mut samplers =
+            super::sample::run_samplers(&run.checkpoints, inf, &post, &map, &at, progress)?;
+        let linearisation_check = super::linearisation::to_exact(&mut post, &mut samplers, nl);
         let lin_shift = linearisation_check.map_or(0.0, |r| r.2);
         let compare = super::compare::compare(
-            study, inf, &post, &map, &samplers, lin_shift, seed, level, name, progress,
+            &run.checkpoints,
+            inf,
+            &post,
+            &map,
+            &samplers,
+            lin_shift,
+            &at,
+            progress,
         )?;
         let redundancy = super::redundancy::analyse(&post, &map, &samplers);
         let mut units = law.param_units();
@@ -231,44 +226,6 @@ pub fn infer_level(
         });
     }
     Ok(out)
-}
-
-/// The linearised measurement bias checked on posterior draws: `post` must carry the exact
-/// operator; the draws' `log_lik` are the linearised model's. On up to 200 draws spread evenly
-/// over the first sampler's, `d = log L_exact - log L_linearised`: returns (draws, sd of `d`,
-/// `log mean exp d`). The sd says whether the posterior's shape changes (a constant `d` does
-/// not change it); `log mean exp d` turns the linearised evidence into the exact one
-/// (`Z = Z_lin E_post_lin[exp d]`, importance sampling from the linearised posterior).
-fn linearisation_error(
-    post: &FrfPosterior<'_>,
-    samplers: &[SamplerResult],
-    nl: usize,
-) -> (usize, f64, f64) {
-    let Some(s) = samplers.first() else {
-        return (0, 0.0, 0.0);
-    };
-    let draws = &s.draws;
-    let n = draws.lp.len();
-    let step = (n / 200).max(1);
-    let d: Vec<f64> = (0..n)
-        .step_by(step)
-        .take(200)
-        .filter_map(|r| {
-            let phys: Vec<f64> = draws.values.iter().map(|col| col[r]).collect();
-            post.likelihood
-                .eval(&phys[..nl], &phys[nl..], false)
-                .ok()
-                .map(|e| e.value - draws.log_lik[r])
-        })
-        .collect();
-    if d.is_empty() {
-        return (0, 0.0, 0.0);
-    }
-    let m = d.iter().sum::<f64>() / d.len() as f64;
-    let sd = (d.iter().map(|x| (x - m).powi(2)).sum::<f64>() / d.len() as f64).sqrt();
-    let mx = d.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let lme = mx + (d.iter().map(|x| (x - mx).exp()).sum::<f64>() / d.len() as f64).ln();
-    (d.len(), sd, lme)
 }
 
 /// A report sentence on an estimated channel correlation: where it is large and how much
@@ -312,58 +269,4 @@ fn correlation_note(
             )
         }
     }
-}
-
-/// The basin study of every posterior of a level (hook of the runner after the level's
-/// inference): rebuilds each posterior, linearises its measurement bias at the MAP as the
-/// search did, and runs [`super::basins::run`].
-pub fn basins_of_level(
-    study: &Study,
-    inf: &crate::study::inference::Inference,
-    lik_engine: &dyn FrfEngine,
-    square_engine: &dyn FrfEngine,
-    level: &LevelData,
-    laws: &[Box<dyn ConstitutiveModel>],
-    posts: &mut [PosteriorResult],
-) -> Result<(), RunError> {
-    let Some(settings) = &inf.basins else {
-        return Ok(());
-    };
-    for (mi, p) in posts.iter_mut().enumerate() {
-        let Some((_, law)) = study
-            .models
-            .iter()
-            .zip(laws)
-            .find(|(m, _)| m.name.eq_ignore_ascii_case(&p.model))
-        else {
-            continue;
-        };
-        let mut post = build_posterior(study, inf, lik_engine, level, law.as_ref(), &p.model)?;
-        let nl = law.n_params();
-        if inf.linearised_measurement && post.likelihood.forward.obs.measurement.is_some() {
-            post.likelihood
-                .forward
-                .linearise_measurement(&p.map.map_physical[..nl])
-                .map_err(|e| RunError::Analysis {
-                    analysis: format!("basin study of {} at {}", p.model, p.level),
-                    message: e.to_string(),
-                })?;
-        }
-        let seed =
-            study.seed ^ 0xBA51_0000_0000 ^ ((mi as u64 + 1) << 40) ^ level_hash(&level.name);
-        p.basins = Some(super::basins::run(
-            study,
-            settings,
-            &post,
-            square_engine,
-            level,
-            law.as_ref(),
-            &p.map,
-            &p.initial_x,
-            &format!("{} at {}", p.model, p.level),
-            inf.map_max_iterations,
-            seed,
-        )?);
-    }
-    Ok(())
 }
