@@ -98,7 +98,6 @@ pub mod report;
 pub mod rfm;
 #[allow(clippy::needless_borrow)]
 pub mod rom;
-pub mod runner;
 pub mod simulate;
 pub mod stage;
 pub mod stats;

@@ -12,7 +12,7 @@ use rfmlab::data::FrfSet;
 use rfmlab::diagnose::prepared::Prepared;
 use rfmlab::inference::likelihood::FrfPosterior;
 use rfmlab::inference::{DensityError, Posterior as _};
-use rfmlab::runner::RunError;
+use rfmlab::stage::RunError;
 use rfmlab::study::StudyError;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
@@ -271,7 +271,7 @@ impl Study {
     /// The folder of certified ROMs reused across runs (`.rom-cache/` beside the output folder).
     #[getter]
     fn rom_cache_dir(&self) -> PathBuf {
-        rfmlab::runner::rom_cache_dir(&self.study)
+        rfmlab::stage::rom_cache_dir(&self.study.output_dir)
     }
 
     /// Check the study without running it (data, channels, band, initial values): a dict.
@@ -359,7 +359,8 @@ impl Study {
             match cached {
                 Some(p) => p,
                 None => {
-                    let cache = rom_cache.then(|| rfmlab::runner::rom_cache_dir(&self.study));
+                    let cache =
+                        rom_cache.then(|| rfmlab::stage::rom_cache_dir(&self.study.output_dir));
                     let p = py
                         .detach(|| Prepared::new(&self.study, cache.as_deref()))
                         .map_err(|e| run_error(py, &e))?;

@@ -10,7 +10,7 @@ use super::{error, run_error};
 use polars::prelude::{DataFrame, ParquetWriter};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyTuple};
-use rfmlab::runner::RunError;
+use rfmlab::stage::RunError;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
@@ -232,7 +232,7 @@ pub(crate) fn execute(
             }
         });
     if opts.rom_cache {
-        ex = ex.rom_cache(rfmlab::runner::rom_cache_dir(study));
+        ex = ex.rom_cache(rfmlab::stage::rom_cache_dir(&study.output_dir));
     }
     let results = rfmlab::pipeline::run(&plan, &mut ex)?;
     let files = match &opts.output {

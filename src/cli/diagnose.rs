@@ -2,7 +2,7 @@
 
 use super::common::{print_json, Global, InputError};
 use rfmlab::closed_loop::ClosedLoopParams;
-use rfmlab::runner::RunError;
+use rfmlab::stage::RunError;
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]

@@ -1,4 +1,4 @@
-//! `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` (the study runner, [`rfmlab::runner`]).
+//! `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` ([`rfmlab::pipeline`] and [`rfmlab::report`]).
 
 use super::common::{print_json, Global, InputError};
 use rfmlab::pipeline::RunSummary;

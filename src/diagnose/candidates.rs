@@ -103,7 +103,7 @@ pub(crate) fn level_candidates(
     if built.model.c_b.is_some() {
         candidates.retain(|c| !matches!(c, Effect::BeamModulus));
     }
-    crate::runner::declared::admitted(candidates, settings)
+    crate::bayes::declared::admitted(candidates, settings)
 }
 
 /// Whether `settings` admit the alternative law, the fractional Zener (type

@@ -5,7 +5,7 @@
 //!
 //! These are the entry points of the CLI and the Python binding: they take the study, make the
 //! stage's params from it ([`DiagnoseParams::of`]) and build the engine with the run's
-//! functions (`crate::runner::stages`).
+//! functions ([`crate::stage::engine::setup`]).
 
 use super::of_study::{no_inference, wants_sensor_mass, StudyPosterior};
 use super::params::{DiagnoseParams, LoopInputs};

@@ -127,6 +127,35 @@ impl LevelPosterior for StudyPosterior<'_> {
             .inference
             .as_ref()
             .ok_or_else(|| no_inference(study))?;
-        crate::runner::posterior::build_posterior(study, inf, engine, level, law, model)
+        build_posterior(study, inf, engine, level, law, model)
     }
+}
+
+/// The posterior of `model_name` at `level` with the priors and sampler settings of the
+/// study's `[inference]` section `inf` (the study's point ids, estimator and declared effects).
+pub(crate) fn build_posterior<'a>(
+    study: &Study,
+    inf: &crate::study::inference::Inference,
+    engine: &'a dyn FrfEngine,
+    level: &LevelData,
+    law: &'a dyn ConstitutiveModel,
+    model_name: &str,
+) -> Result<FrfPosterior<'a>, RunError> {
+    let ids: Vec<u32> = study.structure.points.iter().map(|p| p.id).collect();
+    let stage = crate::bayes::InferenceParams {
+        level: level.name.clone(),
+        model: model_name.to_string(),
+        priors: inf.priors.get(model_name).cloned().unwrap_or_default(),
+        samplers: crate::bayes::SamplerParams::from(inf),
+    };
+    let inputs = crate::bayes::PosteriorInputs {
+        file: &study.file,
+        estimator: study
+            .measurements
+            .as_ref()
+            .and_then(|m| m.estimator.as_ref()),
+        point_ids: &ids,
+        declared: &study.declared_effects,
+    };
+    crate::bayes::posterior::build_posterior(&inputs, &stage, engine, level, law)
 }

@@ -106,7 +106,7 @@ impl Prepared {
             ));
         };
         let engine = self.lik_engine.as_deref().unwrap_or(self.engine.as_ref());
-        let mut post = crate::runner::posterior::build_posterior(
+        let mut post = super::of_study::build_posterior(
             study,
             inf,
             engine,

@@ -92,7 +92,7 @@ pub fn loop_stage(
     let mut results = Vec::new();
     for level in levels.iter().filter(|l| p.levels.contains(&l.name)) {
         let mut post = posterior.posterior(engine, level, law.as_ref(), name)?;
-        let x0 = crate::runner::posterior::initial_x(&post, &p.initial);
+        let x0 = crate::bayes::posterior::initial_x(&post, &p.initial);
         let candidates = level_candidates(level, engine, built, &bonds, p.settings.as_ref());
         let t_loop = std::time::Instant::now();
         params

@@ -38,7 +38,7 @@ pub(super) fn band_constant(ctx: &Level<'_>) -> Result<Vec<BandConstantResult>, 
             &sub,
             |c, prev: Option<&BandResult>| {
                 let e0 = prev.map(|p| p.modulus).unwrap_or(model1_e0);
-                crate::rfm::rfm_band_constant(engine, c, band, e0, &params)
+                crate::rfm::rfm_band_constant(engine, c, band, e0, params)
                     .map_err(|e| analysis(&name, e))
             },
             |r| vec![r.modulus.re, r.modulus.im],

@@ -41,7 +41,7 @@ pub(super) fn global_models(
             col,
             |c, prev: Option<&RfmResult>| {
                 let p0 = prev.map(|p| p.params.as_slice()).unwrap_or(&m.initial);
-                let r = crate::rfm::rfm_global(engine, c, law.as_ref(), p0, &params);
+                let r = crate::rfm::rfm_global(engine, c, law.as_ref(), p0, params);
                 // A corrected pass continues the history of the previous one (Fig. 8 shows
                 // the whole path from the initial values).
                 let r = r.map(|mut r| {

@@ -97,7 +97,7 @@ impl Plan {
             data,
             identification: IdentificationParams {
                 models: s.models.clone(),
-                rfm: crate::runner::settings::rfm_params(s),
+                rfm: rfm_params(s),
                 per_line: s.analyses.per_line,
                 correlation: s.analyses.correlation,
                 sensitivity: s.analyses.sensitivity,
@@ -124,4 +124,14 @@ impl Plan {
 /// The sampler settings of an `[inference]` section.
 pub(super) fn sampler_params(inf: &Inference) -> SamplerParams {
     SamplerParams::from(inf)
+}
+
+/// The RFM settings of a study's `[solver]`.
+fn rfm_params(s: &Study) -> crate::rfm::RfmParams {
+    crate::rfm::RfmParams {
+        tol_rel_change: s.solver.tolerance,
+        max_iterations: s.solver.max_iterations,
+        rcond: s.solver.svd_rtol,
+        ..crate::rfm::RfmParams::default()
+    }
 }

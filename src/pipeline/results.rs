@@ -27,7 +27,7 @@ pub struct LevelResults {
     /// Posteriors of the `[inference]` models at this level.
     pub posteriors: Vec<PosteriorResult>,
     /// The change from the lower `[inference]` level to this one (set on the higher level).
-    pub across_levels: Option<crate::runner::levels::LevelComparison>,
+    pub across_levels: Option<crate::bayes::levels::LevelComparison>,
 }
 
 impl LevelResults {
@@ -91,7 +91,7 @@ pub struct Results {
     pub(crate) figures: bool,
     pub(crate) output_dir: std::path::PathBuf,
     pub(crate) closed_loop: Option<LoopOutcome>,
-    pub(crate) mesh_error: Vec<crate::runner::preflight::ModeDiscretisation>,
+    pub(crate) mesh_error: Vec<crate::stage::preflight::ModeDiscretisation>,
     /// (name = path of the parquet file without `.parquet`, table, its DataFrame).
     tables: Vec<(String, Table, DataFrame)>,
 }
@@ -109,7 +109,7 @@ impl Results {
         figures: bool,
         output_dir: std::path::PathBuf,
         closed_loop: Option<LoopOutcome>,
-        mesh_error: Vec<crate::runner::preflight::ModeDiscretisation>,
+        mesh_error: Vec<crate::stage::preflight::ModeDiscretisation>,
     ) -> Result<Results, RunError> {
         let mut tables = Vec::new();
         for t in crate::pipeline::tables::all(&levels, &level_results)? {
@@ -140,7 +140,7 @@ impl Results {
 
     /// The mesh's estimated discretisation error per low mode (`[analyses] mesh_error`;
     /// empty when not asked for or not a meshed joint).
-    pub fn mesh_error(&self) -> &[crate::runner::preflight::ModeDiscretisation] {
+    pub fn mesh_error(&self) -> &[crate::stage::preflight::ModeDiscretisation] {
         &self.mesh_error
     }
 

@@ -15,11 +15,11 @@ mod figures;
 mod markdown;
 pub mod material;
 
+use crate::diagnose;
 use crate::output::{Manifest, ResultsDir};
 use crate::pipeline::results::{Results, LOOP_DIR};
 use crate::pipeline::{Executor, RunOptions, RunSummary};
-use crate::runner::closed_loop;
-use crate::runner::{Event, RunError};
+use crate::stage::{Event, RunError};
 use crate::study::Study;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -120,11 +120,11 @@ fn fill(
     if let Some(o) = results.closed_loop() {
         let sub = LOOP_DIR;
         let mut d = ResultsDir::create(out.path(), sub)?;
-        closed_loop::write_loop(&mut d, o, &study.name, results.figures)?;
+        diagnose::write_loop(&mut d, o, &study.name, results.figures)?;
         for f in d.written() {
             out.record(format!("{sub}/{f}"));
         }
-        report.paragraph(&closed_loop::report_section(&o.markdown, sub));
+        report.paragraph(&diagnose::report_section(&o.markdown, sub));
     }
     out.write_report(&report)?;
     let mut manifest = Manifest::new(&study.file, Some(study.seed));

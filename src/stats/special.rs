@@ -58,25 +58,6 @@ pub fn chi2_sf(stat: f64, dof: f64) -> f64 {
     gamma_q(dof / 2.0, stat / 2.0)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn chi_square_tail_matches_closed_forms() {
-        // dof 2: Q = exp(-x / 2); dof 1: Q = erfc(sqrt(x / 2)).
-        for x in [0.1, 1.0, 3.0, 5.0, 10.0, 30.0, 40.0] {
-            assert!((chi2_sf(x, 2.0) - (-x / 2.0f64).exp()).abs() < 1e-13);
-            assert!((chi2_sf(x, 1.0) - libm::erfc((x / 2.0f64).sqrt())).abs() < 1e-12);
-        }
-        // dof 4: Q = exp(-x/2) (1 + x/2).
-        for x in [0.5, 2.0, 3.0, 9.0, 12.0, 30.0] {
-            let q = (-x / 2.0f64).exp() * (1.0 + x / 2.0);
-            assert!((chi2_sf(x, 4.0) - q).abs() < 1e-13, "{x}");
-        }
-    }
-}
-
 /// Standard normal quantile `Phi^-1(p)`: Acklam's rational approximation refined by two Halley
 /// steps on `erfc`, accurate to a few ulps for `p` in (0, 1).
 pub fn norm_ppf(p: f64) -> f64 {
@@ -137,4 +118,23 @@ pub fn norm_ppf(p: f64) -> f64 {
         x -= u / (1.0 + 0.5 * x * u);
     }
     x
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chi_square_tail_matches_closed_forms() {
+        // dof 2: Q = exp(-x / 2); dof 1: Q = erfc(sqrt(x / 2)).
+        for x in [0.1, 1.0, 3.0, 5.0, 10.0, 30.0, 40.0] {
+            assert!((chi2_sf(x, 2.0) - (-x / 2.0f64).exp()).abs() < 1e-13);
+            assert!((chi2_sf(x, 1.0) - libm::erfc((x / 2.0f64).sqrt())).abs() < 1e-12);
+        }
+        // dof 4: Q = exp(-x/2) (1 + x/2).
+        for x in [0.5, 2.0, 3.0, 9.0, 12.0, 30.0] {
+            let q = (-x / 2.0f64).exp() * (1.0 + x / 2.0);
+            assert!((chi2_sf(x, 4.0) - q).abs() < 1e-13, "{x}");
+        }
+    }
 }

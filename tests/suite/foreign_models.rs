@@ -260,7 +260,7 @@ figures = false
     )
 }
 
-fn run(dir: &Path, name: &str, text: &str) -> rfmlab::runner::RunSummary {
+fn run(dir: &Path, name: &str, text: &str) -> rfmlab::pipeline::RunSummary {
     let file = dir.join(format!("{name}.toml"));
     std::fs::write(&file, text).unwrap();
     let study = rfmlab::study::load(&file).unwrap_or_else(|e| panic!("{e}"));

@@ -70,7 +70,7 @@ pub(crate) fn params() -> RomParams {
     RomParams {
         n_cert_moduli_per_axis: 2,
         // the range a study's ROM covers: the paper's adhesive (E0 about 5 MPa) widened 2x
-        // either way ([`rfmlab::runner`]'s modulus range)
+        // either way ([`rfmlab::study::build::initial_modulus_range`])
         range: rfmlab::rom::ModulusRange {
             e_storage_pa: (2e6, 2e7),
             e_loss_pa: (0.3e6, 8e6),

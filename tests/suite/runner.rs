@@ -10,7 +10,7 @@ use rfmlab::output::Table;
 use rfmlab::pipeline::RunOptions;
 use rfmlab::report::run_study;
 
-fn no_progress(_: rfmlab::runner::Event) {}
+fn no_progress(_: rfmlab::stage::Event) {}
 
 #[test]
 fn each_model_recovers_its_truth_from_table4_initial_rows() {

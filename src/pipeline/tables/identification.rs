@@ -16,7 +16,8 @@
 
 use crate::common::C64;
 use crate::output::{Columns as Cols, Table};
-use crate::runner::{LevelData, LevelResults, RunError};
+use crate::pipeline::results::LevelResults;
+use crate::stage::{LevelData, RunError};
 
 fn s(v: impl Into<String>) -> String {
     v.into()

@@ -8,10 +8,11 @@
 //! | `redundancy` | level, model, kind (svd / parameter), index, parameter, singular_value (1), condition_number (1), direction (text), v_<param> (right singular vector, d ln p), posterior_sd_x, prior_sd_x, sd_ratio (1; unconstrained coordinates), corr_<param> (posterior correlation, unconstrained coordinates) |
 //! | `basins` | level, model, method (map / rfm), start, kind (initial / design), basin (-1: failed), objective (map: -log posterior up to log Z, nats; rfm: relative FRF residual), iterations, stop_reason, basin_distance_sd (the basin's distance from the MAP in Laplace sd), start_<param>, end_<param> (SI) |
 
+use crate::bayes::levels::LevelComparison;
+use crate::bayes::PosteriorResult;
 use crate::output::{Columns as Cols, Table};
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::levels::LevelComparison;
-use crate::runner::{LevelResults, RunError};
+use crate::pipeline::results::LevelResults;
+use crate::stage::RunError;
 
 pub(crate) fn union_names<'a>(names: impl Iterator<Item = &'a [String]>) -> Vec<String> {
     let mut all: Vec<String> = Vec::new();

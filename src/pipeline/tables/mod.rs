@@ -20,9 +20,10 @@ pub(crate) mod posterior;
 
 pub(crate) use posterior::summaries;
 
+use crate::bayes::PosteriorResult;
 use crate::output::Table;
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::{LevelData, LevelResults, RunError};
+use crate::pipeline::results::LevelResults;
+use crate::stage::{LevelData, RunError};
 
 /// Every table of a run, in the order they are written: the deterministic ones, then the
 /// inference, comparison and across-level ones (those only when computed).

@@ -10,10 +10,10 @@
 //!
 //! The draws table is what `scripts/to_arviz.py` turns into an ArviZ InferenceData.
 
+use crate::bayes::PosteriorResult;
 use crate::inference::diagnostics::{summarize_with_hdi, Summary, DEFAULT_HDI_PROB};
 use crate::output::{Columns as Cols, Table};
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::{LevelData, RunError};
+use crate::stage::{LevelData, RunError};
 
 /// The diagnostics of one sampler's draws (one Summary per parameter).
 pub(crate) fn summaries(p: &PosteriorResult) -> Vec<(String, Vec<Summary>)> {

@@ -6,9 +6,10 @@
 //! `.svg`.
 
 use crate::common::C64;
+use crate::identify::frf_of;
+use crate::pipeline::results::LevelResults;
 use crate::plot::{Curve, CurveStyle, FrfCurve};
-use crate::runner::frf_of;
-use crate::runner::{LevelData, LevelResults, RunError};
+use crate::stage::{LevelData, RunError};
 use std::path::Path;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;

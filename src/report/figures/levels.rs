@@ -4,9 +4,10 @@
 //! (`fig_identifiability`) and the basin maps per level, model and method
 //! (`fig_basins_<level>_<model>_<method>`).
 
+use crate::bayes::PosteriorResult;
+use crate::pipeline::results::LevelResults;
 use crate::pipeline::tables::levels::{comparisons, union_names};
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::{LevelResults, RunError};
+use crate::stage::RunError;
 
 /// The two parameters of a basin map: the largest entries of the weakest direction.
 fn map_pair(p: &PosteriorResult, nl: usize) -> (usize, usize) {
@@ -125,7 +126,7 @@ pub(super) fn figures(
             let mut curves = Vec::new();
             let n_show = m.basins.len().min(4);
             for k in 0..=n_show {
-                let pick: Vec<&crate::runner::basins::BasinStart> = m
+                let pick: Vec<&crate::bayes::basins::BasinStart> = m
                     .starts
                     .iter()
                     .filter(|s| match s.basin {
@@ -153,7 +154,7 @@ pub(super) fn figures(
                     pick.iter().map(|s| s.start[j].log10()).collect(),
                 ));
             }
-            let failed: Vec<&crate::runner::basins::BasinStart> =
+            let failed: Vec<&crate::bayes::basins::BasinStart> =
                 m.starts.iter().filter(|s| s.basin.is_none()).collect();
             if !failed.is_empty() {
                 curves.push(Curve::points(

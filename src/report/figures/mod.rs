@@ -11,9 +11,9 @@ mod identification;
 mod levels;
 mod posterior;
 
+use crate::bayes::PosteriorResult;
 use crate::pipeline::Results;
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::RunError;
+use crate::stage::RunError;
 use std::path::Path;
 
 /// Draw every figure of `results` into `dir`; returns (file name of the PNG, caption), in the

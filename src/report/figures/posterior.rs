@@ -3,8 +3,8 @@
 //! (`fig_pair_<level>_<model>`), and per model the posterior bands of E'(f) and E''(f) of
 //! every level (`fig_posterior_modulus_<model>`).
 
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::RunError;
+use crate::bayes::PosteriorResult;
+use crate::stage::RunError;
 
 /// Posterior figures: per level and model the NUTS trace plot and the pair plot (MAP and the
 /// Laplace 95 % ellipse), and per model the posterior bands of E'(f) and E''(f) of every level

@@ -3,11 +3,11 @@
 //! widened ten-fold), LOO and WAIC, FRAC over posterior draws, the estimators'
 //! disagreements, and the posterior predictive check per channel at the MAP.
 
+use crate::bayes::PosteriorResult;
 use crate::output::Report;
 use crate::pipeline::tables::comparison::{
     estimator_gap, evidence_of, levels_of, model_probabilities, PREFERENCE,
 };
-use crate::runner::bayes::PosteriorResult;
 
 fn pm(z: f64, se: f64) -> String {
     if !z.is_finite() {

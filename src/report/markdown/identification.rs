@@ -8,8 +8,9 @@
 
 use super::f4;
 use crate::output::Report;
+use crate::pipeline::results::LevelResults;
 use crate::pipeline::Results;
-use crate::runner::{LevelData, LevelResults};
+use crate::stage::LevelData;
 
 /// Paper values (MPa, kPa s) of Table 4 identified rows, by model name, for the report.
 fn paper_identified(model: &str, level: &str) -> Option<Vec<f64>> {
@@ -57,7 +58,7 @@ pub(super) fn header(run: &Results, loop_status: Option<&str>) -> Report {
         study.sha256
     ));
     rep.paragraph(&format!("FRF {engine_note}."));
-    if let Some(note) = crate::runner::declared::deterministic_note(study) {
+    if let Some(note) = crate::bayes::declared::deterministic_note(&study.declared_effects) {
         rep.paragraph(&note);
     }
     if let Some(e) = study

@@ -21,11 +21,11 @@ mod modal;
 mod posterior;
 mod redundancy;
 
+use crate::bayes::PosteriorResult;
+use crate::diagnose;
 use crate::output::Report;
 use crate::pipeline::Results;
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::closed_loop;
-use crate::runner::preflight::ModeDiscretisation;
+use crate::stage::preflight::ModeDiscretisation;
 
 /// A value with 4 decimals, `-` when not finite.
 fn f4(v: f64) -> String {
@@ -43,7 +43,7 @@ pub(super) fn build(results: &Results, figures: &[(String, String)]) -> Report {
     let posts: Vec<&PosteriorResult> = results.posteriors().collect();
     let loop_status = results
         .closed_loop()
-        .map(|o| closed_loop::status_line(&o.summary.levels));
+        .map(|o| diagnose::status_line(&o.summary.levels));
     let mut rep = identification::header(results, loop_status.as_deref());
     modal::modal_tables(&mut rep, levels, level_results);
     identification::global_tables(&mut rep, levels, level_results);
@@ -95,7 +95,7 @@ fn mesh_error_section(report: &mut crate::output::Report, modes: &[ModeDiscretis
         ],
         &rows,
     );
-    for w in crate::runner::preflight::mesh_error_warnings(modes) {
+    for w in crate::stage::preflight::mesh_error_warnings(modes) {
         report.paragraph(&format!("**Warning**: {w}"));
     }
 }

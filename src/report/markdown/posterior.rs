@@ -3,11 +3,11 @@
 //! sd, 95 % interval, Laplace sd, R-hat and ESS (moduli in MPa, viscosities in kPa s), the
 //! samplers' costs, diagnostics warnings and the posterior figures.
 
+use crate::bayes::PosteriorResult;
 use crate::inference::Sampler;
 use crate::output::Report;
 use crate::pipeline::tables::posterior::{summaries, truth_of};
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::LevelData;
+use crate::stage::LevelData;
 
 /// Scale of a unit for the report.
 fn scale(unit: &str) -> (f64, &'static str) {

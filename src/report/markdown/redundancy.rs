@@ -3,9 +3,9 @@
 //! sensitivity (where the MAP search and the global RFM end from space-filling starts: basins,
 //! iterations, stop reasons).
 
+use crate::bayes::PosteriorResult;
 use crate::output::Report;
-use crate::runner::bayes::PosteriorResult;
-use crate::runner::LevelResults;
+use crate::pipeline::results::LevelResults;
 
 /// The parameter redundancy section (when a posterior has its redundancy analysis).
 pub(super) fn redundancy(rep: &mut Report, results: &[LevelResults], figures: &[(String, String)]) {
