@@ -5,7 +5,7 @@
 //!
 //! These are the entry points of the CLI and the Python binding: they take the study, make the
 //! stage's params from it ([`DiagnoseParams::of`]) and build the engine with the run's
-//! functions ([`crate::stage::engine::setup`]).
+//! functions ([`crate::stage::setup::setup`]).
 
 use super::of_study::{no_inference, wants_sensor_mass, StudyPosterior};
 use super::params::{DiagnoseParams, LoopInputs};
@@ -61,12 +61,12 @@ pub fn diagnose_into(
     if study.inference.is_none() {
         return Err(no_inference(study));
     }
-    let crate::stage::engine::Setup {
+    let crate::stage::setup::Setup {
         laws,
         built,
         levels,
         engines,
-    } = crate::stage::engine::setup(study, None)?;
+    } = crate::stage::setup::setup(study, None)?;
     let engine = engines
         .likelihood
         .as_deref()

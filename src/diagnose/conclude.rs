@@ -53,7 +53,7 @@ pub(crate) fn verdict_of(
                     })
                     .unwrap_or(200)
             });
-            let spec = crate::stage::engine::estimator_spec(e, &level.freq_hz);
+            let spec = crate::stage::measurement::estimator_spec(e, &level.freq_hz);
             let force = chain_params.force_of(&level.name);
             Chain::Welch(Box::new(crate::experiment::ChainParams {
                 force_rms_n: force,

@@ -40,12 +40,12 @@ impl Prepared {
     /// Build the model, load the data and build the engines as `rfmlab run` does, reusing
     /// certified ROMs from `rom_cache` when given (see [`crate::stage::rom_cache_dir`]).
     pub fn new(study: &Study, rom_cache: Option<&Path>) -> Result<Prepared, RunError> {
-        let crate::stage::engine::Setup {
+        let crate::stage::setup::Setup {
             laws,
             built: _,
             levels,
             engines,
-        } = crate::stage::engine::setup(study, rom_cache)?;
+        } = crate::stage::setup::setup(study, rom_cache)?;
         Ok(Prepared {
             study: study.clone(),
             levels,

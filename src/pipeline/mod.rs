@@ -23,6 +23,7 @@
 
 mod check;
 mod executor;
+mod level_results;
 mod lower;
 mod plan;
 pub(crate) mod results;
@@ -31,6 +32,7 @@ pub(crate) mod tables;
 pub use crate::stage::{Event, RunError};
 pub use check::{check, check_study, CheckSummary};
 pub use executor::{Executor, Observer};
+pub use level_results::LevelResults;
 pub use plan::{
     DataParams, EngineParams, IdentificationParams, InferenceParams, Plan, SamplerParams,
 };
@@ -202,7 +204,7 @@ fn run_here(
             engine: det_engine,
             level,
             laws: &laws,
-            measurement: crate::stage::engine::measurement_model(
+            measurement: crate::stage::measurement::measurement_model(
                 plan.data.estimator.as_ref(),
                 level,
                 &study.file,

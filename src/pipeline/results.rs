@@ -4,10 +4,11 @@
 //! writes as parquet, as polars `DataFrame`s named by the file stems (`parameters`, `draws`,
 //! `summary`, ...).
 
+pub use super::level_results::LevelResults;
 use crate::bayes::posterior::Draws;
 use crate::bayes::PosteriorResult;
 use crate::diagnose::LoopOutcome;
-use crate::identify::{GlobalResult, Identification};
+use crate::identify::GlobalResult;
 use crate::inference::diagnostics::Summary;
 use crate::output::Table;
 use crate::stage::{LevelData, RunError};
@@ -17,36 +18,6 @@ use std::sync::Arc;
 
 /// The folder (inside the results folder) of the closed loop's files.
 pub const LOOP_DIR: &str = "closed_loop";
-
-/// Everything computed for one level: the deterministic identification (its fields read
-/// through this value), the posteriors of the `[inference]` models, and the change from the
-/// lower `[inference]` level (set on the higher level).
-#[derive(Clone, Debug)]
-pub struct LevelResults {
-    pub identification: Identification,
-    /// Posteriors of the `[inference]` models at this level.
-    pub posteriors: Vec<PosteriorResult>,
-    /// The change from the lower `[inference]` level to this one (set on the higher level).
-    pub across_levels: Option<crate::bayes::levels::LevelComparison>,
-}
-
-impl LevelResults {
-    /// The level's results before its inference stages.
-    pub fn new(identification: Identification) -> Self {
-        LevelResults {
-            identification,
-            posteriors: Vec::new(),
-            across_levels: None,
-        }
-    }
-}
-
-impl std::ops::Deref for LevelResults {
-    type Target = Identification;
-    fn deref(&self) -> &Identification {
-        &self.identification
-    }
-}
 
 /// The identified parameters of one global RFM run (SI, in the law's order).
 #[derive(Clone, Debug, PartialEq)]

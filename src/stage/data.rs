@@ -255,3 +255,23 @@ pub fn load_levels(
     }
     Ok(out)
 }
+
+/// Lines of the lowest clear peak of the summed magnitude (a local maximum above a tenth of
+/// the largest), in Hz.
+pub fn first_peak_hz(level: &LevelData) -> Option<f64> {
+    let n_out = level.column.outputs.len().max(1);
+    let mag: Vec<f64> = (0..level.freq_hz.len())
+        .map(|l| {
+            (0..n_out)
+                .map(|k| level.column.accelerance[l * n_out + k].norm())
+                .sum::<f64>()
+        })
+        .collect();
+    let top = mag.iter().cloned().fold(0.0, f64::max);
+    if !(top > 0.0) || mag.len() < 3 {
+        return None;
+    }
+    (1..mag.len() - 1)
+        .find(|&l| mag[l] >= mag[l - 1] && mag[l] > mag[l + 1] && mag[l] > 0.1 * top)
+        .map(|l| level.freq_hz[l])
+}

@@ -5,10 +5,11 @@
 //! cache when it holds it) or the full model ([`crate::frf::FullModel`]), plus the
 //! likelihood's engine and the H1 measurement model's grid per level.
 
+use super::measurement::{estimator_spec, measurement_model};
+use super::rom_engine::RomEngine;
 use super::{input_error, LevelData, RunError};
 use crate::common::C64;
-use crate::forward::{EstimatorSpec, MeasurementModel, MeasurementParams};
-use crate::frf::{FrfEngine, FrfError, Sweep};
+use crate::frf::FrfEngine;
 use crate::material::ConstitutiveModel;
 use crate::study::build::BuiltModel;
 use crate::study::{Engine, Estimator, ModelSpec, Structure};
@@ -56,94 +57,6 @@ pub struct ModelsAndData<'a> {
     pub estimator: Option<&'a Estimator>,
     /// The study file, named by input errors.
     pub file: &'a Path,
-}
-
-/// The H1 estimator's settings on the lines `freq_hz`.
-pub fn estimator_spec(estimator: &Estimator, freq_hz: &[f64]) -> EstimatorSpec {
-    let lo = freq_hz.first().copied().unwrap_or(0.0);
-    let hi = freq_hz.last().copied().unwrap_or(0.0);
-    EstimatorSpec {
-        window: estimator.window,
-        block_s: estimator.block_s,
-        fs_hz: estimator.fs_hz,
-        force_band_hz: estimator.force_band((lo, hi)),
-        shaker: estimator.shaker,
-    }
-}
-
-/// The measurement model of a level, when the study states its estimator: the one chosen with
-/// the engine ([`LevelData::measurement`]), else on the default grid.
-pub fn measurement_model(
-    estimator: Option<&Estimator>,
-    level: &LevelData,
-    file: &Path,
-) -> Result<Option<MeasurementModel>, RunError> {
-    let Some(est) = estimator else {
-        return Ok(None);
-    };
-    if let Some((m, _)) = &level.measurement {
-        return Ok(Some(m.clone()));
-    }
-    MeasurementModel::new(
-        estimator_spec(est, &level.freq_hz),
-        &level.freq_hz,
-        &MeasurementParams::default(),
-    )
-    .map(Some)
-    .map_err(|e| input_error(file, "measurements.estimator", e.to_string()))
-}
-
-/// The ROM with a prepared pencil for the band's lines; other grids fall back to the reduced
-/// model's LU sweep (both are certified over the same range).
-struct RomEngine {
-    rom: crate::rom::ReducedModel,
-    /// Prepared pencils: the band's lines, and the measurement model's fine grid per level.
-    pencils: Vec<crate::rom::PencilSweep>,
-}
-
-impl FrfEngine for RomEngine {
-    fn n_out(&self) -> usize {
-        self.rom.n_out()
-    }
-    fn inputs(&self) -> &[usize] {
-        self.rom.inputs()
-    }
-    fn sweep_into(
-        &self,
-        omega_rad_s: &[f64],
-        modulus_pa: &[C64],
-        with_derivatives: bool,
-        out: &mut Sweep,
-    ) -> Result<(), FrfError> {
-        let same = |p: &crate::rom::PencilSweep| {
-            omega_rad_s.len() == p.omega_rad_s().len()
-                && omega_rad_s
-                    .iter()
-                    .zip(p.omega_rad_s())
-                    .all(|(a, b)| a.to_bits() == b.to_bits())
-        };
-        if let Some(p) = self.pencils.iter().find(|p| same(p)) {
-            p.sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
-        } else {
-            self.rom
-                .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
-        }
-    }
-    fn complex_modes(
-        &self,
-        modulus_pa: C64,
-        n_modes: usize,
-    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
-        FrfEngine::complex_modes(&self.rom, modulus_pa, n_modes)
-    }
-    fn complex_modes_with_masses(
-        &self,
-        modulus_pa: C64,
-        n_modes: usize,
-        masses: &[(usize, f64)],
-    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
-        FrfEngine::complex_modes_with_masses(&self.rom, modulus_pa, n_modes, masses)
-    }
 }
 
 /// The run's FRF engines.
@@ -418,45 +331,4 @@ pub fn check_initial_values(
         n_checked += omega.len();
     }
     Ok(n_checked)
-}
-
-/// What a command that runs one stage of a study starts from (`rfmlab diagnose`, a prepared
-/// posterior): the laws, the built model, the levels' data and the engines, made as
-/// `rfmlab run` makes them.
-pub struct Setup {
-    pub laws: Vec<Box<dyn ConstitutiveModel>>,
-    pub built: BuiltModel,
-    pub levels: Vec<LevelData>,
-    pub engines: Engines,
-}
-
-/// The [`Setup`] of `study`, reusing certified ROMs from `rom_cache` when given. The one
-/// function of the stages that reads a whole study: it is where a single-stage command enters.
-pub fn setup(study: &crate::study::Study, rom_cache: Option<&Path>) -> Result<Setup, RunError> {
-    let file = study.file.as_path();
-    let laws = crate::identify::model_laws(&study.models, file)?;
-    let built = build(&study.structure, file)?;
-    let mut levels = super::data::load_levels(study.measurements.as_ref(), &built, file)?;
-    let models = ModelsAndData {
-        models: &study.models,
-        laws: &laws,
-        estimator: study
-            .measurements
-            .as_ref()
-            .and_then(|m| m.estimator.as_ref()),
-        file,
-    };
-    let engines = build_engine(
-        &EngineParams::of(study),
-        &models,
-        &built,
-        &mut levels,
-        rom_cache,
-    )?;
-    Ok(Setup {
-        laws,
-        built,
-        levels,
-        engines,
-    })
 }

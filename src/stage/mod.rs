@@ -8,7 +8,11 @@ use crate::study::StudyError;
 
 pub mod data;
 pub mod engine;
+pub mod measurement;
+pub mod mesh_error;
 pub mod preflight;
+mod rom_engine;
+pub mod setup;
 
 /// Progress of a run, for progress bars.
 #[derive(Clone, Debug, PartialEq)]

@@ -16,7 +16,7 @@
 
 use crate::common::C64;
 use crate::output::{Columns as Cols, Table};
-use crate::pipeline::results::LevelResults;
+use crate::pipeline::LevelResults;
 use crate::stage::{LevelData, RunError};
 
 fn s(v: impl Into<String>) -> String {

@@ -11,7 +11,7 @@
 use crate::bayes::levels::LevelComparison;
 use crate::bayes::PosteriorResult;
 use crate::output::{Columns as Cols, Table};
-use crate::pipeline::results::LevelResults;
+use crate::pipeline::LevelResults;
 use crate::stage::RunError;
 
 pub(crate) fn union_names<'a>(names: impl Iterator<Item = &'a [String]>) -> Vec<String> {

@@ -22,7 +22,7 @@ pub(crate) use posterior::summaries;
 
 use crate::bayes::PosteriorResult;
 use crate::output::Table;
-use crate::pipeline::results::LevelResults;
+use crate::pipeline::LevelResults;
 use crate::stage::{LevelData, RunError};
 
 /// Every table of a run, in the order they are written: the deterministic ones, then the

@@ -7,7 +7,7 @@
 
 use crate::common::C64;
 use crate::identify::frf_of;
-use crate::pipeline::results::LevelResults;
+use crate::pipeline::LevelResults;
 use crate::plot::{Curve, CurveStyle, FrfCurve};
 use crate::stage::{LevelData, RunError};
 use std::path::Path;

@@ -5,8 +5,8 @@
 //! (`fig_basins_<level>_<model>_<method>`).
 
 use crate::bayes::PosteriorResult;
-use crate::pipeline::results::LevelResults;
 use crate::pipeline::tables::levels::{comparisons, union_names};
+use crate::pipeline::LevelResults;
 use crate::stage::RunError;
 
 /// The two parameters of a basin map: the largest entries of the weakest direction.

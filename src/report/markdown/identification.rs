@@ -8,7 +8,7 @@
 
 use super::f4;
 use crate::output::Report;
-use crate::pipeline::results::LevelResults;
+use crate::pipeline::LevelResults;
 use crate::pipeline::Results;
 use crate::stage::LevelData;
 

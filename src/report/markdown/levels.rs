@@ -4,8 +4,8 @@
 //! change; the evidence for shared or separate law parameters.
 
 use crate::output::Report;
-use crate::pipeline::results::LevelResults;
 use crate::pipeline::tables::levels::comparisons;
+use crate::pipeline::LevelResults;
 
 fn mpa(v: f64) -> String {
     format!("{:.3}", v * 1e-6)

@@ -6,7 +6,7 @@
 use super::f4;
 use crate::common::C64;
 use crate::output::Report;
-use crate::pipeline::results::LevelResults;
+use crate::pipeline::LevelResults;
 use crate::stage::LevelData;
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;

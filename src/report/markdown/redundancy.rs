@@ -5,7 +5,7 @@
 
 use crate::bayes::PosteriorResult;
 use crate::output::Report;
-use crate::pipeline::results::LevelResults;
+use crate::pipeline::LevelResults;
 
 /// The parameter redundancy section (when a posterior has its redundancy analysis).
 pub(super) fn redundancy(rep: &mut Report, results: &[LevelResults], figures: &[(String, String)]) {

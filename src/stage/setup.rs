@@ -1,0 +1,48 @@
+//! The start of a command that runs one stage of a study.
+
+use super::engine::{build, build_engine, EngineParams, Engines, ModelsAndData};
+use super::{LevelData, RunError};
+use crate::material::ConstitutiveModel;
+use crate::study::build::BuiltModel;
+use std::path::Path;
+
+/// What a command that runs one stage of a study starts from (`rfmlab diagnose`, a prepared
+/// posterior): the laws, the built model, the levels' data and the engines, made as
+/// `rfmlab run` makes them.
+pub struct Setup {
+    pub laws: Vec<Box<dyn ConstitutiveModel>>,
+    pub built: BuiltModel,
+    pub levels: Vec<LevelData>,
+    pub engines: Engines,
+}
+
+/// The [`Setup`] of `study`, reusing certified ROMs from `rom_cache` when given. The one
+/// function of the stages that reads a whole study: it is where a single-stage command enters.
+pub fn setup(study: &crate::study::Study, rom_cache: Option<&Path>) -> Result<Setup, RunError> {
+    let file = study.file.as_path();
+    let laws = crate::identify::model_laws(&study.models, file)?;
+    let built = build(&study.structure, file)?;
+    let mut levels = super::data::load_levels(study.measurements.as_ref(), &built, file)?;
+    let models = ModelsAndData {
+        models: &study.models,
+        laws: &laws,
+        estimator: study
+            .measurements
+            .as_ref()
+            .and_then(|m| m.estimator.as_ref()),
+        file,
+    };
+    let engines = build_engine(
+        &EngineParams::of(study),
+        &models,
+        &built,
+        &mut levels,
+        rom_cache,
+    )?;
+    Ok(Setup {
+        laws,
+        built,
+        levels,
+        engines,
+    })
+}
