@@ -22,7 +22,7 @@ use crate::iem::IemResult;
 use crate::material::ConstitutiveModel;
 use crate::modal::circle_fit::CircleFitResult;
 use crate::rfm::{BandResult, PerLineEstimate, RfmParams, RfmResult};
-use crate::stage::{input_error, Event, LevelData, RunError};
+use crate::stage::{Event, LevelData, RunError};
 use crate::study::build::BuiltModel;
 use crate::study::{Band, ModelSpec};
 use leakage::Leakage;
@@ -226,20 +226,4 @@ pub fn analyse_level(
         global,
         sensitivity,
     })
-}
-
-/// The laws of `models`, checked against their initial values (errors name `models[i]`).
-pub fn model_laws(
-    models: &[ModelSpec],
-    file: &Path,
-) -> Result<Vec<Box<dyn ConstitutiveModel>>, RunError> {
-    let mut laws = Vec::new();
-    for (i, m) in models.iter().enumerate() {
-        let law = crate::material::model_from_name(&m.name, m.branches)
-            .map_err(|e| input_error(file, format!("models[{i}].name"), e.to_string()))?;
-        crate::material::check_params(law.as_ref(), &m.initial)
-            .map_err(|e| input_error(file, format!("models[{i}].initial"), e.to_string()))?;
-        laws.push(law);
-    }
-    Ok(laws)
 }

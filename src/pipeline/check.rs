@@ -34,7 +34,7 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
     let study = plan.study();
     let (models, file) = (&plan.identification.models, study.file.as_path());
     preflight::check_settings(models, &plan.output_dir, file)?;
-    let laws = crate::identify::model_laws(models, file)?;
+    let laws = crate::stage::model_laws(models, file)?;
     let spec = crate::study::build::joint_spec(&study.structure);
     let cost = match &spec {
         Some(spec) => Some(
@@ -54,7 +54,8 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
         }),
         ..Default::default()
     };
-    preflight::check_bands(&plan.identification, file, &levels, &mut pf.warnings)?;
+    let id = &plan.identification;
+    preflight::check_bands(&id.band_constant, &id.iem, file, &levels, &mut pf.warnings)?;
     preflight::check_channels(&built, &levels, &mut pf.warnings);
     let lines_checked = engine::check_initial_values(models, file, &built, &levels, &laws)?;
     preflight::check_first_mode(models, &built, &levels, &laws, &mut pf)?;

@@ -108,7 +108,7 @@ fn run_here(
         extra(e);
     };
     let study = &lowered.study;
-    let laws = crate::identify::model_laws(&plan.identification.models, &study.file)?;
+    let laws = crate::stage::model_laws(&plan.identification.models, &study.file)?;
     progress(Event::Start {
         step: "assembling the FE model".into(),
         total: 0,

@@ -122,3 +122,19 @@ pub fn sibling(dir: &std::path::Path, suffix: &str) -> std::path::PathBuf {
         .unwrap_or_else(|| "results".into());
     dir.with_file_name(format!("{name}.{suffix}"))
 }
+
+/// The laws of `models`, checked against their initial values (errors name `models[i]`).
+pub fn model_laws(
+    models: &[crate::study::ModelSpec],
+    file: &std::path::Path,
+) -> Result<Vec<Box<dyn crate::material::ConstitutiveModel>>, RunError> {
+    let mut laws = Vec::new();
+    for (i, m) in models.iter().enumerate() {
+        let law = crate::material::model_from_name(&m.name, m.branches)
+            .map_err(|e| input_error(file, format!("models[{i}].name"), e.to_string()))?;
+        crate::material::check_params(law.as_ref(), &m.initial)
+            .map_err(|e| input_error(file, format!("models[{i}].initial"), e.to_string()))?;
+        laws.push(law);
+    }
+    Ok(laws)
+}

@@ -8,8 +8,8 @@
 
 use super::{input_error, LevelData, RunError};
 use crate::common::C64;
-use crate::identify::IdentificationParams;
 use crate::study::build::BuiltModel;
+use crate::study::Band;
 use crate::study::ModelSpec;
 use std::path::Path;
 
@@ -78,20 +78,18 @@ pub fn check_settings(
 /// The analysis bands against each level's lines: an error when a band holds no line of a
 /// level, a warning when it reaches beyond the data.
 pub fn check_bands(
-    params: &IdentificationParams,
+    band_constant: &[Band],
+    iem: &[Band],
     file: &Path,
     levels: &[LevelData],
     warnings: &mut Vec<String>,
 ) -> Result<(), RunError> {
-    let bands = params
-        .band_constant
+    let bands = band_constant
         .iter()
         .enumerate()
         .map(|(i, b)| (format!("analyses.band_constant[{i}]"), b))
         .chain(
-            params
-                .iem
-                .iter()
+            iem.iter()
                 .enumerate()
                 .map(|(i, b)| (format!("analyses.iem[{i}]"), b)),
         );

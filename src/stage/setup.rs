@@ -20,7 +20,7 @@ pub struct Setup {
 /// function of the stages that reads a whole study: it is where a single-stage command enters.
 pub fn setup(study: &crate::study::Study, rom_cache: Option<&Path>) -> Result<Setup, RunError> {
     let file = study.file.as_path();
-    let laws = crate::identify::model_laws(&study.models, file)?;
+    let laws = crate::stage::model_laws(&study.models, file)?;
     let built = build(&study.structure, file)?;
     let mut levels = super::data::load_levels(study.measurements.as_ref(), &built, file)?;
     let models = ModelsAndData {
