@@ -22,6 +22,7 @@
 //! ```
 
 mod check;
+mod closed_loop;
 mod executor;
 mod level_results;
 mod lower;
@@ -116,8 +117,7 @@ fn run_here(
     let built = crate::stage::engine::build(&study.structure, &study.file)?;
     progress(Event::Finish);
     ex.lap("build model")?;
-    let mut data =
-        crate::stage::data::load_levels(study.measurements.as_ref(), &built, &study.file)?;
+    let mut data = crate::stage::data::load_levels(Some(&plan.data), &built, &study.file)?;
     crate::stage::engine::check_initial_values(
         &plan.identification.models,
         &study.file,
@@ -126,7 +126,7 @@ fn run_here(
         &laws,
     )?;
     ex.lap("load and check data")?;
-    let mesh_error = if study.analyses.mesh_error {
+    let mesh_error = if plan.identification.mesh_error {
         progress(Event::Start {
             step: "estimating the mesh's discretisation error".into(),
             total: 0,
@@ -267,13 +267,20 @@ fn run_here(
                     total: 0,
                 })
             });
-            let stage = crate::diagnose::DiagnoseParams::of(study, None)?;
+            let stage = match &plan.closed_loop_stage {
+                Some(s) => s.clone(),
+                None => crate::diagnose::DiagnoseParams::of(study, None)?,
+            };
+            let posterior = closed_loop::PlanPosterior {
+                stages: &plan.inference,
+                inputs: bayes_run.posterior,
+            };
             let inputs = crate::diagnose::LoopInputs {
                 built: &built,
                 levels: &data,
                 laws: &laws,
                 engine: lik,
-                posterior: &crate::diagnose::StudyPosterior(study),
+                posterior: &posterior,
             };
             let o = crate::diagnose::loop_stage(&stage, &params, &inputs)?;
             progress(Event::Finish);

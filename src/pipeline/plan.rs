@@ -36,8 +36,10 @@ pub struct Plan {
     pub comparison: Option<LevelSettings>,
     /// The basin study of the MAP search (`[inference.basins]`).
     pub basins: Option<BasinSettings>,
-    /// The closed loop (`[closed_loop]` with `[inference]`), run on the run's engine.
+    /// The closed loop (`[closed_loop]` with `[inference]`), run on the run's engine: the
+    /// loop's settings and the stage's (model, levels, candidates, term ROM).
     pub closed_loop: Option<ClosedLoopParams>,
+    pub closed_loop_stage: Option<crate::diagnose::DiagnoseParams>,
     /// Where [`crate::report::write`] puts the results by default.
     pub output_dir: PathBuf,
     /// Whether the report draws figures.
@@ -92,6 +94,10 @@ impl Plan {
         let closed_loop = (s.inference.is_some()
             && s.closed_loop.as_ref().is_some_and(|c| c.enabled))
         .then(|| crate::diagnose::params_of(s));
+        let closed_loop_stage = match closed_loop {
+            Some(_) => Some(crate::diagnose::DiagnoseParams::of(s, None)?),
+            None => None,
+        };
         Ok(Plan {
             engine: EngineParams::of(s),
             data,
@@ -109,6 +115,7 @@ impl Plan {
             comparison: s.inference.as_ref().map(|i| i.level_change.clone()),
             basins: s.inference.as_ref().and_then(|i| i.basins.clone()),
             closed_loop,
+            closed_loop_stage,
             output_dir: s.output_dir.clone(),
             figures: s.analyses.figures,
             study,
