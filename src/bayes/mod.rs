@@ -39,7 +39,6 @@ pub use infer::{infer_level, PosteriorResult};
 pub use params::{stages_at, InferenceParams, SamplerParams};
 
 use crate::stage::RunError;
-use std::path::Path;
 
 /// A failed analysis step (`what` names the model and level) and why.
 pub(crate) fn fail(what: String, e: impl std::fmt::Display) -> RunError {
@@ -49,15 +48,4 @@ pub(crate) fn fail(what: String, e: impl std::fmt::Display) -> RunError {
     }
 }
 
-/// An input error at `key` of the study file `file`.
-pub(crate) fn input_err(
-    file: &Path,
-    key: impl Into<String>,
-    message: impl Into<String>,
-) -> RunError {
-    RunError::Study(crate::study::StudyError {
-        file: file.display().to_string(),
-        key: key.into(),
-        message: message.into(),
-    })
-}
+pub(crate) use crate::stage::input_error as input_err;

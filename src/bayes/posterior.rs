@@ -6,14 +6,12 @@
 //! Checked by the suite's `bayes_run` and `measurement_model` tests.
 
 use super::{fail, input_err, InferenceParams, PosteriorInputs};
-use crate::forward::{EstimatorSpec, ForwardModel, MeasurementModel, MeasurementParams};
+use crate::forward::ForwardModel;
 use crate::frf::FrfEngine;
 use crate::inference::likelihood::{FrfData, FrfLikelihood, FrfPosterior, NoiseModel, Scale};
 use crate::material::ConstitutiveModel;
 use crate::stage::{LevelData, RunError};
 use crate::study::inference::NoiseSpec;
-use crate::study::Estimator;
-use std::path::Path;
 
 /// Draws of one sampler, flattened over chains (physical values, SI).
 #[derive(Clone, Debug, Default)]
@@ -58,42 +56,6 @@ pub struct SamplerResult {
     pub seconds: f64,
     /// Per-stage or per-chain statistics for the report (name, value) rows.
     pub notes: Vec<String>,
-}
-
-/// The estimator declared by the study as the forward model's measurement-model settings for
-/// a level with lines `freq_hz`.
-pub fn estimator_spec(estimator: &Estimator, freq_hz: &[f64]) -> EstimatorSpec {
-    let lo = freq_hz.first().copied().unwrap_or(0.0);
-    let hi = freq_hz.last().copied().unwrap_or(0.0);
-    EstimatorSpec {
-        window: estimator.window,
-        block_s: estimator.block_s,
-        fs_hz: estimator.fs_hz,
-        force_band_hz: estimator.force_band((lo, hi)),
-        shaker: estimator.shaker,
-    }
-}
-
-/// The measurement model of a level, when the study declares its estimator: the one chosen
-/// with the engine ([`LevelData::measurement`]), else the default grid (errors name `file`).
-pub fn measurement_model(
-    estimator: Option<&Estimator>,
-    file: &Path,
-    level: &LevelData,
-) -> Result<Option<MeasurementModel>, RunError> {
-    let Some(est) = estimator else {
-        return Ok(None);
-    };
-    if let Some((m, _)) = &level.measurement {
-        return Ok(Some(m.clone()));
-    }
-    MeasurementModel::new(
-        estimator_spec(est, &level.freq_hz),
-        &level.freq_hz,
-        &MeasurementParams::default(),
-    )
-    .map(Some)
-    .map_err(|e| input_err(file, "measurements.estimator", e.to_string()))
 }
 
 /// Equivalent number of independent averages of a level's H1: the study's value, else the
@@ -144,7 +106,7 @@ pub fn build_posterior<'a>(
         &col.omega_rad_s,
         col.input,
         &col.outputs,
-        measurement_model(inputs.estimator, inputs.file, level)?,
+        crate::stage::measurement::measurement_model(inputs.estimator, level, inputs.file)?,
     )
     .map_err(|e| {
         fail(

@@ -3,7 +3,6 @@
 //! ([`band_of`]).
 
 use super::params::TermParams;
-use crate::stage::LevelData;
 
 /// The term ROM's modulus box (see `terms.rs`'s module doc): E*(w) of the initial values of
 /// the box's models (`p.box_models`: the `[inference]` models) over `band_hz`, widened by 2
@@ -66,15 +65,4 @@ pub fn outside_box(
         .fold(1.0, f64::max)
 }
 
-/// The band (Hz) of the levels' lines.
-pub fn band_of(levels: &[LevelData]) -> (f64, f64) {
-    let lo = levels
-        .iter()
-        .flat_map(|l| l.freq_hz.first().copied())
-        .fold(f64::INFINITY, f64::min);
-    let hi = levels
-        .iter()
-        .flat_map(|l| l.freq_hz.last().copied())
-        .fold(0.0, f64::max);
-    (lo, hi)
-}
+pub use crate::stage::data::band_of;

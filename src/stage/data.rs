@@ -275,3 +275,16 @@ pub fn first_peak_hz(level: &LevelData) -> Option<f64> {
         .find(|&l| mag[l] >= mag[l - 1] && mag[l] > mag[l + 1] && mag[l] > 0.1 * top)
         .map(|l| level.freq_hz[l])
 }
+
+/// The band (Hz) of the levels' lines.
+pub fn band_of(levels: &[LevelData]) -> (f64, f64) {
+    let lo = levels
+        .iter()
+        .flat_map(|l| l.freq_hz.first().copied())
+        .fold(f64::INFINITY, f64::min);
+    let hi = levels
+        .iter()
+        .flat_map(|l| l.freq_hz.last().copied())
+        .fold(0.0, f64::max);
+    (lo, hi)
+}

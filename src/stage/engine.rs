@@ -123,14 +123,7 @@ pub fn build_engine(
             rom_builds: 0,
         }),
         Engine::Rom => {
-            let lo = levels
-                .iter()
-                .flat_map(|l| l.freq_hz.first().copied())
-                .fold(f64::INFINITY, f64::min);
-            let hi = levels
-                .iter()
-                .flat_map(|l| l.freq_hz.last().copied())
-                .fold(0.0, f64::max);
+            let (lo, hi) = super::data::band_of(levels);
             let params = crate::rom::RomParams {
                 band_hz: (lo, hi),
                 range: crate::study::build::initial_modulus_range(models, (lo, hi)),

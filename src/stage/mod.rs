@@ -71,7 +71,7 @@ pub struct LevelData {
     pub n_averages: Option<u32>,
     /// The H1 estimator's model on these lines with its grid chosen by convergence
     /// ([`crate::forward::Observation::converged_measurement`]), set with the engine; `None`
-    /// before, or without an estimator (then [`crate::bayes::posterior::measurement_model`]
+    /// before, or without an estimator (then [`crate::stage::measurement::measurement_model`]
     /// uses the default grid).
     pub measurement: Option<(crate::forward::MeasurementModel, crate::forward::GridChoice)>,
 }
