@@ -12,7 +12,7 @@
 //!
 //! The mass identity is Woodbury's on M + sum m_k b_k b_k^T; its E'-derivative follows from
 //! d(A^-1) = -A^-1 dA A^-1 with A = I + D H_PP. Every mass point must be an engine input (the
-//! runner builds the deterministic engine with every measured point as an input, so a mass
+//! run builds the deterministic engine with every measured point as an input, so a mass
 //! at a measured point qualifies). Exact algebra on the certified engine's outputs: the
 //! wrapped engine is as accurate as the engine. The shaker and law effects are not
 //! structural transforms of all columns ([`FixedEffectsEngine::unsupported`] names them);

@@ -67,7 +67,7 @@ pub struct MeasurementParams {
     /// points, 2.7e-6 with 3, 1.2e-6 with 4 and 8, the +-6-line truncation's floor); the force
     /// band's edges get an end correction ([`END_CORRECTION`]). What a grid must resolve is
     /// the sharpest feature of `H S_F`: a shaker's coupled resonance in the force spectrum
-    /// needs 8 points on the default rig. The runner therefore picks the grid per level by
+    /// needs 8 points on the default rig. A run therefore picks the grid per level by
     /// convergence ([`crate::forward::Observation::converged_measurement`]). The likelihood
     /// evaluates the FRF on this grid, so it sets the cost of the measurement model.
     pub points_per_line: usize,

@@ -8,7 +8,7 @@
 //! ```
 //!
 //! The deterministic RFM (through the leakage bias `E[H1] - H'` at the lines, see
-//! `runner::leakage`), the likelihood ([`crate::inference`]) and the closed loop call this one
+//! [`crate::identify::leakage`]), the likelihood ([`crate::inference`]) and the closed loop call this one
 //! object, so a prediction is made in one place. Without a measurement model the prediction is
 //! the exact accelerance at the lines.
 

@@ -96,7 +96,7 @@ pub struct GlobalResult {
     /// without `[measurements.estimator]`).
     pub leakage_bias: Vec<C64>,
     /// Predicted measurement at the initial and updated parameters, `[line][k]` flattened
-    /// like [`MeasuredColumn::accelerance`]: the analytical accelerance, plus the H1
+    /// like [`crate::rfm::MeasuredColumn::accelerance`]: the analytical accelerance, plus the H1
     /// estimator's leakage bias when the study states its estimator.
     pub initial_frf: Vec<C64>,
     pub updated_frf: Vec<C64>,

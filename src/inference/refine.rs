@@ -14,7 +14,7 @@
 //!   the estimate and the search alternate [`CORRELATION_PASSES`] times.
 //!
 //! Tests: tests/suite/inference_likelihood.rs (the correlation models), and every Bayesian
-//! study test through the runner.
+//! study test through the pipeline.
 
 use super::likelihood::{ChannelCorrelation, FrfPosterior, LikelihoodError};
 use super::map::{find_map, MapError, MapParams, MapResult};

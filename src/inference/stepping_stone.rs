@@ -2,7 +2,7 @@
 //! 60(2)) on draws from a resample-move particle population (Del Moral, Doucet and Jasra 2006,
 //! JRSS B 68(3)), with its standard error from independent replicas. This module's path starts
 //! at the prior; [`super::reference`] runs it from a reference density close to the posterior
-//! (the generalized stepping-stone, the runner's default), which needs 1-2 rungs instead of
+//! (the generalized stepping-stone, a run's default), which needs 1-2 rungs instead of
 //! dozens. Independent of TMCMC: its
 //! own ladder, its own populations and random streams; it shares only the Metropolis kernel and
 //! the resampling of [`super::sampling`].
@@ -81,7 +81,7 @@
 //! Determinism: replica `r` takes its seed from `unit_rng(seed ^ salt, r)`, rung `k` of it its
 //! streams from `unit_rng(replica seed, k)`: one stream per particle (and one for the resampling),
 //! moves in parallel reduced in particle order, so results are bit-identical whatever the thread
-//! count. The runner checkpoints finished replicas ([`stepping_stone_replica`], [`combine_replicas`]).
+//! count. A run checkpoints finished replicas ([`stepping_stone_replica`], [`combine_replicas`]).
 
 use rand::RngExt;
 use rayon::prelude::*;

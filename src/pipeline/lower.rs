@@ -1,6 +1,8 @@
-//! Lowering a [`Plan`] to the study the runner's stages read: the study the plan was made from
-//! with the plan's parameters written in (the inference stages as one `[inference]` section,
-//! whose sampler settings and priors per model the stages must share).
+//! Lowering a [`Plan`] to the study its results describe: the study the plan was made from with
+//! the plan's parameters written in (the inference stages as one `[inference]` section), so the
+//! report and the manifest speak of the plan that ran. Lowering also checks that the plan's
+//! stages fit together: every inference stage's model is identified, and the stages share their
+//! sampler settings and a model's priors. The stages themselves read the plan.
 
 use super::plan::{sampler_params, InferenceParams, Plan};
 use super::RunError;
@@ -11,8 +13,8 @@ use crate::study::Study;
 use std::collections::BTreeMap;
 
 impl Plan {
-    /// The study the runner's stages read: the original with this plan's parameters written
-    /// in.
+    /// The study this plan's results describe: the original with the plan's parameters
+    /// written in (module doc).
     pub(crate) fn lowered(&self) -> Result<Lowered, RunError> {
         let mut s = self.study().clone();
         let bad = |key: &str, message: String| {
@@ -87,7 +89,7 @@ impl Plan {
     }
 }
 
-/// A study as the runner's stages read it (see [`Plan::lowered`]).
+/// The study a run's results describe (see [`Plan::lowered`]).
 pub(crate) struct Lowered {
     pub study: Study,
 }

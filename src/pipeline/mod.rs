@@ -1,4 +1,4 @@
-//! The pipeline: a validated [`Study`] -> its [`Plan`] ([`Study::plan`]) -> [`run`] with an
+//! The pipeline: a validated [`crate::Study`] -> its [`Plan`] ([`crate::Study::plan`]) -> [`run`] with an
 //! [`Executor`] -> [`Results`] in memory -> [`crate::report::write`] (parquet, figures,
 //! report.md and manifest.json in one atomic folder swap).
 //!

@@ -2,10 +2,8 @@
 //! [`Study`] by [`Study::plan`]. A program may edit the plan before [`super::run`]: drop a
 //! model, change the sampler settings of one inference stage, switch the engine.
 //!
-//! The inference stages ([`crate::bayes`]) take their `InferenceParams` directly; the stages
-//! of the runner still read their settings from a study: [`Plan::lowered`] writes the plan's
-//! parameters back into a copy of the study the plan was made from, so an edited plan is what
-//! runs.
+//! Every stage reads its parameters from the plan. [`Plan::lowered`] also writes them into a
+//! copy of the study, which the results carry, so the report describes the plan that ran.
 
 use super::RunError;
 pub use crate::bayes::{InferenceParams, SamplerParams};

@@ -24,7 +24,7 @@ use crate::study::Study;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// What [`write`] wrote.
+/// What [`write()`] wrote.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Written {
     /// The results folder.
@@ -40,7 +40,7 @@ pub fn write(results: &Results, dir: impl AsRef<Path>) -> Result<Written, RunErr
     write_with(results, dir, &|_| {})
 }
 
-/// [`write`] with a progress callback.
+/// [`write()`] with a progress callback.
 pub fn write_with(
     results: &Results,
     dir: impl AsRef<Path>,
@@ -58,7 +58,7 @@ pub fn write_with(
 
 /// Run a study: identification, correlation, tables, figures, report and manifest in
 /// `study.output_dir` (or `opts.output_dir`), replaced atomically as a whole (module doc).
-/// The same path as [`crate::pipeline::run`] then [`write`].
+/// The same path as [`crate::pipeline::run`] then [`write()`].
 pub fn run_study(
     study: &Study,
     opts: &RunOptions,

@@ -173,7 +173,7 @@ impl ModelJson {
             b_r: tall(&self.b_r)?,
             sb_r: tall(&self.sb_r)?,
             range: self.range,
-            // Not cached: only mode classification uses it (the runner classifies by the points).
+            // Not cached: only mode classification uses it (a run classifies by the points).
             m_axes_r: None,
         })
     }

@@ -77,7 +77,7 @@ pub struct RawClosedLoop {
     pub top: Option<usize>,
 }
 
-/// Where a declared effect acts, by the study's ids (resolved to engine indices by the runner).
+/// Where a declared effect acts, by the study's ids (resolved to engine indices by the run's stages).
 #[derive(Clone, Debug, PartialEq)]
 pub enum DeclaredKind {
     PointMass {
@@ -99,7 +99,7 @@ pub enum DeclaredKind {
         stiffness_n_m: f64,
     },
     /// A degraded bond over `[x_start_m, x_start_m + width_m]` (m) of the adhesive block (checked
-    /// against the block by the runner, which assembles the region).
+    /// against the block by the run's model building, which assembles the region).
     DegradedBond {
         x_start_m: f64,
         width_m: f64,
