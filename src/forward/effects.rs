@@ -281,6 +281,8 @@ pub struct Effects {
 pub(crate) struct StructuralColumns {
     pub h: Vec<C64>,
     pub dh: Vec<C64>,
+    /// `b_o^T S H_in` with the masses on (only for a full sweep, [`Effects::structural_sweep`]).
+    pub sh: Vec<C64>,
     pub drive: Vec<C64>,
     pub d_terms: Vec<Vec<C64>>,
 }
@@ -433,6 +435,63 @@ impl Effects {
         Ok(())
     }
 
+    /// The full sweep of `inner` (every output, every input column: receptance, and with
+    /// `derivs` its E' derivative and `S H`) with this set's point masses and beam factor at
+    /// `values` (one per term): what the deterministic analyses (RFM, IEM, FRAC) see of a
+    /// study's declared effects. The same transform as the likelihood's columns
+    /// ([`Self::structural`]), applied to each input column; the shaker and law effects are
+    /// not structural transforms of all columns and are left out by the caller.
+    pub(crate) fn structural_sweep(
+        &self,
+        inner: &dyn FrfEngine,
+        omega: &[f64],
+        modulus: &[C64],
+        derivs: bool,
+        values: &[f64],
+        out: &mut crate::frf::Sweep,
+    ) -> Result<(), super::ForwardError> {
+        let beam = self
+            .terms
+            .iter()
+            .zip(values)
+            .find(|(t, _)| matches!(t.effect, Effect::BeamModulus))
+            .map_or(0.0, |(_, v)| *v);
+        let scale = 1.0 + beam;
+        if scale <= 0.0 {
+            return Err(super::ForwardError::Setup(format!(
+                "beam modulus factor {beam} leaves no beam stiffness"
+            )));
+        }
+        let w_eng: Vec<f64> = omega.iter().map(|w| w / scale.sqrt()).collect();
+        let e_eng: Vec<C64> = modulus.iter().map(|e| e / scale).collect();
+        let sw = inner.sweep(&w_eng, &e_eng, derivs)?;
+        let inputs = inner.inputs();
+        let (n_out, n_in) = (sw.n_out, sw.n_in);
+        let outputs: Vec<usize> = (0..n_out).collect();
+        *out = crate::frf::Sweep::zeros(omega.len(), n_out, n_in, derivs);
+        if sw.sh.is_empty() {
+            out.sh.clear();
+        }
+        for (j, &input) in inputs.iter().enumerate() {
+            let col = self.transform(
+                &sw, inputs, input, &outputs, omega, derivs, values, scale, true,
+            )?;
+            for l in 0..omega.len() {
+                for o in 0..n_out {
+                    let (k, at) = (l * n_out + o, out.idx(l, o, j));
+                    out.h[at] = col.h[k];
+                    if derivs {
+                        out.dh_de[at] = col.dh[k];
+                    }
+                    if !col.sh.is_empty() {
+                        out.sh[at] = col.sh[k];
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// Structural part: the engine's receptances transformed by the beam factor and the point
     /// masses at `values` (one per term), read as accelerance at `outputs` driven at `input`.
     #[allow(clippy::too_many_arguments)]
@@ -533,6 +592,7 @@ impl Effects {
                 derivs,
                 values,
                 scale,
+                false,
             );
         }
         let (mut sw, cols) = engine.sweep_terms(&w_eng, &e_eng, &coefs, derivs)?;
@@ -545,6 +605,7 @@ impl Effects {
             derivs,
             values,
             scale,
+            false,
         )?;
         if derivs {
             // The transforms (masses, shaker) are linear in the receptances' derivative: the
@@ -560,6 +621,7 @@ impl Effects {
                     true,
                     values,
                     scale,
+                    false,
                 )?;
                 res.d_terms[*t] = r.dh;
             }
@@ -568,7 +630,8 @@ impl Effects {
     }
 
     /// The transforms of the engine's sweep `sw` (at w / sqrt(scale), E* / scale) by the
-    /// beam factor `scale`, the point masses and the shaker.
+    /// beam factor `scale`, the point masses and the shaker: accelerance, or receptance with
+    /// `receptance` (then also `S H`, when `sw` has it).
     #[allow(clippy::too_many_arguments)]
     fn transform(
         &self,
@@ -580,6 +643,7 @@ impl Effects {
         derivs: bool,
         values: &[f64],
         scale: f64,
+        receptance: bool,
     ) -> Result<StructuralColumns, super::ForwardError> {
         let zero = C64::new(0.0, 0.0);
         let pos = |p: usize| inputs.iter().position(|&j| j == p);
@@ -607,9 +671,11 @@ impl Effects {
         let np = masses.len();
         let n = outputs.len();
         let nl = omega.len();
+        let with_sh = receptance && derivs && !sw.sh.is_empty();
         let mut res = StructuralColumns {
             h: Vec::with_capacity(nl * n),
             dh: Vec::with_capacity(if derivs { nl * n } else { 0 }),
+            sh: Vec::with_capacity(if with_sh { nl * n } else { 0 }),
             drive: Vec::with_capacity(nl),
             d_terms: if derivs {
                 vec![vec![zero; nl * n]; self.terms.len()]
@@ -636,10 +702,11 @@ impl Effects {
         // Targets: the outputs, then the drive point.
         let targets: Vec<usize> = outputs.iter().copied().chain([input]).collect();
         for (l, &w) in omega.iter().enumerate() {
-            let acc = -w * w;
+            let acc = if receptance { 1.0 } else { -w * w };
             // Receptance (scaled back) and its E' derivative between point i and input pos j.
             let r = |i: usize, j: usize| sw.h[sw.idx(l, i, j)] / scale;
             let dr = |i: usize, j: usize| sw.dh_de[sw.idx(l, i, j)] / (scale * scale);
+            let sr = |i: usize, j: usize| sw.sh[sw.idx(l, i, j)] / scale;
             if np == 0 {
                 for (ti, &o) in targets.iter().enumerate() {
                     if ti == n {
@@ -651,6 +718,9 @@ impl Effects {
                         res.h.push(acc * r(o, jin));
                         if derivs {
                             res.dh.push(acc * dr(o, jin));
+                        }
+                        if with_sh {
+                            res.sh.push(acc * sr(o, jin));
                         }
                     }
                 }
@@ -710,6 +780,11 @@ impl Effects {
                     res.drive.push(val);
                 } else {
                     res.h.push(val);
+                    if with_sh {
+                        // S H' = S H - (S H)_:P u: the same correction of the S-weighted rows.
+                        let s_corr: C64 = masses.iter().zip(&u).map(|(m, b)| sr(o, m.2) * b).sum();
+                        res.sh.push(acc * (sr(o, jin) - s_corr));
+                    }
                 }
                 if derivs {
                     let dhop: Vec<C64> = masses.iter().map(|m| dr(o, m.2)).collect();
