@@ -13,21 +13,7 @@ pub fn term_modulus_range(p: &TermParams, band_hz: (f64, f64)) -> crate::rom::Mo
         e_storage_pa: (f64::INFINITY, 0.0),
         e_loss_pa: (f64::INFINITY, 0.0),
     };
-    for m in &p.box_models {
-        let Ok(law) = crate::material::model_from_name(&m.name, m.branches) else {
-            continue;
-        };
-        for k in 0..=50 {
-            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / 50.0;
-            let e = law.modulus(&m.initial, std::f64::consts::TAU * f.max(1e-3));
-            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 && e.im >= 0.0 {
-                r.e_storage_pa.0 = r.e_storage_pa.0.min(e.re / 2.0);
-                r.e_storage_pa.1 = r.e_storage_pa.1.max(e.re * 2.0);
-                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im / 2.0);
-                r.e_loss_pa.1 = r.e_loss_pa.1.max(e.im * 2.0);
-            }
-        }
-    }
+    crate::study::build::widen_to_initial_moduli(&mut r, &p.box_models, band_hz, 50);
     if r.e_storage_pa.0 < r.e_storage_pa.1 && r.e_loss_pa.0 < r.e_loss_pa.1 {
         r
     } else {

@@ -454,7 +454,7 @@ impl<'a> FrfLikelihood<'a> {
                         ));
                     }
                     let g2 = g2.min(1.0);
-                    base_var[o] += abs2[o] * (1.0 - g2).max(*floor) / (2.0 * n_averages * g2);
+                    base_var[o] += coherence_variance(abs2[o], g2, *n_averages, *floor);
                 }
             }
             Scale::Fixed { variances } => {
@@ -977,4 +977,10 @@ impl Posterior for FrfPosterior<'_> {
             hess,
         }))
     }
+}
+
+/// The variance of each of Re and Im of an H1 estimate from its coherence: `|H|^2 (1 - g2) /
+/// (2 n g2)` (Bendat and Piersol, n independent averages), with `1 - g2` floored at `floor`.
+pub fn coherence_variance(abs2: f64, g2: f64, n_averages: f64, floor: f64) -> f64 {
+    abs2 * (1.0 - g2).max(floor) / (2.0 * n_averages * g2)
 }

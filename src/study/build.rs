@@ -183,20 +183,31 @@ pub fn initial_modulus_range(
     band_hz: (f64, f64),
 ) -> crate::rom::ModulusRange {
     let mut r = crate::rom::ModulusRange::default();
+    widen_to_initial_moduli(&mut r, models, band_hz, 20);
+    r
+}
+
+/// Widen `r` to every model's initial E*(w) on `n + 1` lines across `band_hz`, halved and
+/// doubled (admissible moduli only: finite, E' > 0, E'' >= 0).
+pub fn widen_to_initial_moduli(
+    r: &mut crate::rom::ModulusRange,
+    models: &[super::ModelSpec],
+    band_hz: (f64, f64),
+    n: usize,
+) {
     for m in models {
         let Ok(law) = crate::material::model_from_name(&m.name, m.branches) else {
             continue;
         };
-        for k in 0..=20 {
-            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / 20.0;
-            let e = law.modulus(&m.initial, 2.0 * std::f64::consts::PI * f.max(1e-3));
-            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 {
+        for k in 0..=n {
+            let f = band_hz.0 + (band_hz.1 - band_hz.0) * k as f64 / n as f64;
+            let e = law.modulus(&m.initial, std::f64::consts::TAU * f.max(1e-3));
+            if e.re.is_finite() && e.im.is_finite() && e.re > 0.0 && e.im >= 0.0 {
                 r.e_storage_pa.0 = r.e_storage_pa.0.min(e.re / 2.0);
                 r.e_storage_pa.1 = r.e_storage_pa.1.max(e.re * 2.0);
-                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im.max(0.0) / 2.0);
+                r.e_loss_pa.0 = r.e_loss_pa.0.min(e.im / 2.0);
                 r.e_loss_pa.1 = r.e_loss_pa.1.max(e.im * 2.0);
             }
         }
     }
-    r
 }

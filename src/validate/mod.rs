@@ -319,8 +319,12 @@ impl Setup {
                 for (o, (x, g2)) in values.iter_mut().zip(&coherence).enumerate() {
                     let m = mean.values[o];
                     let g2 = g2.clamp(f64::MIN_POSITIVE, 1.0);
-                    let var = m.norm_sqr() * (1.0 - g2).max(DEFAULT_COHERENCE_FLOOR)
-                        / (2.0 * n_averages * g2);
+                    let var = crate::inference::likelihood::coherence_variance(
+                        m.norm_sqr(),
+                        g2,
+                        n_averages,
+                        DEFAULT_COHERENCE_FLOOR,
+                    );
                     let (a, b): (f64, f64) = (
                         rng.sample(rand_distr::StandardNormal),
                         rng.sample(rand_distr::StandardNormal),
