@@ -1,8 +1,8 @@
 //! `rfmlab run STUDY.toml` and `rfmlab check STUDY.toml` ([`rfmlab::pipeline`] and [`rfmlab::report`]).
 
 use super::common::{print_json, Global, InputError};
-use rfmlab::pipeline::RunSummary;
 use rfmlab::pipeline::{self, Event, Executor, RunError};
+use rfmlab::report::RunSummary;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 

@@ -6,7 +6,7 @@
 
 use super::plan::Plan;
 use crate::stage::preflight;
-use crate::stage::{engine, input_error, RunError};
+use crate::stage::{input_error, model, RunError};
 use crate::study::Study;
 use std::path::PathBuf;
 
@@ -43,7 +43,7 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
         ),
         None => None,
     };
-    let built = engine::build(&study.structure, file)?;
+    let built = model::build(&study.structure, file)?;
     let levels = crate::stage::data::load_levels(Some(&plan.data), &built, file)?;
     let mut pf = preflight::Preflight {
         cost: cost.map(|c| preflight::CostSummary {
@@ -57,7 +57,7 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
     let id = &plan.identification;
     preflight::check_bands(&id.band_constant, &id.iem, file, &levels, &mut pf.warnings)?;
     preflight::check_channels(&built, &levels, &mut pf.warnings);
-    let lines_checked = engine::check_initial_values(models, file, &built, &levels, &laws)?;
+    let lines_checked = model::check_initial_values(models, file, &built, &levels, &laws)?;
     preflight::check_first_mode(models, &built, &levels, &laws, &mut pf)?;
     match preflight::mesh_error_at_initial_values(
         models,

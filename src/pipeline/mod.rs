@@ -42,32 +42,8 @@ pub use results::{IdentifiedParameters, Results, LOOP_DIR};
 
 use crate::frf::FrfEngine;
 use crate::study::build::BuiltModel;
-use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
-
-/// Options of a run (beyond the study file).
-#[derive(Clone, Debug, Default)]
-pub struct RunOptions {
-    /// Skip figures even when the study asks for them (tests, benchmarks). Default false.
-    pub no_figures: bool,
-    /// Override the study's output folder. Default None (use `study.output_dir`).
-    pub output_dir: Option<PathBuf>,
-    /// Folder of certified ROMs reused across runs (keyed by model, points, band, range and
-    /// tolerance; see [`crate::rom::cache`]). Default None: build and certify every run.
-    pub rom_cache: Option<PathBuf>,
-}
-
-/// What a run produced (also printed by `rfmlab run --json`).
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct RunSummary {
-    pub study: String,
-    pub output_dir: PathBuf,
-    pub files: Vec<String>,
-    /// Per level and model: identified parameters (SI), stop reason and FRAC per FRF.
-    pub models: Vec<ModelSummary>,
-    pub seconds: f64,
-}
 
 /// Run `plan`: every stage in memory, nothing written (see [`crate::report::write`]).
 /// Timings and counters go to `executor` and into the results.
@@ -114,11 +90,11 @@ fn run_here(
         step: "assembling the FE model".into(),
         total: 0,
     });
-    let built = crate::stage::engine::build(&study.structure, &study.file)?;
+    let built = crate::stage::model::build(&study.structure, &study.file)?;
     progress(Event::Finish);
     ex.lap("build model")?;
     let mut data = crate::stage::data::load_levels(Some(&plan.data), &built, &study.file)?;
-    crate::stage::engine::check_initial_values(
+    crate::stage::model::check_initial_values(
         &plan.identification.models,
         &study.file,
         &built,

@@ -18,11 +18,34 @@ pub mod material;
 use crate::diagnose;
 use crate::output::{Manifest, ResultsDir};
 use crate::pipeline::results::{Results, LOOP_DIR};
-use crate::pipeline::{Executor, RunOptions, RunSummary};
+use crate::pipeline::{Executor, ModelSummary};
 use crate::stage::{Event, RunError};
 use crate::study::Study;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+/// Options of a run (beyond the study file).
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Skip figures even when the study asks for them (tests, benchmarks). Default false.
+    pub no_figures: bool,
+    /// Override the study's output folder. Default None (use `study.output_dir`).
+    pub output_dir: Option<PathBuf>,
+    /// Folder of certified ROMs reused across runs (keyed by model, points, band, range and
+    /// tolerance; see [`crate::rom::cache`]). Default None: build and certify every run.
+    pub rom_cache: Option<PathBuf>,
+}
+
+/// What a run produced (also printed by `rfmlab run --json`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunSummary {
+    pub study: String,
+    pub output_dir: PathBuf,
+    pub files: Vec<String>,
+    /// Per level and model: identified parameters (SI), stop reason and FRAC per FRF.
+    pub models: Vec<ModelSummary>,
+    pub seconds: f64,
+}
 
 /// What [`write()`] wrote.
 #[derive(Clone, Debug, serde::Serialize)]

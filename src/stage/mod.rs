@@ -10,6 +10,7 @@ pub mod data;
 pub mod engine;
 pub mod measurement;
 pub mod mesh_error;
+pub mod model;
 pub mod preflight;
 mod rom_engine;
 pub mod setup;

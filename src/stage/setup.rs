@@ -1,6 +1,7 @@
 //! The start of a command that runs one stage of a study.
 
-use super::engine::{build, build_engine, EngineParams, Engines, ModelsAndData};
+use super::engine::{build_engine, EngineParams, Engines, ModelsAndData};
+use super::model::build;
 use super::{LevelData, RunError};
 use crate::material::ConstitutiveModel;
 use crate::study::build::BuiltModel;

@@ -146,8 +146,8 @@ fn wrapped_rom_modes_equal_the_full_model_modes_with_the_masses() {
 /// same study without it is biased (what the closed loop exists to catch).
 #[test]
 fn declared_mass_brings_the_deterministic_rfm_back_to_the_truth() {
-    use rfmlab::pipeline::RunOptions;
     use rfmlab::report::run_study;
+    use rfmlab::report::RunOptions;
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(root.join("studies/closed_loop_mass.toml")).unwrap();
     // Deterministic part only, level L1, Model 4.

@@ -16,8 +16,8 @@ use rfmlab::common::C64;
 use rfmlab::fe::foreign::{import_model_files, ImportFiles, ImportFormat, Units};
 use rfmlab::fe::harwell_boeing::{format_hb, parse_hb};
 use rfmlab::fe::model::StructuralModel;
-use rfmlab::pipeline::RunOptions;
 use rfmlab::report::run_study;
+use rfmlab::report::RunOptions;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -260,7 +260,7 @@ figures = false
     )
 }
 
-fn run(dir: &Path, name: &str, text: &str) -> rfmlab::pipeline::RunSummary {
+fn run(dir: &Path, name: &str, text: &str) -> rfmlab::report::RunSummary {
     let file = dir.join(format!("{name}.toml"));
     std::fs::write(&file, text).unwrap();
     let study = rfmlab::study::load(&file).unwrap_or_else(|e| panic!("{e}"));

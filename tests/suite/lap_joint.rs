@@ -8,8 +8,8 @@
 use rfmlab::common::C64;
 use rfmlab::fe::lap::{adhesive_aspect_ratio, build_lap_model, lap_mesh, LapSpec};
 use rfmlab::modes::{complex_modes, ModesParams};
-use rfmlab::pipeline::RunOptions;
 use rfmlab::report::run_study;
+use rfmlab::report::RunOptions;
 use std::path::Path;
 use std::process::Command;
 

@@ -249,7 +249,7 @@ print(json.dumps(clean({'mc': m.to_dict('records'), 'pw': p.groupby(['level','mo
 fn bayes_study_with_comparison() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let study = rfmlab::Study::load(root.join("studies/bayes_compare.toml")).unwrap();
-    let opts = rfmlab::pipeline::RunOptions {
+    let opts = rfmlab::report::RunOptions {
         output_dir: Some(root.join("results/bayes_compare")),
         ..Default::default()
     };

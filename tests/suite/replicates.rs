@@ -36,8 +36,8 @@ use rfmlab::experiment::{
     simulate_level, ChainParams, ChannelLabel, ExperimentError, Mode, NoiseLevel, Plant,
 };
 use rfmlab::output::{ColumnData, Table};
-use rfmlab::pipeline::RunOptions;
 use rfmlab::report::run_study;
+use rfmlab::report::RunOptions;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::sync::Mutex;

@@ -7,8 +7,8 @@ use crate::python_checks::{check_parquet, python_for_parquet};
 use crate::runner_common::*;
 
 use rfmlab::output::Table;
-use rfmlab::pipeline::RunOptions;
 use rfmlab::report::run_study;
+use rfmlab::report::RunOptions;
 
 fn no_progress(_: rfmlab::stage::Event) {}
 

@@ -6,8 +6,8 @@
 //! `force_band_hz = [1, 500]`) is not; on `model4_fd` (exact FRF at the lines, no leakage,
 //! `studies/virtual_fd.toml`) within 0.1 %.
 
-use rfmlab::pipeline::RunOptions;
 use rfmlab::report::run_study;
+use rfmlab::report::RunOptions;
 use std::path::Path;
 
 /// Truth per level in Model 4's parameter order (E0, h, E1, eta1), SI.
