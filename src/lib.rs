@@ -1,38 +1,43 @@
 //! rfmlab: identification of viscoelastic constitutive models of adhesives in bonded
 //! joints from measured frequency response functions (FRFs).
 //!
-//! Module map (dependencies point one way, top to bottom):
+//! Module map, from the command line down (a module imports only modules below it):
 //!
 //! | module | what it holds |
 //! |---|---|
-//! | [`common`] | shared small types: complex scalar, directions, units |
-//! | [`fe`] | 20-node hexahedra, structured mesher, sparse assembly of M, K_b, S; Matrix Market import |
-//! | [`material`] | constitutive models E*(w; p) with analytic Jacobians (Models 1-5, fractional Zener, generalized Maxwell) |
-//! | [`material_fit`] | material-level loop on measured E'(w), E''(w) (DMA): posterior, residual tests, Kramers-Kronig check |
-//! | [`frf`] | the FRF engine interface and the full-model sweep with sensitivities (paper eq. 44-47) |
-//! | [`stats`] | priors of parameters and effects, the chi-square tail and the normal quantile |
-//! | [`forward`] | the forward model: engine + law + H1 measurement model -> predicted H1 and its Jacobian |
-//! | [`inference`] | priors, likelihood, MAP (argmin multistart), samplers (NUTS, TMCMC), diagnostics |
-//! | [`modes`] | complex modes of (K_b + E* S, M), sparse real eigensolver |
-//! | [`rom`] | certified reduced-order model and the pencil sweep |
-//! | [`data`] | measured FRF data model, UFF58 and CSV readers and writers |
-//! | [`experiment`] | virtual experiment: random excitation, H1 and coherence |
-//! | [`modal`] | circle-fit modal analysis |
-//! | [`correlation`] | FRAC, SCC, ACC (paper eq. 38-40) |
-//! | [`rfm`] | response function method updating (paper eq. 9-11, 37) |
-//! | [`iem`] | inverse eigensensitivity method (paper eq. 20) |
-//! | [`identify`] | the deterministic identification of a level: RFM per line, per band and per model, circle fit + IEM, correlation, sensitivities, the leakage fixed point |
-//! | [`simulate`] | the virtual experiment of an experiment file (`rfmlab simulate`) and its UFF58 + truth files |
-//! | [`study`] | study files: TOML as written -> validated typed study (outside the numerical core) |
-//! | [`output`] | parquet tables, manifest, atomic writes (outside the numerical core) |
-//! | [`plot`] | PNG/SVG figures (outside the numerical core) |
-//! | [`stage`] | what every stage of a run shares: a level's measured data, progress events, the run's error |
-//! | [`diagnose`] | the closed loop as a stage of a run and `rfmlab diagnose`: candidate effects and their term ROM, the loop at every level, its verdict, tables and markdown (outside the numerical core) |
-//! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
+//! | [`report`] | results -> parquet, figures, report.md, manifest.json in one atomic folder swap; `run_study`; the material command's files |
+//! | [`pipeline`] | the public API: study -> [`pipeline::Plan`] (typed `*Params` per stage) -> [`pipeline::run`] -> [`Results`] with every table; `check` |
+//! | [`diagnose`] | the closed loop as a stage of a run and `rfmlab diagnose`: candidate effects and their term ROM, the loop at every level, its verdict, tables and markdown |
 //! | [`bayes`] | the Bayesian stages of a run: posterior per model and level, MAP, samplers, evidence and comparison criteria, redundancy, basins, the comparison across levels |
+//! | [`identify`] | the deterministic identification of a level: RFM per line, per band and per model, circle fit + IEM, correlation, sensitivities, the leakage fixed point |
+//! | [`stage`] | what the stages share: a level's measured data, progress events, the run's error; loading the levels, the model, the FRF engines, the measurement model, the pre-flight |
+//! | [`validate`] | statistical validation of the Bayesian layer (SBC, coverage, model selection, quadrature), sharded |
+//! | [`simulate`] | the virtual experiment of an experiment file (`rfmlab simulate`) and its UFF58 + truth files |
+//! | [`study`] | study files: TOML as written -> validated typed study |
+//! | [`closed_loop`] | the closed loop's numerics: residuals, score tests, refits, alternative laws, confounding, the verdict |
+//! | [`material_fit`] | material-level loop on measured E'(w), E''(w) (DMA): posterior, residual tests, Kramers-Kronig check |
+//! | [`inference`] | likelihood, MAP (argmin multistart, Levenberg-Marquardt), samplers (NUTS, TMCMC), evidence, diagnostics |
+//! | [`forward`] | the forward model: engine + law + effects + H1 measurement model -> predicted H1 and its Jacobian |
+//! | [`rfm`] | response function method updating (paper eq. 9-11, 37) |
+//! | [`rom`] | certified reduced-order model and the pencil sweep |
+//! | [`modes`] | complex modes of (K_b + E* S, M), sparse real eigensolver |
+//! | [`experiment`] | virtual experiment: random excitation, H1 and coherence |
+//! | [`frf`] | the FRF engine interface and the full-model sweep with sensitivities (paper eq. 44-47) |
+//! | [`plot`] | PNG/SVG figures |
+//! | [`modal`] | circle-fit modal analysis |
+//! | [`fe`] | 20-node hexahedra, structured mesher, sparse assembly of M, K_b, S; Matrix Market import |
+//! | [`linalg`] | sparse and small dense linear-algebra helpers |
+//! | [`data`] | measured FRF data model, UFF58 and CSV readers and writers |
+//! | [`output`] | parquet tables, manifest, atomic writes |
+//! | [`material`] | constitutive models E*(w; p) with analytic Jacobians (Models 1-5, fractional Zener, generalized Maxwell) |
+//! | [`correlation`] | FRAC, SCC, ACC (paper eq. 38-40) |
+//! | [`iem`] | inverse eigensensitivity method (paper eq. 20) |
+//! | [`stats`] | priors of parameters and effects, the chi-square tail and the normal quantile |
+//! | [`common`] | shared small types: complex scalar, directions, units |
 //!
-//! Numerical modules never import `study`, `output`, `plot` or the CLI; `bayes` sits outside
-//! the numerical core below the pipeline (it takes its stage parameters, never the study).
+//! The numerical modules (from `closed_loop` down, except `plot` and `output`) never import
+//! `study`, `output`, `plot` or the CLI. Below the pipeline, every stage takes its `*Params` and typed inputs, never the
+//! whole study; only the plan's constructors and the single-stage entry points read one.
 //!
 //! # The public API
 //! A study file -> [`Study::load`] -> [`Study::plan`] (typed `*Params` per stage) ->
