@@ -3,9 +3,11 @@
 //! leakage fixed point.
 
 use super::leakage::fixed_point;
-use super::{analysis, constant, frf_of, BandConstantResult, IemBandResult, Level, RunError};
+use super::{
+    analysis, constant, frf_of, BandConstantResult, IemBandResult, IemFailed, Level, RunError,
+};
 use crate::common::C64;
-use crate::iem::{AnalyticalMode, ExperimentalMode, IemParams, IemResult};
+use crate::iem::{AnalyticalMode, ExperimentalMode, IemParams, IemResult, ModesError};
 use crate::modal::circle_fit::{circle_fit, CircleFitParams, CircleFitResult};
 use crate::rfm::BandResult;
 use crate::stage::Event;
@@ -92,9 +94,9 @@ pub(super) fn iem(
         let axes = built.dof_axes.as_deref();
         // Modes from the engine when it has them (the ROM's reduced pencil: microseconds),
         // else complex modes of the full model.
-        let provider = move |e: C64| -> Result<Vec<AnalyticalMode>, String> {
+        let provider = move |e: C64| -> Result<Vec<AnalyticalMode>, ModesError> {
             if let Some(r) = engine.complex_modes(e, 8) {
-                let modes = r.map_err(|e| e.to_string())?;
+                let modes = r?;
                 // The ROM's basis is driven by the measured (y) loads; it may still carry
                 // traces of modes the points do not see (lateral bending, torsion), which
                 // these flags leave out.
@@ -117,8 +119,7 @@ pub(super) fn iem(
                 8,
                 axes,
                 &crate::modes::ModesParams::default(),
-            )
-            .map_err(|e| e.to_string())?;
+            )?;
             Ok(modes
                 .iter()
                 .map(|m| AnalyticalMode {
@@ -134,7 +135,7 @@ pub(super) fn iem(
             .iter()
             .map(|w| w / std::f64::consts::TAU)
             .collect();
-        type IemFit = (CircleFitResult, Result<IemResult, String>);
+        type IemFit = (CircleFitResult, Result<IemResult, IemFailed>);
         let ((circle, r), passes) = fixed_point(
             leak,
             &sub,
@@ -162,7 +163,11 @@ pub(super) fn iem(
                     _ => e_band,
                 };
                 let r = crate::iem::iem_mode(&provider, target, e0, &IemParams::default()).map_err(
-                    |e| format!("IEM around {} Hz at level {lname} failed: {e}", b.center_hz),
+                    |source| IemFailed {
+                        center_hz: b.center_hz,
+                        level: lname.clone(),
+                        source,
+                    },
                 );
                 Ok((circle, r))
             },

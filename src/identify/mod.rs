@@ -80,10 +80,19 @@ pub struct IemBandResult {
     pub response_id: u32,
     pub circle: CircleFitResult,
     /// The IEM result, or why it failed (the circle fit is kept either way).
-    pub iem: Result<IemResult, String>,
+    pub iem: Result<IemResult, IemFailed>,
     /// Leakage-corrected passes (0 without `[measurements.estimator]`); the circle fit is then
     /// of the corrected data.
     pub leakage_passes: usize,
+}
+
+/// The IEM failed around one resonance (the circle fit is kept).
+#[derive(Clone, Debug, thiserror::Error)]
+#[error("IEM around {center_hz} Hz at level {level} failed: {source}")]
+pub struct IemFailed {
+    pub center_hz: f64,
+    pub level: String,
+    pub source: crate::iem::IemError,
 }
 
 /// One global RFM run with the FRFs and correlation before and after.

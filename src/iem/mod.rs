@@ -54,18 +54,21 @@ impl From<(C64, C64)> for AnalyticalMode {
     }
 }
 
+/// Why a [`ModeProvider`] has no modes at a modulus (the engine's or the eigensolver's error).
+pub type ModesError = Box<dyn std::error::Error + Send + Sync>;
+
 /// Gives the analytical modes at a modulus. Implemented for closures
-/// `Fn(C64) -> Result<Vec<AnalyticalMode>, String>`.
+/// `Fn(C64) -> Result<Vec<AnalyticalMode>, ModesError>`.
 pub trait ModeProvider {
-    /// Modes of (K_b + E* S, M) at modulus E* (Pa); an error message says what failed.
-    fn modes_at(&self, modulus_pa: C64) -> Result<Vec<AnalyticalMode>, String>;
+    /// Modes of (K_b + E* S, M) at modulus E* (Pa); the error says what failed.
+    fn modes_at(&self, modulus_pa: C64) -> Result<Vec<AnalyticalMode>, ModesError>;
 }
 
 impl<F> ModeProvider for F
 where
-    F: Fn(C64) -> Result<Vec<AnalyticalMode>, String>,
+    F: Fn(C64) -> Result<Vec<AnalyticalMode>, ModesError>,
 {
-    fn modes_at(&self, modulus_pa: C64) -> Result<Vec<AnalyticalMode>, String> {
+    fn modes_at(&self, modulus_pa: C64) -> Result<Vec<AnalyticalMode>, ModesError> {
         self(modulus_pa)
     }
 }
@@ -126,7 +129,7 @@ pub struct IemResult {
 }
 
 /// Errors of the IEM.
-#[derive(Debug, thiserror::Error)]
+#[derive(Clone, Debug, thiserror::Error)]
 pub enum IemError {
     #[error("mode computation failed at E* = {modulus} Pa: {message}")]
     Modes { modulus: C64, message: String },
@@ -177,9 +180,9 @@ pub fn iem_mode(
     }
     let lambda_x = target.lambda();
     let select = |e: C64| -> Result<AnalyticalMode, IemError> {
-        let modes = provider.modes_at(e).map_err(|message| IemError::Modes {
+        let modes = provider.modes_at(e).map_err(|err| IemError::Modes {
             modulus: e,
-            message,
+            message: err.to_string(),
         })?;
         nearest_mode(&modes, target.freq_hz, params.y_dominant_only)
             .ok_or(IemError::NoMode { modulus: e })

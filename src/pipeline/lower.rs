@@ -73,7 +73,7 @@ impl Plan {
                 ));
             }
             let u = union.get_or_insert_with(|| inference_of(st, &self.comparison, &self.basins));
-            merge(u, st).map_err(|m| bad("inference", m))?;
+            merge(u, st).map_err(|m| bad("inference", m.to_string()))?;
         }
         s.inference = union;
         s.closed_loop = match (&self.closed_loop, s.closed_loop.take()) {
@@ -120,21 +120,32 @@ fn inference_of(
     }
 }
 
+/// Why an inference stage cannot join the others of a run.
+#[derive(Debug, thiserror::Error)]
+enum StageMismatch {
+    #[error("inference stage {model} at {level}: the stages of one run share their sampler settings; give every stage the same `samplers`")]
+    Samplers { model: String, level: String },
+    #[error(
+        "inference stage {model} at {level}: the priors of a model must be the same at every level"
+    )]
+    Priors { model: String, level: String },
+}
+
 /// Add stage `st` to `inf`; the stages sharing one section must share its sampler settings
 /// and a model's priors.
-fn merge(inf: &mut Inference, st: &InferenceParams) -> Result<(), String> {
+fn merge(inf: &mut Inference, st: &InferenceParams) -> Result<(), StageMismatch> {
     if sampler_params(inf) != st.samplers {
-        return Err(format!(
-            "inference stage {} at {}: the stages of one run share their sampler settings; give every stage the same `samplers`",
-            st.model, st.level
-        ));
+        return Err(StageMismatch::Samplers {
+            model: st.model.clone(),
+            level: st.level.clone(),
+        });
     }
     match inf.priors.get(&st.model) {
         Some(p) if *p != st.priors => {
-            return Err(format!(
-                "inference stage {} at {}: the priors of a model must be the same at every level",
-                st.model, st.level
-            ))
+            return Err(StageMismatch::Priors {
+                model: st.model.clone(),
+                level: st.level.clone(),
+            })
         }
         Some(_) => {}
         None => {

@@ -5,7 +5,9 @@ use crate::spring_model::{chain, N};
 use faer::linalg::solvers::Solve;
 use faer::{Mat, Side};
 use rfmlab::common::{C64, J};
-use rfmlab::iem::{iem_mode, nearest_mode, AnalyticalMode, ExperimentalMode, IemError, IemParams};
+use rfmlab::iem::{
+    iem_mode, nearest_mode, AnalyticalMode, ExperimentalMode, IemError, IemParams, ModesError,
+};
 use std::f64::consts::PI;
 
 fn bilinear(x: &[C64], a: &Mat<f64>, y: &[C64]) -> C64 {
@@ -21,7 +23,7 @@ fn bilinear(x: &[C64], a: &Mat<f64>, y: &[C64]) -> C64 {
 /// Complex modes of (K_b + E S, M): real modes of (K_b + Re(E) S, M) (M diagonal, so the
 /// symmetric eigensolver on M^-1/2 K M^-1/2), each refined by complex Rayleigh-quotient
 /// iteration with the unconjugated quotient phi^T K phi / phi^T M phi. Normalised phi^T M phi = 1.
-fn modes(e: C64) -> Result<Vec<AnalyticalMode>, String> {
+fn modes(e: C64) -> Result<Vec<AnalyticalMode>, ModesError> {
     let (m, kb, s) = chain();
     let kr = Mat::<f64>::from_fn(N, N, |r, c| {
         (kb[(r, c)] + e.re * s[(r, c)]) / (m[(r, r)] * m[(c, c)]).sqrt()
@@ -143,12 +145,12 @@ fn nearest_mode_respects_y_dominance_and_errors_are_typed() {
         freq_hz: 20.0,
         loss_factor: 0.2,
     };
-    let none = |_: C64| -> Result<Vec<AnalyticalMode>, String> { Ok(vec![]) };
+    let none = |_: C64| -> Result<Vec<AnalyticalMode>, ModesError> { Ok(vec![]) };
     assert!(matches!(
         iem_mode(&none, target, C64::new(7e6, 1e6), &IemParams::default()),
         Err(IemError::NoMode { .. })
     ));
-    let flat = |_: C64| -> Result<Vec<AnalyticalMode>, String> {
+    let flat = |_: C64| -> Result<Vec<AnalyticalMode>, ModesError> {
         Ok(vec![AnalyticalMode::new(
             C64::new(w(20.0), 1.0),
             C64::new(0.0, 0.0),
@@ -158,7 +160,7 @@ fn nearest_mode_respects_y_dominance_and_errors_are_typed() {
         iem_mode(&flat, target, C64::new(7e6, 1e6), &IemParams::default()),
         Err(IemError::Insensitive { .. })
     ));
-    let fail = |_: C64| -> Result<Vec<AnalyticalMode>, String> { Err("no convergence".into()) };
+    let fail = |_: C64| -> Result<Vec<AnalyticalMode>, ModesError> { Err("no convergence".into()) };
     let e = iem_mode(&fail, target, C64::new(7e6, 1e6), &IemParams::default()).unwrap_err();
     assert!(e.to_string().contains("no convergence"));
     let bad = ExperimentalMode {

@@ -136,7 +136,11 @@ pub(super) fn modal_tables(rep: &mut Report, levels: &[LevelData], results: &[Le
     }
     let failures: Vec<String> = results
         .iter()
-        .flat_map(|r| r.iem.iter().filter_map(|m| m.iem.as_ref().err().cloned()))
+        .flat_map(|r| {
+            r.iem
+                .iter()
+                .filter_map(|m| m.iem.as_ref().err().map(|e| e.to_string()))
+        })
         .collect();
     if !t3.is_empty() {
         rep.heading(2, "Table 3: IEM and Model 1 RFM over 10 Hz bands (MPa)");
