@@ -9,8 +9,8 @@ use crate::stage::{LevelData, RunError};
 use crate::study::build::BuiltModel;
 use crate::study::effects::{ClosedLoopSettings, DeclaredEffect};
 use crate::study::inference::CorrelationKind;
-use crate::study::{Estimator, ModelSpec, StudyError};
-use std::path::{Path, PathBuf};
+use crate::study::{Estimator, ModelSpec};
+use std::path::PathBuf;
 
 /// The stage's settings besides the loop's own ([`crate::closed_loop::ClosedLoopParams`]).
 #[derive(Clone, Debug)]
@@ -108,15 +108,4 @@ pub struct LoopInputs<'a> {
     pub posterior: &'a dyn LevelPosterior,
 }
 
-/// An input error naming `key` of the study file `file`.
-pub(crate) fn key_error(
-    file: &Path,
-    key: impl Into<String>,
-    message: impl Into<String>,
-) -> RunError {
-    RunError::Study(StudyError {
-        file: file.display().to_string(),
-        key: key.into(),
-        message: message.into(),
-    })
-}
+pub(crate) use crate::stage::input_error as key_error;

@@ -435,6 +435,15 @@ impl Effects {
         Ok(())
     }
 
+    /// The beam modulus factor b among `values` (one per term; 0 without the effect).
+    fn beam_factor(&self, values: &[f64]) -> f64 {
+        self.terms
+            .iter()
+            .zip(values)
+            .find(|(t, _)| matches!(t.effect, Effect::BeamModulus))
+            .map_or(0.0, |(_, v)| *v)
+    }
+
     /// The full sweep of `inner` (every output, every input column: receptance, and with
     /// `derivs` its E' derivative and `S H`) with this set's point masses and beam factor at
     /// `values` (one per term): what the deterministic analyses (RFM, IEM, FRAC) see of a
@@ -450,12 +459,7 @@ impl Effects {
         values: &[f64],
         out: &mut crate::frf::Sweep,
     ) -> Result<(), super::ForwardError> {
-        let beam = self
-            .terms
-            .iter()
-            .zip(values)
-            .find(|(t, _)| matches!(t.effect, Effect::BeamModulus))
-            .map_or(0.0, |(_, v)| *v);
+        let beam = self.beam_factor(values);
         let scale = 1.0 + beam;
         if scale <= 0.0 {
             return Err(super::ForwardError::Setup(format!(
@@ -541,12 +545,7 @@ impl Effects {
         derivs: bool,
         values: &[f64],
     ) -> Result<StructuralColumns, super::ForwardError> {
-        let beam = self
-            .terms
-            .iter()
-            .zip(values)
-            .find(|(t, _)| matches!(t.effect, Effect::BeamModulus))
-            .map_or(0.0, |(_, v)| *v);
+        let beam = self.beam_factor(values);
         let scale = 1.0 + beam;
         let w_eng: Vec<f64> = omega.iter().map(|w| w / scale.sqrt()).collect();
         let e_eng: Vec<C64> = modulus.iter().map(|e| e / scale).collect();
