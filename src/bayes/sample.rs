@@ -11,12 +11,13 @@
 use super::posterior::{Draws, SamplerResult};
 use super::{fail, At, Checkpoints, SamplerParams};
 use crate::inference::likelihood::FrfPosterior;
-use crate::inference::map::{cholesky, MapResult};
+use crate::inference::map::MapResult;
 use crate::inference::whiten::Whitened;
 use crate::inference::Sampler;
 use crate::inference::{
     sample_nuts, sample_tmcmc, unit_rng, NutsParams, Posterior, Progress, TmcmcParams,
 };
+use crate::linalg::dense::cholesky;
 use crate::stage::{Event, RunError};
 use rand_distr::{Distribution, StandardNormal};
 use std::time::Instant;

@@ -439,10 +439,10 @@ fn profile_point(
             .map(|&i| if p[i] != 0.0 { p[i].abs() } else { 1.0 })
             .collect();
         let (g, a) = super::normal_equations(&lik.data.values, &pred, v, &free, &scale);
-        let Some(l) = crate::inference::map::cholesky(&a, k) else {
+        let Some(l) = crate::linalg::dense::cholesky(&a, k) else {
             break;
         };
-        let d = crate::inference::map::chol_solve(&l, k, &g);
+        let d = crate::linalg::dense::chol_solve(&l, k, &g);
         let mut f = 1.0;
         let mut moved = false;
         for _ in 0..8 {

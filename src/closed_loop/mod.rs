@@ -44,10 +44,9 @@ use crate::forward::{Effect, EffectTerm, Effects, ForwardError};
 use crate::inference::likelihood::{FrfLikelihood, FrfPosterior};
 
 pub mod start;
-use crate::inference::map::{
-    chol_solve, cholesky, find_map, MapError, MapParams, MapResult, SearchMethod,
-};
+use crate::inference::map::{find_map, MapError, MapParams, MapResult, SearchMethod};
 use crate::inference::prior::Prior;
+use crate::linalg::dense::{chol_solve, cholesky};
 use crate::material::ConstitutiveModel;
 use libm::erfc;
 

@@ -15,8 +15,8 @@
 use super::candidate_model;
 use crate::forward::{Effect, ForwardError};
 use crate::inference::likelihood::FrfPosterior;
-use crate::inference::map::{chol_solve, cholesky};
 use crate::inference::prior::Prior;
+use crate::linalg::dense::{chol_solve, cholesky};
 
 /// Grid points across a uniform prior (cell centres).
 pub const PROFILE_GRID: usize = 10;

@@ -19,7 +19,7 @@
 
 use super::lm::Quadratic;
 use super::{unit_rng, DensityError, Posterior};
-pub use crate::linalg::dense::{chol_inverse, chol_solve, cholesky};
+use crate::linalg::dense::{chol_inverse, chol_solve, cholesky};
 use argmin::core::{CostFunction, Executor, Gradient, State};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;

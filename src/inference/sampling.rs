@@ -299,7 +299,7 @@ pub(crate) fn cholesky_jittered(cov: &[f64], d: usize) -> Vec<f64> {
     l
 }
 
-use super::map::cholesky;
+use crate::linalg::dense::cholesky;
 
 /// Outcome of one round of population moves.
 #[derive(Debug, Clone, Copy, Default)]

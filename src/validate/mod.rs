@@ -41,10 +41,11 @@ use crate::forward::{EstimatorSpec, ForwardModel, MeasurementModel, MeasurementP
 use crate::inference::likelihood::{
     ErrorLaw, FrfData, FrfLikelihood, FrfPosterior, NoiseModel, Scale, DEFAULT_COHERENCE_FLOOR,
 };
-use crate::inference::map::{cholesky, find_map, MapParams, MapResult};
+use crate::inference::map::{find_map, MapParams, MapResult};
 use crate::inference::prior::{normal_quantile, Prior};
 use crate::inference::refine::relinearise_to_map;
 use crate::inference::{unit_rng, Posterior, SteppingStoneParams};
+use crate::linalg::dense::cholesky;
 use crate::material::ConstitutiveModel;
 use crate::output::shards::Shard;
 use crate::output::Table;

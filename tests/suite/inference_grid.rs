@@ -26,12 +26,13 @@ use rfmlab::inference::diagnostics::{mcse_mean, mcse_sd, rhat};
 use rfmlab::inference::likelihood::{
     ErrorLaw, FrfData, FrfLikelihood, FrfPosterior, NoiseModel, Scale,
 };
-use rfmlab::inference::map::{cholesky, find_map, MapParams};
+use rfmlab::inference::map::{find_map, MapParams};
 use rfmlab::inference::prior::Prior;
 use rfmlab::inference::{
     no_progress, sample_nuts, sample_tmcmc, stepping_stone, unit_rng, NutsParams, Posterior,
     SteppingStoneParams, TmcmcParams,
 };
+use rfmlab::linalg::dense::cholesky;
 use rfmlab::material::Model1;
 use rfmlab::rfm::DenseEngine;
 use std::f64::consts::TAU;

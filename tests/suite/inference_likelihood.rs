@@ -360,8 +360,8 @@ fn multistart_agrees_and_laplace_covariance_is_the_inverse_fisher_information() 
         }
     }
     // Laplace covariance (which also holds the tiny prior curvature) vs the inverse Fisher.
-    let l = rfmlab::inference::map::cholesky(&fisher, d).unwrap();
-    let inv = rfmlab::inference::map::chol_inverse(&l, d);
+    let l = rfmlab::linalg::dense::cholesky(&fisher, d).unwrap();
+    let inv = rfmlab::linalg::dense::chol_inverse(&l, d);
     for i in 0..d {
         let rel = (lp.cov_x[i * d + i] / inv[i * d + i] - 1.0).abs();
         assert!(
