@@ -131,8 +131,16 @@ fn run_here(
         estimator: plan.data.estimator.as_ref(),
         file: &study.file,
     };
+    // The closed loop needs the receptances of every measured point, also when it was added
+    // to the plan after planning (its candidate masses act there).
+    let mut engine_params = plan.engine.clone();
+    if plan.closed_loop.is_some() {
+        if let Some(all_inputs) = engine_params.likelihood.as_mut() {
+            *all_inputs = true;
+        }
+    }
     let engines = crate::stage::engine::build_engine(
-        &plan.engine,
+        &engine_params,
         &models,
         &built,
         &mut data,
