@@ -52,17 +52,7 @@ pub(super) fn figures(
         };
         let n = s.draws.chain.len();
         let step = (n / 300).max(1);
-        let nl = law.n_params();
-        let (mut st, mut lo) = (Vec::new(), Vec::new());
-        for r in (0..n).step_by(step) {
-            let par: Vec<f64> = (0..nl).map(|k| s.draws.values[k][r]).collect();
-            let e: Vec<crate::common::C64> = freq
-                .iter()
-                .map(|f| law.modulus(&par, std::f64::consts::TAU * f))
-                .collect();
-            st.push(e.iter().map(|z| z.re).collect());
-            lo.push(e.iter().map(|z| z.im).collect());
-        }
+        let (st, lo) = super::modulus_bands(law.as_ref(), &s.draws, &freq, step);
         groups.push(BandGroup {
             label: format!("{} {}", p.model, p.level),
             freq_hz: freq.clone(),

@@ -58,18 +58,7 @@ pub(super) fn figures(
             };
             let n = s.draws.chain.len();
             let step = (n / 400).max(1);
-            let nl = law.n_params();
-            let mut storage = Vec::new();
-            let mut loss = Vec::new();
-            for r in (0..n).step_by(step) {
-                let par: Vec<f64> = (0..nl).map(|k| s.draws.values[k][r]).collect();
-                let e: Vec<crate::common::C64> = freq
-                    .iter()
-                    .map(|f| law.modulus(&par, std::f64::consts::TAU * f))
-                    .collect();
-                storage.push(e.iter().map(|z| z.re).collect());
-                loss.push(e.iter().map(|z| z.im).collect());
-            }
+            let (storage, loss) = super::modulus_bands(law.as_ref(), &s.draws, &freq, step);
             groups.push(BandGroup {
                 label: format!("level {}", p.level),
                 freq_hz: freq.clone(),
