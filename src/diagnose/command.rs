@@ -42,14 +42,7 @@ pub fn diagnose_into(
     figures: bool,
 ) -> Result<DiagnoseSummary, RunError> {
     let t0 = std::time::Instant::now();
-    // The loop needs every measured point as an engine input (point-mass candidates).
     let mut with_loop = study.clone();
-    if !crate::study::effects::needs_all_inputs(
-        with_loop.closed_loop.as_ref(),
-        &with_loop.declared_effects,
-    ) {
-        with_loop.closed_loop = Some(crate::study::effects::ClosedLoopSettings::default());
-    }
     // A sensor's mass acts in x, y and z: when `[closed_loop] candidates` names the
     // sensor-mass candidate, the other two directions of every measured point of a meshed
     // joint become model points (and engine inputs) for it. Opt-in: the engine's inputs
@@ -66,7 +59,12 @@ pub fn diagnose_into(
         built,
         levels,
         engines,
-    } = crate::stage::setup::setup(study, None)?;
+    } = crate::stage::setup::setup(
+        study,
+        // The loop's candidate masses act at every measured point.
+        Some(crate::stage::engine::LikelihoodInputs::EveryMeasuredPoint),
+        None,
+    )?;
     let engine = engines
         .likelihood
         .as_deref()

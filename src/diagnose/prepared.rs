@@ -45,7 +45,11 @@ impl Prepared {
             built: _,
             levels,
             engines,
-        } = crate::stage::setup::setup(study, rom_cache)?;
+        } = crate::stage::setup::setup(
+            study,
+            crate::stage::engine::LikelihoodInputs::of(study),
+            rom_cache,
+        )?;
         Ok(Prepared {
             study: study.clone(),
             levels,

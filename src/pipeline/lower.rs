@@ -77,7 +77,9 @@ impl Plan {
         }
         s.inference = union;
         s.closed_loop = match (&self.closed_loop, s.closed_loop.take()) {
-            (Some(_), Some(c)) => Some(c),
+            (Some(_), Some(c)) => {
+                Some(crate::study::effects::ClosedLoopSettings { enabled: true, ..c })
+            }
             (Some(_), None) => Some(Default::default()),
             (None, Some(c)) => Some(crate::study::effects::ClosedLoopSettings {
                 enabled: false,

@@ -28,6 +28,7 @@ mod level_results;
 mod lower;
 mod plan;
 pub(crate) mod results;
+mod stages;
 pub(crate) mod tables;
 
 pub use crate::stage::{Event, RunError};
@@ -35,13 +36,12 @@ pub use check::{check, check_study, CheckSummary};
 pub use executor::{Executor, Observer};
 pub use level_results::LevelResults;
 pub use plan::{
-    DataParams, EngineParams, IdentificationParams, InferenceParams, Plan, SamplerParams,
+    DataParams, EngineParams, IdentificationParams, InferenceParams, LikelihoodInputs, Plan,
+    SamplerParams,
 };
 pub use results::ModelSummary;
 pub use results::{IdentifiedParameters, Results, LOOP_DIR};
 
-use crate::frf::FrfEngine;
-use crate::study::build::BuiltModel;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -77,7 +77,6 @@ fn run_here(
     ex: &mut Executor,
     extra: &(dyn Fn(Event) + Sync),
 ) -> Result<Results, RunError> {
-    use crate::bayes::{self, declared, levels};
     let t0 = Instant::now();
     let observers = ex.progress();
     let progress = |e: Event| {
@@ -85,76 +84,11 @@ fn run_here(
         extra(e);
     };
     let study = &lowered.study;
-    let laws = crate::stage::model_laws(&plan.identification.models, &study.file)?;
-    progress(Event::Start {
-        step: "assembling the FE model".into(),
-        total: 0,
-    });
-    let built = crate::stage::model::build(&study.structure, &study.file)?;
-    progress(Event::Finish);
-    ex.lap("build model")?;
-    let mut data = crate::stage::data::load_levels(Some(&plan.data), &built, &study.file)?;
-    crate::stage::model::check_initial_values(
-        &plan.identification.models,
-        &study.file,
-        &built,
-        &data,
-        &laws,
-    )?;
-    ex.lap("load and check data")?;
-    let mesh_error = if plan.identification.mesh_error {
-        progress(Event::Start {
-            step: "estimating the mesh's discretisation error".into(),
-            total: 0,
-        });
-        let d = crate::stage::preflight::mesh_error_at_initial_values(
-            &plan.identification.models,
-            &study.structure,
-            &study.file,
-            &built,
-            &data,
-            &laws,
-        )?;
-        progress(Event::Finish);
-        ex.lap("mesh error")?;
-        d
-    } else {
-        Vec::new()
-    };
-    progress(Event::Start {
-        step: "building the FRF engine".into(),
-        total: 0,
-    });
-    let models = crate::stage::engine::ModelsAndData {
-        models: &plan.identification.models,
-        laws: &laws,
-        estimator: plan.data.estimator.as_ref(),
-        file: &study.file,
-    };
-    // The closed loop needs the receptances of every measured point, also when it was added
-    // to the plan after planning (its candidate masses act there).
-    let mut engine_params = plan.engine.clone();
-    if plan.closed_loop.is_some() {
-        if let Some(all_inputs) = engine_params.likelihood.as_mut() {
-            *all_inputs = true;
-        }
-    }
-    let engines = crate::stage::engine::build_engine(
-        &engine_params,
-        &models,
-        &built,
-        &mut data,
-        ex.rom_cache_dir(),
-    )?;
-    progress(Event::Finish);
-    ex.count("rom builds", engines.rom_builds);
-    ex.lap("engine")?;
-    let engine: &dyn FrfEngine = engines.engine.as_ref();
-    let lik: &dyn FrfEngine = engines.likelihood.as_deref().unwrap_or(engine);
+    let run = stages::prepare(plan, study, ex, &progress)?;
     let point_ids: Vec<u32> = study.structure.points.iter().map(|p| p.id).collect();
     let checkpoints = checkpoint_folder(&plan.output_dir);
-    let bayes_run = bayes::RunContext {
-        posterior: bayes::PosteriorInputs {
+    let bayes_run = crate::bayes::RunContext {
+        posterior: crate::bayes::PosteriorInputs {
             file: &study.file,
             estimator: plan.data.estimator.as_ref(),
             point_ids: &point_ids,
@@ -162,121 +96,31 @@ fn run_here(
         },
         seed: study.seed,
         models: &plan.identification.models,
-        laws: &laws,
-        checkpoints: bayes::Checkpoints {
+        laws: &run.laws,
+        checkpoints: crate::bayes::Checkpoints {
             folder: &checkpoints,
             study: &study.name,
             study_sha256: &study.sha256,
         },
     };
-    let mut results = Vec::new();
-    for level in &data {
-        // Declared point masses and beam factor change the deterministic analyses' structure.
-        let view = declared::deterministic_view(
-            &study.declared_effects,
-            &study.file,
-            engine,
-            &built,
-            level,
-        )?;
-        let (det_engine, det_built): (&dyn FrfEngine, &BuiltModel) = match &view {
-            Some(v) => (&v.engine, &v.built),
-            None => (engine, &built),
-        };
-        let inputs = crate::identify::LevelInputs {
-            built: det_built,
-            engine: det_engine,
-            level,
-            laws: &laws,
-            measurement: crate::stage::measurement::measurement_model(
-                plan.data.estimator.as_ref(),
-                level,
-                &study.file,
-            )?,
-            file: &study.file,
-        };
-        let id = crate::identify::analyse_level(&plan.identification, &inputs, &progress)?;
-        let mut r = results::LevelResults::new(id);
-        ex.lap(format!("analyses {}", level.name))?;
-        let stages = bayes::stages_at(&plan.inference, &level.name);
-        if !stages.is_empty() {
-            let fits: Vec<&crate::rfm::RfmResult> = r.global.iter().map(|g| &g.result).collect();
-            r.posteriors = bayes::infer_level(&bayes_run, &stages, lik, level, &fits, &progress)?;
-            ex.lap(format!("inference {}", level.name))?;
-            if let Some(settings) = &plan.basins {
-                bayes::basins_of_level(
-                    &bayes_run,
-                    &stages,
-                    settings,
-                    &plan.identification.rfm,
-                    lik,
-                    engine,
-                    level,
-                    &mut r.posteriors,
-                )?;
-                ex.lap(format!("basins {}", level.name))?;
-            }
-        }
-        results.push(r);
+    let mut levels = Vec::new();
+    for level in &run.data {
+        levels.push(stages::level(
+            plan, study, &run, &bayes_run, level, ex, &progress,
+        )?);
     }
-    if !plan.inference.is_empty() {
-        let settings = plan.comparison.clone().unwrap_or_default();
-        let posteriors: Vec<(&str, &[bayes::PosteriorResult])> = results
-            .iter()
-            .map(|r| (r.level.as_str(), r.posteriors.as_slice()))
-            .collect();
-        let across = levels::compare(
-            &bayes_run,
-            &plan.inference,
-            &settings,
-            &plan.data,
-            lik,
-            &data,
-            &posteriors,
-        )?;
-        if let Some(c) = across {
-            if let Some(r) = results.iter_mut().find(|r| r.level == c.high) {
-                r.across_levels = Some(c);
-            }
-            ex.lap("across levels")?;
-        }
-    }
-    let closed_loop = match &plan.closed_loop {
-        Some(params) => {
-            let mut params = params.clone();
-            let say = ex.progress();
-            params.progress = crate::closed_loop::Progress::new(move |m| {
-                say(Event::Start {
-                    step: format!("closed loop: {m}"),
-                    total: 0,
-                })
-            });
-            let stage = match &plan.closed_loop_stage {
-                Some(s) => s.clone(),
-                None => crate::diagnose::DiagnoseParams::of(study, None)?,
-            };
-            let posterior = closed_loop::PlanPosterior {
-                stages: &plan.inference,
-                inputs: bayes_run.posterior,
-            };
-            let inputs = crate::diagnose::LoopInputs {
-                built: &built,
-                levels: &data,
-                laws: &laws,
-                engine: lik,
-                posterior: &posterior,
-            };
-            let o = crate::diagnose::loop_stage(&stage, &params, &inputs)?;
-            progress(Event::Finish);
-            ex.lap("closed loop")?;
-            Some(o)
-        }
-        None => None,
-    };
+    stages::across_levels(plan, &bayes_run, &run, &mut levels, ex)?;
+    let closed_loop = stages::closed_loop(plan, study, &run, &bayes_run, ex, &progress)?;
+    let stages::Prepared {
+        data,
+        engines,
+        mesh_error,
+        ..
+    } = run;
     Results::new(
         Arc::new(lowered.study.clone()),
         data,
-        results,
+        levels,
         engines.note,
         ex.timings().to_vec(),
         ex.counters().to_vec(),

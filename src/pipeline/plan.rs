@@ -9,7 +9,7 @@ use super::RunError;
 pub use crate::bayes::{InferenceParams, SamplerParams};
 use crate::closed_loop::ClosedLoopParams;
 pub use crate::identify::IdentificationParams;
-pub use crate::stage::engine::EngineParams;
+pub use crate::stage::engine::{EngineParams, LikelihoodInputs};
 use crate::study::comparison::{BasinSettings, LevelSettings};
 use crate::study::inference::Inference;
 use crate::study::Study;
@@ -123,6 +123,17 @@ impl Plan {
     /// The study the plan was made from (as loaded, before any edit of the plan).
     pub fn study(&self) -> &Study {
         &self.study
+    }
+
+    /// The inputs of the likelihood's engine this plan needs, as it stands now: none without
+    /// inference or the closed loop, every measured point for the closed loop (its candidate
+    /// masses act there) and for declared point masses, else the excitation column.
+    pub fn likelihood_inputs(&self) -> Option<LikelihoodInputs> {
+        LikelihoodInputs::needed(
+            !self.inference.is_empty() || self.closed_loop.is_some(),
+            self.closed_loop.is_some(),
+            &self.study.declared_effects,
+        )
     }
 }
 

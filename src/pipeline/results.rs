@@ -210,6 +210,24 @@ impl Results {
         self.posteriors()
             .find(|p| p.level == level && p.model.eq_ignore_ascii_case(model))
     }
+    /// The models' probabilities at `level` under `prior` (`"declared"` or `"widened_10x"`),
+    /// with equal prior model probabilities, as the `model_comparison` table gives them: the
+    /// evidence estimator used (the first that every model has) and per model (name, log
+    /// Bayes factor against the best, probability). `None` without evidence for every model.
+    pub fn model_probabilities(
+        &self,
+        level: &str,
+        prior: &str,
+    ) -> Option<(&'static str, Vec<(String, f64, f64)>)> {
+        let posts: Vec<&PosteriorResult> = self.posteriors().filter(|p| p.level == level).collect();
+        let (est, p) = crate::pipeline::tables::comparison::model_probabilities(&posts, prior)?;
+        let rows = posts
+            .iter()
+            .zip(p)
+            .map(|(post, (bf, prob))| (post.model.clone(), bf, prob))
+            .collect();
+        Some((est, rows))
+    }
     /// The draws of `sampler` (`"nuts"`, `"tmcmc"`; `None`: the one the figures show) for
     /// `model` at `level`, with the parameter names (law, then noise) of `values`.
     pub fn draws(

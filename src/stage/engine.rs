@@ -23,25 +23,58 @@ pub struct EngineParams {
     pub rom_tolerance: f64,
     /// Worker threads of the run (`None`: rayon's default, one per core).
     pub threads: Option<usize>,
-    /// Whether a likelihood's engine is built (with `[inference]`), and with every measured
-    /// point as an input (`Some(true)`: the closed loop and declared point masses need their
-    /// receptances) or the excitation column only (`Some(false)`).
-    pub likelihood: Option<bool>,
 }
 
 impl EngineParams {
-    /// The engine stage's parameters of a study (`[solver]`; a likelihood engine with
-    /// `[inference]`, with every measured point as an input for the closed loop and declared
-    /// point masses).
+    /// The engine stage's parameters of a study's `[solver]`.
     pub fn of(s: &crate::study::Study) -> EngineParams {
         EngineParams {
             engine: s.solver.engine,
             rom_tolerance: s.solver.rom_tolerance,
             threads: s.solver.threads,
-            likelihood: s.inference.as_ref().map(|_| {
-                crate::study::effects::needs_all_inputs(s.closed_loop.as_ref(), &s.declared_effects)
-            }),
         }
+    }
+}
+
+/// The inputs of the likelihood's engine (a ROM reduced to the columns the likelihood uses).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LikelihoodInputs {
+    /// The excitation column only: the plain likelihood.
+    Excitation,
+    /// Every measured point: the closed loop's candidate masses and declared point masses act
+    /// there (the Sherman-Morrison-Woodbury update needs their receptances).
+    EveryMeasuredPoint,
+}
+
+impl LikelihoodInputs {
+    /// The likelihood engine's inputs for a run with inference (`inference`), the closed loop
+    /// (`closed_loop`) and the declared effects `declared`; `None` when nothing evaluates the
+    /// likelihood.
+    pub fn needed(
+        inference: bool,
+        closed_loop: bool,
+        declared: &[crate::study::effects::DeclaredEffect],
+    ) -> Option<LikelihoodInputs> {
+        if !inference {
+            return None;
+        }
+        Some(
+            if closed_loop || crate::study::effects::declares_point_mass(declared) {
+                LikelihoodInputs::EveryMeasuredPoint
+            } else {
+                LikelihoodInputs::Excitation
+            },
+        )
+    }
+
+    /// The likelihood engine's inputs for `study` as it stands (`[inference]`, an enabled
+    /// `[closed_loop]`, declared point masses).
+    pub fn of(study: &crate::study::Study) -> Option<LikelihoodInputs> {
+        Self::needed(
+            study.inference.is_some(),
+            study.closed_loop.as_ref().is_some_and(|c| c.enabled),
+            &study.declared_effects,
+        )
     }
 }
 
@@ -71,9 +104,11 @@ pub struct Engines {
     pub rom_builds: u64,
 }
 
-/// Build the FRF engine with inputs = all measured points of every level.
+/// Build the FRF engine with inputs = all measured points of every level, and the likelihood's
+/// engine with `likelihood`'s inputs (ROM only; the full model serves the likelihood itself).
 pub fn build_engine(
     engine_params: &EngineParams,
+    likelihood: Option<LikelihoodInputs>,
     models: &ModelsAndData<'_>,
     built: &BuiltModel,
     levels: &mut [LevelData],
@@ -198,15 +233,12 @@ pub fn build_engine(
                 .map_err(|e| RunError::Engine(e.to_string()))?];
             // The likelihood's engine: the excitation column only, prepared on each level's
             // lines and, with a measurement model, on its fine grid.
-            let lik_engine = match engine_params.likelihood {
+            let lik_engine = match likelihood {
                 None => None,
-                Some(all_inputs) => {
-                    // The closed loop and declared point masses need the receptances of
-                    // every measured point: then all inputs.
-                    let lik_inputs = if all_inputs {
-                        rom.inputs().to_vec()
-                    } else {
-                        vec![built.excitation]
+                Some(which) => {
+                    let lik_inputs = match which {
+                        LikelihoodInputs::EveryMeasuredPoint => rom.inputs().to_vec(),
+                        LikelihoodInputs::Excitation => vec![built.excitation],
                     };
                     let lik_rom = rom
                         .with_inputs(&lik_inputs)

@@ -1,6 +1,6 @@
 //! The start of a command that runs one stage of a study.
 
-use super::engine::{build_engine, EngineParams, Engines, ModelsAndData};
+use super::engine::{build_engine, EngineParams, Engines, LikelihoodInputs, ModelsAndData};
 use super::model::build;
 use super::{LevelData, RunError};
 use crate::material::ConstitutiveModel;
@@ -17,9 +17,14 @@ pub struct Setup {
     pub engines: Engines,
 }
 
-/// The [`Setup`] of `study`, reusing certified ROMs from `rom_cache` when given. The one
-/// function of the stages that reads a whole study: it is where a single-stage command enters.
-pub fn setup(study: &crate::study::Study, rom_cache: Option<&Path>) -> Result<Setup, RunError> {
+/// The [`Setup`] of `study`, with the likelihood's engine on `likelihood`'s inputs, reusing
+/// certified ROMs from `rom_cache` when given. The one function of the stages that reads a
+/// whole study: it is where a single-stage command enters.
+pub fn setup(
+    study: &crate::study::Study,
+    likelihood: Option<LikelihoodInputs>,
+    rom_cache: Option<&Path>,
+) -> Result<Setup, RunError> {
     let file = study.file.as_path();
     let laws = crate::stage::model_laws(&study.models, file)?;
     let built = build(&study.structure, file)?;
@@ -35,6 +40,7 @@ pub fn setup(study: &crate::study::Study, rom_cache: Option<&Path>) -> Result<Se
     };
     let engines = build_engine(
         &EngineParams::of(study),
+        likelihood,
         &models,
         &built,
         &mut levels,

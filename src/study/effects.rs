@@ -167,17 +167,12 @@ impl ClosedLoopSettings {
     }
 }
 
-/// Whether the likelihood's engine needs every measured point as an input: the study runs the
-/// closed loop (`closed_loop` enabled; `rfmlab diagnose` enables it) or `declared` holds a point
-/// mass (the Sherman-Morrison-Woodbury update needs the receptances at the mass's point).
-pub fn needs_all_inputs(
-    closed_loop: Option<&ClosedLoopSettings>,
-    declared: &[DeclaredEffect],
-) -> bool {
-    closed_loop.is_some_and(|c| c.enabled)
-        || declared
-            .iter()
-            .any(|d| matches!(d.kind, DeclaredKind::PointMass { .. }))
+/// Whether `declared` holds a point mass (the likelihood's engine then needs the receptances at
+/// the mass's point for the Sherman-Morrison-Woodbury update).
+pub fn declares_point_mass(declared: &[DeclaredEffect]) -> bool {
+    declared
+        .iter()
+        .any(|d| matches!(d.kind, DeclaredKind::PointMass { .. }))
 }
 
 /// Validate `[[structure.effects]]` against the study's points (`point_ids`).

@@ -1,7 +1,8 @@
-//! Model comparison from `rfmlab run`, as a user runs it, on the bundled default data (Models 3
-//! and 4 at Level 1 over 10-60 Hz, short chains, TMCMC and stepping-stone evidence):
+//! Model comparison of a run in memory (`Study::load -> plan -> pipeline::run`), on the bundled
+//! default data (Models 3 and 4 at Level 1 over 10-60 Hz, short chains, TMCMC and
+//! stepping-stone evidence), rfmlab's values read from the `Results`:
 //! * PSIS-LOO and WAIC (totals, se, p, pointwise, Pareto k) equal ArviZ's `az.loo` / `az.waic`
-//!   to 1e-6 on the pointwise log likelihood the run wrote (scripts/loo_reference.py), and the
+//!   to 1e-6 on the pointwise log likelihood `report::write` wrote (scripts/loo_reference.py), and the
 //!   PPC chi-square p-values equal scipy's `chi2.sf`;
 //! * the evidence table holds Laplace, TMCMC, TMCMC reweighted and stepping-stone (from NUTS's
 //!   reference) under the declared and the ten-fold widened priors; widening the log-uniform
@@ -12,8 +13,6 @@
 use crate::python_checks::{interpreter, script};
 use std::path::Path;
 use std::process::Command;
-
-const BIN: &str = env!("CARGO_BIN_EXE_rfmlab");
 
 fn study_text(out: &Path) -> String {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies");
@@ -59,16 +58,6 @@ fn study_text(out: &Path) -> String {
     )
 }
 
-fn read_json(py: &Path, code: &str, arg: &Path) -> serde_json::Value {
-    let o = Command::new(py)
-        .args(["-c", code])
-        .arg(arg)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_slice(&o.stdout).unwrap()
-}
-
 fn f(v: &serde_json::Value) -> f64 {
     v.as_f64().unwrap_or(f64::NAN)
 }
@@ -85,12 +74,13 @@ fn loo_and_waic_equal_arviz_and_evidence_estimators_agree() {
     let out = dir.path().join("results").join("compare_test");
     let file = dir.path().join("compare.toml");
     std::fs::write(&file, study_text(&out)).unwrap();
-    let o = Command::new(BIN)
-        .args(["run", file.to_str().unwrap(), "--no-cache"])
-        .env("CI", "1")
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // In memory (no ROM cache, as `rfmlab run --no-cache`); the parquet files are written only
+    // for ArviZ, which reads them as a user's notebook would.
+    let study = rfmlab::Study::load(&file).unwrap_or_else(|e| panic!("{e}"));
+    let plan = study.plan().unwrap_or_else(|e| panic!("{e}"));
+    let mut ex = rfmlab::pipeline::Executor::new();
+    let results = rfmlab::pipeline::run(&plan, &mut ex).unwrap_or_else(|e| panic!("{e}"));
+    rfmlab::report::write(&results, &out).unwrap_or_else(|e| panic!("{e}"));
 
     // ArviZ and scipy on what the run wrote.
     let o = Command::new(&py)
@@ -100,89 +90,41 @@ fn loo_and_waic_equal_arviz_and_evidence_estimators_agree() {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let az: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
-    let ours = read_json(
-        &py,
-        "import sys, json, math, pandas as pd; d = sys.argv[1]; \
-clean = lambda o: None if isinstance(o, float) and not math.isfinite(o) else ({k: clean(v) for k, v in o.items()} if isinstance(o, dict) else ([clean(v) for v in o] if isinstance(o, list) else o)); \
- m = pd.read_parquet(d + '/model_comparison.parquet'); p = pd.read_parquet(d + '/pointwise_loglik.parquet'); c = pd.read_parquet(d + '/ppc.parquet'); e = pd.read_parquet(d + '/evidence.parquet'); \
-print(json.dumps(clean({'mc': m.to_dict('records'), 'pw': p.groupby(['level','model','line']).first().reset_index()[['level','model','line','elpd_loo_i','pareto_k','elpd_waic_i']].to_dict('records'), 'ppc': c.groupby(['level','model','channel']).first().reset_index()[['level','model','channel','p_value']].to_dict('records'), 'ev': e.to_dict('records')})))",
-        &out,
-    );
     let close = |what: &str, a: f64, b: f64| {
         assert!(
             (a - b).abs() <= 1e-6 * b.abs().max(1.0),
             "{what}: rfmlab {a} vs reference {b}"
         );
     };
-    let mc = ours["mc"].as_array().unwrap();
-    assert_eq!(mc.len(), 2);
+    // rfmlab's values from the results in memory.
+    let posts: Vec<&rfmlab::bayes::PosteriorResult> =
+        results.posteriors().filter(|p| p.level == "L1").collect();
+    assert_eq!(posts.len(), 2);
     let mut n = 0;
-    for row in mc {
-        let key = format!(
-            "{}/{}",
-            row["level"].as_str().unwrap(),
-            row["model"].as_str().unwrap()
-        );
+    for p in &posts {
+        let key = format!("{}/{}", p.level, p.model);
         let a = &az[&key];
-        close(
-            &format!("{key} elpd_loo"),
-            f(&row["elpd_loo"]),
-            f(&a["elpd_loo"]),
-        );
-        close(
-            &format!("{key} loo se"),
-            f(&row["elpd_loo_se"]),
-            f(&a["loo_se"]),
-        );
-        close(&format!("{key} p_loo"), f(&row["p_loo"]), f(&a["p_loo"]));
-        close(
-            &format!("{key} elpd_waic"),
-            f(&row["elpd_waic"]),
-            f(&a["elpd_waic"]),
-        );
-        close(
-            &format!("{key} waic se"),
-            f(&row["elpd_waic_se"]),
-            f(&a["waic_se"]),
-        );
-        close(&format!("{key} p_waic"), f(&row["p_waic"]), f(&a["p_waic"]));
-        let kmax = a["pareto_k"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(f)
-            .fold(f64::NEG_INFINITY, f64::max);
-        close(&format!("{key} max k"), f(&row["max_pareto_k"]), kmax);
-        for pw in ours["pw"].as_array().unwrap() {
-            if format!(
-                "{}/{}",
-                pw["level"].as_str().unwrap(),
-                pw["model"].as_str().unwrap()
-            ) != key
-            {
-                continue;
-            }
-            let l = pw["line"].as_u64().unwrap() as usize;
-            close("loo_i", f(&pw["elpd_loo_i"]), f(&a["loo_i"][l]));
-            close("pareto_k", f(&pw["pareto_k"]), f(&a["pareto_k"][l]));
-            close("waic_i", f(&pw["elpd_waic_i"]), f(&a["waic_i"][l]));
+        let loo = p.compare.loo.as_ref().expect("PSIS-LOO");
+        let waic = p.compare.waic.as_ref().expect("WAIC");
+        close(&format!("{key} elpd_loo"), loo.elpd, f(&a["elpd_loo"]));
+        close(&format!("{key} loo se"), loo.se, f(&a["loo_se"]));
+        close(&format!("{key} p_loo"), loo.p_loo, f(&a["p_loo"]));
+        close(&format!("{key} elpd_waic"), waic.elpd, f(&a["elpd_waic"]));
+        close(&format!("{key} waic se"), waic.se, f(&a["waic_se"]));
+        close(&format!("{key} p_waic"), waic.p_waic, f(&a["p_waic"]));
+        for (l, (loo_i, k)) in loo.pointwise.iter().zip(&loo.pareto_k).enumerate() {
+            close("loo_i", *loo_i, f(&a["loo_i"][l]));
+            close("pareto_k", *k, f(&a["pareto_k"][l]));
+            close("waic_i", waic.pointwise[l], f(&a["waic_i"][l]));
             n += 1;
         }
-        for c in ours["ppc"].as_array().unwrap() {
-            if format!(
-                "{}/{}",
-                c["level"].as_str().unwrap(),
-                c["model"].as_str().unwrap()
-            ) != key
-            {
-                continue;
-            }
-            let ch = c["channel"].as_i64().unwrap().to_string();
-            let p = f(&c["p_value"]);
-            let q = f(&a["ppc_p"][&ch]);
+        for c in &p.compare.ppc {
+            let q = f(&a["ppc_p"][&c.response_id.to_string()]);
             assert!(
-                (p - q).abs() <= 1e-9 + 1e-6 * q,
-                "{key} channel {ch} p-value {p} vs scipy {q}"
+                (c.p_value - q).abs() <= 1e-9 + 1e-6 * q,
+                "{key} channel {} p-value {} vs scipy {q}",
+                c.response_id,
+                c.p_value
             );
         }
     }
@@ -190,13 +132,15 @@ print(json.dumps(clean({'mc': m.to_dict('records'), 'pw': p.groupby(['level','mo
 
     // Evidence: 3 estimators x 2 priors per model; widening = -4 ln 10 (Model 4), -3 ln 10
     // (Model 3); TMCMC and stepping-stone within 3 combined standard errors (+ 0.1 nats).
-    let ev = ours["ev"].as_array().unwrap();
     let get = |model: &str, est: &str, prior: &str| -> (f64, f64) {
-        let r = ev
+        let p = posts.iter().find(|p| p.model == model).unwrap();
+        let r = p
+            .compare
+            .evidence
             .iter()
-            .find(|r| r["model"] == model && r["estimator"] == est && r["prior"] == prior)
-            .unwrap_or_else(|| panic!("no {model} {est} {prior} row"));
-        (f(&r["log_evidence"]), f(&r["se"]))
+            .find(|r| r.estimator == est && r.prior == prior)
+            .unwrap_or_else(|| panic!("no {model} {est} {prior} evidence"));
+        (r.log_evidence, r.se)
     };
     for (model, d) in [("model3", 3.0), ("model4", 4.0)] {
         for est in ["laplace", "tmcmc", "tmcmc_is", "stepping_stone"] {
@@ -225,19 +169,16 @@ print(json.dumps(clean({'mc': m.to_dict('records'), 'pw': p.groupby(['level','mo
             "{model}: TMCMC reweighted {r} +- {sr} vs stepping-stone {s} +- {ss}"
         );
     }
-    let p: Vec<(String, f64)> = mc
-        .iter()
-        .map(|r| {
-            (
-                r["model"].as_str().unwrap().to_string(),
-                f(&r["probability"]),
-            )
-        })
-        .collect();
-    close("sum of probabilities", p.iter().map(|x| x.1).sum(), 1.0);
-    let best = p.iter().max_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+    let (estimator, p) = results
+        .model_probabilities("L1", "declared")
+        .expect("evidence for both models");
+    assert_eq!(estimator, "stepping_stone");
+    close("sum of probabilities", p.iter().map(|x| x.2).sum(), 1.0);
+    let best = p.iter().max_by(|a, b| a.2.total_cmp(&b.2)).unwrap();
     assert_eq!(best.0, "model4", "{p:?}");
-    assert_eq!(mc[0]["estimator"], "stepping_stone");
+    // The written table says the same.
+    let mc = results.table("model_comparison").expect("model_comparison");
+    assert_eq!(mc.height(), 2);
 }
 
 /// `studies/bayes_compare.toml` end to end with every comparison part (stepping-stone, the

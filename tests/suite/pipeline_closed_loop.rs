@@ -3,16 +3,38 @@
 //! names the mass first, on the run's own engine (one ROM built), and `report::write` puts
 //! its tables (the verdict among them), markdown and report section into the one results
 //! folder, listed in the manifest with the ROM counter, the report's first line giving the
-//! loop's status per level; no temporary or old folder is left beside it.
+//! loop's status per level; no temporary or old folder is left beside it. The plan that runs
+//! is the study's with its loop switched off and the loop added after planning (as Python's
+//! `run(closed_loop=True)` does), so the mass at point 4, away from the drive point, is found
+//! only if the run gives the loop's likelihood every measured point.
 
+use rfmlab::pipeline::LikelihoodInputs;
 use std::path::Path;
 
 #[test]
 fn the_closed_loop_runs_inside_the_run_and_is_written_in_the_same_swap() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let study = rfmlab::Study::load(root.join("studies/closed_loop_td.toml")).unwrap();
-    let mut plan = study.plan().unwrap();
+    let plan = study.plan().unwrap();
     assert!(plan.closed_loop.is_some(), "[closed_loop] makes a stage");
+    assert_eq!(
+        plan.likelihood_inputs(),
+        Some(LikelihoodInputs::EveryMeasuredPoint),
+        "the loop's candidate masses need every measured point"
+    );
+    // The loop added to a plan after planning, as Python's `run(closed_loop=True)` does on a
+    // study whose loop is off: the run must still give the likelihood every measured point,
+    // or the loop has no mass candidate away from the drive point.
+    let mut off = study.clone();
+    off.closed_loop.as_mut().unwrap().enabled = false;
+    let mut plan = off.plan().unwrap();
+    assert!(plan.closed_loop.is_none());
+    assert_eq!(plan.likelihood_inputs(), Some(LikelihoodInputs::Excitation));
+    plan.closed_loop = Some(rfmlab::diagnose::params_of(&study));
+    assert_eq!(
+        plan.likelihood_inputs(),
+        Some(LikelihoodInputs::EveryMeasuredPoint)
+    );
     plan.figures = false;
     let mut ex = rfmlab::pipeline::Executor::new();
     let results = rfmlab::pipeline::run(&plan, &mut ex).unwrap();

@@ -1,0 +1,240 @@
+//! The stages [`super::run`] sequences: the model, data and engines ([`prepare`]), per level the
+//! deterministic identification and the inference stages ([`level`]), the comparison across
+//! levels ([`across_levels`]) and the closed loop ([`closed_loop`]). Each reads its parameters
+//! from the [`Plan`], calls one algorithm layer and records its lap on the [`Executor`].
+
+use super::{closed_loop as plan_loop, Event, Executor, LevelResults, Plan, RunError};
+use crate::bayes::{self, declared, levels as across, RunContext};
+use crate::frf::FrfEngine;
+use crate::material::ConstitutiveModel;
+use crate::stage::engine::{build_engine, Engines, ModelsAndData};
+use crate::stage::preflight::ModeDiscretisation;
+use crate::stage::LevelData;
+use crate::study::build::BuiltModel;
+use crate::study::Study;
+
+/// What every later stage runs on: the laws, the built model, the levels' data, the engines,
+/// and the mesh's discretisation error when the plan asks for it.
+pub(super) struct Prepared {
+    pub laws: Vec<Box<dyn ConstitutiveModel>>,
+    pub built: BuiltModel,
+    pub data: Vec<LevelData>,
+    pub engines: Engines,
+    pub mesh_error: Vec<ModeDiscretisation>,
+}
+
+impl Prepared {
+    /// The engine of the deterministic analyses (inputs at every measured point).
+    fn engine(&self) -> &dyn FrfEngine {
+        self.engines.engine.as_ref()
+    }
+    /// The likelihood's engine (the deterministic one when no separate one was built).
+    fn likelihood(&self) -> &dyn FrfEngine {
+        self.engines.likelihood.as_deref().unwrap_or(self.engine())
+    }
+}
+
+/// The model, the data (checked against every model's initial values), the mesh error and the
+/// engines.
+pub(super) fn prepare(
+    plan: &Plan,
+    study: &Study,
+    ex: &mut Executor,
+    progress: &(dyn Fn(Event) + Sync),
+) -> Result<Prepared, RunError> {
+    let models = &plan.identification.models;
+    let laws = crate::stage::model_laws(models, &study.file)?;
+    progress(Event::Start {
+        step: "assembling the FE model".into(),
+        total: 0,
+    });
+    let built = crate::stage::model::build(&study.structure, &study.file)?;
+    progress(Event::Finish);
+    ex.lap("build model")?;
+    let mut data = crate::stage::data::load_levels(Some(&plan.data), &built, &study.file)?;
+    crate::stage::model::check_initial_values(models, &study.file, &built, &data, &laws)?;
+    ex.lap("load and check data")?;
+    let mesh_error = if plan.identification.mesh_error {
+        progress(Event::Start {
+            step: "estimating the mesh's discretisation error".into(),
+            total: 0,
+        });
+        let d = crate::stage::preflight::mesh_error_at_initial_values(
+            models,
+            &study.structure,
+            &study.file,
+            &built,
+            &data,
+            &laws,
+        )?;
+        progress(Event::Finish);
+        ex.lap("mesh error")?;
+        d
+    } else {
+        Vec::new()
+    };
+    progress(Event::Start {
+        step: "building the FRF engine".into(),
+        total: 0,
+    });
+    let for_models = ModelsAndData {
+        models,
+        laws: &laws,
+        estimator: plan.data.estimator.as_ref(),
+        file: &study.file,
+    };
+    let engines = build_engine(
+        &plan.engine,
+        plan.likelihood_inputs(),
+        &for_models,
+        &built,
+        &mut data,
+        ex.rom_cache_dir(),
+    )?;
+    progress(Event::Finish);
+    ex.count("rom builds", engines.rom_builds);
+    ex.lap("engine")?;
+    Ok(Prepared {
+        laws,
+        built,
+        data,
+        engines,
+        mesh_error,
+    })
+}
+
+/// One level: the deterministic identification (on the structure with the declared point
+/// masses and beam factor), then the level's inference stages and their basin study.
+pub(super) fn level(
+    plan: &Plan,
+    study: &Study,
+    run: &Prepared,
+    bayes_run: &RunContext<'_>,
+    level: &LevelData,
+    ex: &mut Executor,
+    progress: &(dyn Fn(Event) + Sync),
+) -> Result<LevelResults, RunError> {
+    let view = declared::deterministic_view(
+        &study.declared_effects,
+        &study.file,
+        run.engine(),
+        &run.built,
+        level,
+    )?;
+    let (det_engine, det_built): (&dyn FrfEngine, &BuiltModel) = match &view {
+        Some(v) => (&v.engine, &v.built),
+        None => (run.engine(), &run.built),
+    };
+    let inputs = crate::identify::LevelInputs {
+        built: det_built,
+        engine: det_engine,
+        level,
+        laws: &run.laws,
+        measurement: crate::stage::measurement::measurement_model(
+            plan.data.estimator.as_ref(),
+            level,
+            &study.file,
+        )?,
+        file: &study.file,
+    };
+    let id = crate::identify::analyse_level(&plan.identification, &inputs, progress)?;
+    let mut r = LevelResults::new(id);
+    ex.lap(format!("analyses {}", level.name))?;
+    let stages = bayes::stages_at(&plan.inference, &level.name);
+    if stages.is_empty() {
+        return Ok(r);
+    }
+    let fits: Vec<&crate::rfm::RfmResult> = r.global.iter().map(|g| &g.result).collect();
+    r.posteriors =
+        bayes::infer_level(bayes_run, &stages, run.likelihood(), level, &fits, progress)?;
+    ex.lap(format!("inference {}", level.name))?;
+    if let Some(settings) = &plan.basins {
+        bayes::basins_of_level(
+            bayes_run,
+            &stages,
+            settings,
+            &plan.identification.rfm,
+            run.likelihood(),
+            run.engine(),
+            level,
+            &mut r.posteriors,
+        )?;
+        ex.lap(format!("basins {}", level.name))?;
+    }
+    Ok(r)
+}
+
+/// The comparison across levels (with inference), kept with the higher level's results.
+pub(super) fn across_levels(
+    plan: &Plan,
+    bayes_run: &RunContext<'_>,
+    run: &Prepared,
+    levels: &mut [LevelResults],
+    ex: &mut Executor,
+) -> Result<(), RunError> {
+    if plan.inference.is_empty() {
+        return Ok(());
+    }
+    let settings = plan.comparison.clone().unwrap_or_default();
+    let posteriors: Vec<(&str, &[bayes::PosteriorResult])> = levels
+        .iter()
+        .map(|r| (r.level.as_str(), r.posteriors.as_slice()))
+        .collect();
+    let compared = across::compare(
+        bayes_run,
+        &plan.inference,
+        &settings,
+        &plan.data,
+        run.likelihood(),
+        &run.data,
+        &posteriors,
+    )?;
+    if let Some(c) = compared {
+        if let Some(r) = levels.iter_mut().find(|r| r.level == c.high) {
+            r.across_levels = Some(c);
+        }
+        ex.lap("across levels")?;
+    }
+    Ok(())
+}
+
+/// The closed loop on the run's likelihood engine, when the plan has it.
+pub(super) fn closed_loop(
+    plan: &Plan,
+    study: &Study,
+    run: &Prepared,
+    bayes_run: &RunContext<'_>,
+    ex: &mut Executor,
+    progress: &(dyn Fn(Event) + Sync),
+) -> Result<Option<crate::diagnose::LoopOutcome>, RunError> {
+    let Some(params) = &plan.closed_loop else {
+        return Ok(None);
+    };
+    let mut params = params.clone();
+    let say = ex.progress();
+    params.progress = crate::closed_loop::Progress::new(move |m| {
+        say(Event::Start {
+            step: format!("closed loop: {m}"),
+            total: 0,
+        })
+    });
+    let stage = match &plan.closed_loop_stage {
+        Some(s) => s.clone(),
+        None => crate::diagnose::DiagnoseParams::of(study, None)?,
+    };
+    let posterior = plan_loop::PlanPosterior {
+        stages: &plan.inference,
+        inputs: bayes_run.posterior,
+    };
+    let inputs = crate::diagnose::LoopInputs {
+        built: &run.built,
+        levels: &run.data,
+        laws: &run.laws,
+        engine: run.likelihood(),
+        posterior: &posterior,
+    };
+    let outcome = crate::diagnose::loop_stage(&stage, &params, &inputs)?;
+    progress(Event::Finish);
+    ex.lap("closed loop")?;
+    Ok(Some(outcome))
+}
