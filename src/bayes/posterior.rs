@@ -100,13 +100,21 @@ pub fn build_posterior<'a>(
     let model_name = stage.model.as_str();
     let sp = &stage.samplers;
     let col = &level.column;
-    let forward = ForwardModel::new(
+    // The inputs first: the declared effects (`[[structure.effects]]`: fixed ones change the
+    // model, free ones are parameters after the law's), the noise model, the H1 measurement.
+    let (effects, effect_priors) =
+        super::declared::level_effects(inputs.declared, inputs.file, inputs.point_ids, level)?;
+    let n_d = n_averages(inputs, &sp.noise, level)?;
+    let measurement =
+        crate::stage::measurement::measurement_model(inputs.estimator, level, inputs.file)?;
+    let noise = sp.noise.resolve(n_d);
+    let mut forward = ForwardModel::new(
         engine,
         law,
         &col.omega_rad_s,
         col.input,
         &col.outputs,
-        crate::stage::measurement::measurement_model(inputs.estimator, level, inputs.file)?,
+        measurement,
     )
     .map_err(|e| {
         fail(
@@ -114,17 +122,11 @@ pub fn build_posterior<'a>(
             e,
         )
     })?;
-    // Declared effects (`[[structure.effects]]`): fixed ones change the model, free ones are
-    // parameters after the law's.
-    let mut forward = forward;
-    let (effects, effect_priors) =
-        super::declared::level_effects(inputs.declared, inputs.file, inputs.point_ids, level)?;
     if !effects.is_empty() {
         forward
             .set_effects(effects)
             .map_err(|e| fail(format!("declared effects at {}", level.name), e))?;
     }
-    let noise = sp.noise.resolve(n_averages(inputs, &sp.noise, level)?);
     let data = FrfData {
         freq_hz: level.freq_hz.clone(),
         n_out: col.outputs.len(),

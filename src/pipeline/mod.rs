@@ -40,7 +40,7 @@ pub use plan::{
     SamplerParams,
 };
 pub use results::ModelSummary;
-pub use results::{IdentifiedParameters, Results, LOOP_DIR};
+pub use results::{IdentifiedParameters, ModelProbabilities, ModelProbability, Results, LOOP_DIR};
 
 use std::sync::Arc;
 use std::time::Instant;

@@ -16,6 +16,24 @@ use crate::study::Study;
 use polars::prelude::DataFrame;
 use std::sync::Arc;
 
+/// The models' probabilities at one level ([`Results::model_probabilities`]).
+#[derive(Clone, Debug)]
+pub struct ModelProbabilities {
+    /// The evidence estimator used: the first of stepping-stone, TMCMC reweighted, TMCMC and
+    /// Laplace that every model has.
+    pub estimator: &'static str,
+    pub models: Vec<ModelProbability>,
+}
+
+/// One model's Bayes factor and probability.
+#[derive(Clone, Debug)]
+pub struct ModelProbability {
+    pub model: String,
+    /// Log Bayes factor against the best model (nats; 0 for the best).
+    pub log_bf_vs_best: f64,
+    pub probability: f64,
+}
+
 /// The folder (inside the results folder) of the closed loop's files.
 pub const LOOP_DIR: &str = "closed_loop";
 
@@ -211,22 +229,22 @@ impl Results {
             .find(|p| p.level == level && p.model.eq_ignore_ascii_case(model))
     }
     /// The models' probabilities at `level` under `prior` (`"declared"` or `"widened_10x"`),
-    /// with equal prior model probabilities, as the `model_comparison` table gives them: the
-    /// evidence estimator used (the first that every model has) and per model (name, log
-    /// Bayes factor against the best, probability). `None` without evidence for every model.
-    pub fn model_probabilities(
-        &self,
-        level: &str,
-        prior: &str,
-    ) -> Option<(&'static str, Vec<(String, f64, f64)>)> {
+    /// with equal prior model probabilities, as the `model_comparison` table gives them.
+    /// `None` without evidence for every model.
+    pub fn model_probabilities(&self, level: &str, prior: &str) -> Option<ModelProbabilities> {
         let posts: Vec<&PosteriorResult> = self.posteriors().filter(|p| p.level == level).collect();
-        let (est, p) = crate::pipeline::tables::comparison::model_probabilities(&posts, prior)?;
-        let rows = posts
+        let (estimator, p) =
+            crate::pipeline::tables::comparison::model_probabilities(&posts, prior)?;
+        let models = posts
             .iter()
             .zip(p)
-            .map(|(post, (bf, prob))| (post.model.clone(), bf, prob))
+            .map(|(post, (log_bf_vs_best, probability))| ModelProbability {
+                model: post.model.clone(),
+                log_bf_vs_best,
+                probability,
+            })
             .collect();
-        Some((est, rows))
+        Some(ModelProbabilities { estimator, models })
     }
     /// The draws of `sampler` (`"nuts"`, `"tmcmc"`; `None`: the one the figures show) for
     /// `model` at `level`, with the parameter names (law, then noise) of `values`.

@@ -169,13 +169,21 @@ fn loo_and_waic_equal_arviz_and_evidence_estimators_agree() {
             "{model}: TMCMC reweighted {r} +- {sr} vs stepping-stone {s} +- {ss}"
         );
     }
-    let (estimator, p) = results
+    let p = results
         .model_probabilities("L1", "declared")
         .expect("evidence for both models");
-    assert_eq!(estimator, "stepping_stone");
-    close("sum of probabilities", p.iter().map(|x| x.2).sum(), 1.0);
-    let best = p.iter().max_by(|a, b| a.2.total_cmp(&b.2)).unwrap();
-    assert_eq!(best.0, "model4", "{p:?}");
+    assert_eq!(p.estimator, "stepping_stone");
+    close(
+        "sum of probabilities",
+        p.models.iter().map(|m| m.probability).sum(),
+        1.0,
+    );
+    let best = p
+        .models
+        .iter()
+        .max_by(|a, b| a.probability.total_cmp(&b.probability))
+        .unwrap();
+    assert_eq!(best.model, "model4", "{p:?}");
     // The written table says the same.
     let mc = results.table("model_comparison").expect("model_comparison");
     assert_eq!(mc.height(), 2);
