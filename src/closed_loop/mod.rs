@@ -436,13 +436,15 @@ pub fn score_test_step(
     }
     let zs = s_eff / i_eff.sqrt();
     // One-sided (a mass): the statistic is max(0, z)^2 (Self and Liang 1987), so a score
-    // pointing to a negative size ranks last.
-    let t = if candidate.one_sided() {
+    // pointing to a negative size ranks last (not for a resonator, whose column at zero does
+    // not give the sign of a finite one's action: [`Effect::score_one_sided`]).
+    let one_sided = candidate.score_one_sided();
+    let t = if one_sided {
         zs.max(0.0).powi(2)
     } else {
         zs * zs
     };
-    let p_value = if candidate.one_sided() {
+    let p_value = if one_sided {
         0.5 * erfc(zs / std::f64::consts::SQRT_2)
     } else {
         erfc(zs.abs() / std::f64::consts::SQRT_2)

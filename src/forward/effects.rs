@@ -221,6 +221,13 @@ impl Effect {
                 | Effect::AdherendDamping
         )
     }
+    /// Whether the score test at zero is one-sided: that of a one-sided effect whose column at
+    /// zero points the way a small size acts. Not a resonator's: at zero its column is a rigid
+    /// mass's (`dm_eff/dm = 1`), but above its own frequency a finite one has a negative
+    /// effective mass, so data that carry one may score a rigid mass below zero.
+    pub fn score_one_sided(&self) -> bool {
+        self.one_sided() && !matches!(self, Effect::Resonator { .. })
+    }
     /// Admissible range (open) of the parameter.
     pub fn bounds(&self) -> (f64, f64) {
         match self {
