@@ -69,6 +69,14 @@ pub fn level_effects(
             DeclaredKind::BeamModulus => Effect::BeamModulus,
             DeclaredKind::MaxwellBranch { tau_s } => Effect::MaxwellBranch { tau_s },
             DeclaredKind::Shaker { stiffness_n_m } => Effect::Shaker { stiffness_n_m },
+            DeclaredKind::Resonator {
+                point: id,
+                stiffness_n_m,
+            } => Effect::Resonator {
+                point: point(id, "point")?,
+                id,
+                stiffness_n_m,
+            },
             DeclaredKind::DegradedBond { x_start_m, width_m } => {
                 Effect::DegradedBond { x_start_m, width_m }
             }
@@ -168,8 +176,8 @@ pub fn deterministic_view<'a>(
 }
 
 /// A report sentence on the declared effects in the deterministic analyses: point masses and
-/// the beam factor enter the RFM, IEM and FRAC; gains, delays, the shaker and law effects
-/// only the likelihood and the closed loop. `None` without declared effects.
+/// the beam factor enter the RFM, IEM and FRAC; gains, delays, the shaker, resonators and law
+/// effects only the likelihood and the closed loop. `None` without declared effects.
 pub fn deterministic_note(declared: &[DeclaredEffect]) -> Option<String> {
     if declared.is_empty() {
         return None;
@@ -195,7 +203,7 @@ pub fn deterministic_note(declared: &[DeclaredEffect]) -> Option<String> {
             s.push_str("; ");
         }
         s.push_str(&format!(
-            "{} (gains, delays, shaker, law effects) are in the Bayesian layer and the closed loop only: the deterministic RFM, IEM and FRAC above run without them",
+            "{} (gains, delays, shaker, resonators, law effects) are in the Bayesian layer and the closed loop only: the deterministic RFM, IEM and FRAC above run without them",
             outside.join(", ")
         ));
     }

@@ -436,13 +436,15 @@ pub fn score_test_step(
     }
     let zs = s_eff / i_eff.sqrt();
     // One-sided (a mass): the statistic is max(0, z)^2 (Self and Liang 1987), so a score
-    // pointing to a negative size ranks last.
-    let t = if candidate.one_sided() {
+    // pointing to a negative size ranks last (not for a resonator, whose column at zero does
+    // not give the sign of a finite one's action: [`Effect::score_one_sided`]).
+    let one_sided = candidate.score_one_sided();
+    let t = if one_sided {
         zs.max(0.0).powi(2)
     } else {
         zs * zs
     };
-    let p_value = if candidate.one_sided() {
+    let p_value = if one_sided {
         0.5 * erfc(zs / std::f64::consts::SQRT_2)
     } else {
         erfc(zs.abs() / std::f64::consts::SQRT_2)
@@ -1074,13 +1076,23 @@ pub fn is_law_effect(e: &Effect) -> bool {
     matches!(e, Effect::MaxwellBranch { .. })
 }
 
-/// The default candidate list for an observation: a gain and a delay per channel, a point
-/// mass per measured point that is an engine input (with its id), the beam modulus and a
-/// shaker's moving mass on the default stinger (acting at the drive point).
+/// The default candidate list for an observation: a point mass and a resonator (a mass on
+/// the default spring, [`crate::forward::effects::DEFAULT_RESONATOR_STIFFNESS_N_M`]) per
+/// measured point that is an engine input (with its id), a gain and a delay per channel, the
+/// beam modulus and a shaker's moving mass on the default stinger (acting at the drive point).
+///
+/// At zero size a resonator's column is the point mass's (`dm_eff/dm = 1`), so the two tie in
+/// the score test; each resonator follows its point's mass, and the ranking's stable sort
+/// sends both to the refits, where the evidence tells them apart.
 pub fn default_candidates(channel_ids: &[u32], mass_points: &[(usize, u32)]) -> Vec<Effect> {
     let mut c = Vec::new();
     for &(point, id) in mass_points {
         c.push(Effect::PointMass { point, id });
+        c.push(Effect::Resonator {
+            point,
+            id,
+            stiffness_n_m: crate::forward::effects::DEFAULT_RESONATOR_STIFFNESS_N_M,
+        });
     }
     for (channel, &id) in channel_ids.iter().enumerate() {
         c.push(Effect::Gain { channel, id });

@@ -1,5 +1,5 @@
-//! The candidate effects of the loop: the defaults of a level (a point mass at every measured
-//! point, a gain and a delay per channel, the beam modulus factor, the Maxwell branches), the
+//! The candidate effects of the loop: the defaults of a level (a point mass and a resonator at
+//! every measured point, a gain and a delay per channel, the beam modulus factor, the Maxwell branches), the
 //! opt-in ones with matrices of their own (degraded-bond strips, adherend damping, base
 //! springs: [`opt_in_term_candidates`]) and the sensor mass, as `[closed_loop] candidates`
 //! admits them; and the effects the term ROM is built for ([`with_declared`]).
@@ -69,7 +69,8 @@ pub(crate) fn opt_in_term_candidates(
 }
 
 /// The candidates at `level` that `settings` admit: the defaults at its channels (a point mass
-/// where a channel's point is an input of `engine`), the sensor masses, the Maxwell branches
+/// and a resonator on `settings`' spring where a channel's point is an input of `engine`), the
+/// sensor masses, the Maxwell branches
 /// over its band, then `with_terms` (the opt-in term candidates); without the beam factor when
 /// the adherend has viscous damping `C_b` (its exact scaling needs none).
 pub(crate) fn level_candidates(
@@ -88,6 +89,13 @@ pub(crate) fn level_candidates(
         .map(|(o, id)| (*o, *id))
         .collect();
     let mut candidates = default_candidates(&level.response_ids, &mass_points);
+    if let Some(k) = settings.map(|s| s.resonator_stiffness_n_m) {
+        for c in &mut candidates {
+            if let Effect::Resonator { stiffness_n_m, .. } = c {
+                *stiffness_n_m = k;
+            }
+        }
+    }
     candidates.extend(sensor_mass_candidates(
         &built.model.points,
         engine.inputs(),

@@ -16,6 +16,10 @@
 //!                          H''_od = H'_od s,   s = k_s / (k_s - w^2 m_s (1 + k_s H'_dd))
 //!                          (armature -w^2 m_s x_s = F - f, stinger f = k_s (x_s - x_d));
 //!                          m_s -> 0 gives H', k_s -> inf a point mass m_s at d
+//!   resonator (m on k at P): a mass on a spring at point P, force read at the structure: the
+//!                          point-mass identity with the frequency-dependent mass
+//!                          m_eff(w) = m k / (k - w^2 m),   D = -w^2 m_eff,
+//!                          dm_eff/dm = k^2 / (k - w^2 m)^2   (k -> inf gives a point mass m)
 //!   degraded bond (x-range): E* S -> E* (S - d S_region), evaluated by an engine with the
 //!                          region's term (crate::rom::terms, certified against the full model
 //!                          with the strip degraded);  d/dd = -E* H_oG S_region,r H_Gi (reduced)
@@ -62,6 +66,16 @@ pub enum Effect {
     /// point, with the force read on the shaker's side of the stinger (the force that drives
     /// the moving mass). A force gauge at the structure would not see the shaker at all.
     Shaker { stiffness_n_m: f64 },
+    /// A resonator: a mass m (kg, the parameter) on a spring of stiffness `stiffness_n_m` at
+    /// engine point `point` (an engine input), acting in the measured direction, with the force
+    /// read at the structure: a compliant sensor or fixture mount, or a shaker's armature that
+    /// stays attached while a gauge at the structure reads the force. It adds `-w^2 m_eff(w)`,
+    /// `m_eff = m k / (k - w^2 m)`, to the dynamic stiffness at the point; `id` the point's id.
+    Resonator {
+        point: usize,
+        id: u32,
+        stiffness_n_m: f64,
+    },
     /// One more Maxwell branch in the adhesive's law with relaxation time `tau_s` (s):
     /// `E* -> E* + E_k j w tau / (1 + j w tau)`, the parameter the branch modulus `E_k` (Pa).
     MaxwellBranch { tau_s: f64 },
@@ -94,6 +108,10 @@ pub const DEFAULT_BOND_STRIP_M: f64 = 0.010;
 /// Default stinger stiffness of a shaker candidate (N/m): a thin steel rod some 10 cm long.
 pub const DEFAULT_STINGER_STIFFNESS_N_M: f64 = 2e5;
 
+/// Default spring of a resonator candidate (N/m): a compliant mount or a stinger-like link, the
+/// shaker's default stinger (20 g on it resonates at 503 Hz).
+pub const DEFAULT_RESONATOR_STIFFNESS_N_M: f64 = 2e5;
+
 impl Effect {
     /// Name of the effect's parameter, as in tables.
     pub fn name(&self) -> String {
@@ -104,6 +122,7 @@ impl Effect {
             Effect::SensorMass { id, .. } => format!("mass3_pt{id}"),
             Effect::BeamModulus => "beam_modulus".into(),
             Effect::Shaker { .. } => "shaker_mass".into(),
+            Effect::Resonator { id, .. } => format!("resonator_pt{id}"),
             Effect::MaxwellBranch { tau_s } => {
                 format!("maxwell_fc{:.0}hz", 1.0 / (std::f64::consts::TAU * tau_s))
             }
@@ -123,6 +142,7 @@ impl Effect {
             Effect::SensorMass { .. } => "sensor_mass",
             Effect::BeamModulus => "beam_modulus",
             Effect::Shaker { .. } => "shaker",
+            Effect::Resonator { .. } => "resonator",
             Effect::MaxwellBranch { .. } => "maxwell_branch",
             Effect::DegradedBond { .. } => "degraded_bond",
             Effect::BaseSprings { .. } => "base_springs",
@@ -137,7 +157,10 @@ impl Effect {
             | Effect::DegradedBond { .. }
             | Effect::AdherendDamping => "1",
             Effect::Delay { .. } => "s",
-            Effect::PointMass { .. } | Effect::SensorMass { .. } | Effect::Shaker { .. } => "kg",
+            Effect::PointMass { .. }
+            | Effect::SensorMass { .. }
+            | Effect::Shaker { .. }
+            | Effect::Resonator { .. } => "kg",
             Effect::MaxwellBranch { .. } => "Pa",
             Effect::BaseSprings { .. } => "m^3/N",
         }
@@ -160,6 +183,9 @@ impl Effect {
             Effect::BeamModulus => "the adherends' modulus differs from the declared one by a factor (1 + b): all beam-dominated modes shift by sqrt(1 + b)".into(),
             Effect::Shaker { stiffness_n_m } => format!(
                 "a shaker's moving mass m_s on a {stiffness_n_m:.3e} N/m stinger at the drive point, with the force read on the shaker's side of the stinger, loads the drive point and adds a stinger-armature resonance"
+            ),
+            Effect::Resonator { id, stiffness_n_m, .. } => format!(
+                "a mass m on a {stiffness_n_m:.3e} N/m spring at point {id} (a compliant sensor or fixture mount, or a shaker's armature with the force read at the structure) adds its own resonance at sqrt(k / m): it loads the point like a mass below that frequency and pins it there (an antiresonance)"
             ),
             Effect::MaxwellBranch { tau_s } => format!(
                 "the adhesive relaxes also near {:.1} Hz (tau = {tau_s:.3e} s): one more Maxwell branch E_k j w tau / (1 + j w tau) adds stiffness above and loss around that frequency (the law's relaxation spectrum is too narrow, e.g. a fractional-law adhesive)",
@@ -188,20 +214,29 @@ impl Effect {
             Effect::PointMass { .. }
                 | Effect::SensorMass { .. }
                 | Effect::Shaker { .. }
+                | Effect::Resonator { .. }
                 | Effect::MaxwellBranch { .. }
                 | Effect::DegradedBond { .. }
                 | Effect::BaseSprings { .. }
                 | Effect::AdherendDamping
         )
     }
+    /// Whether the score test at zero is one-sided: that of a one-sided effect whose column at
+    /// zero points the way a small size acts. Not a resonator's: at zero its column is a rigid
+    /// mass's (`dm_eff/dm = 1`), but above its own frequency a finite one has a negative
+    /// effective mass, so data that carry one may score a rigid mass below zero.
+    pub fn score_one_sided(&self) -> bool {
+        self.one_sided() && !matches!(self, Effect::Resonator { .. })
+    }
     /// Admissible range (open) of the parameter.
     pub fn bounds(&self) -> (f64, f64) {
         match self {
             Effect::Gain { .. } => (-0.9, 9.0),
             Effect::Delay { .. } => (-0.01, 0.01),
-            Effect::PointMass { .. } | Effect::SensorMass { .. } | Effect::Shaker { .. } => {
-                (-1e-12, 10.0)
-            }
+            Effect::PointMass { .. }
+            | Effect::SensorMass { .. }
+            | Effect::Shaker { .. }
+            | Effect::Resonator { .. } => (-1e-12, 10.0),
             Effect::BeamModulus => (-0.9, 9.0),
             Effect::MaxwellBranch { .. } => (-1e-6, 1e11),
             Effect::DegradedBond { .. } => (-1e-9, 1.0),
@@ -211,7 +246,7 @@ impl Effect {
     }
     /// Default prior when the effect is free: uniform over a stated plausible range (the
     /// evidence depends on it: a ten times wider range costs ln 10 = 2.3 nats).
-    /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor or a shaker's moving mass), beam
+    /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor, a shaker's moving mass, a resonator's), beam
     /// modulus +-20 %, Maxwell branch modulus 0-20 MPa (a few times the stiffness of the paper's adhesive, E0 about 5 MPa).
     /// Degraded bond: loss fraction uniform on [0, 1). Base springs: compliance 0-1e-9 m^3/N.
     /// Adherend damping: loss factor uniform on [0, 0.01] (steel beams and bolted or clamped
@@ -223,9 +258,10 @@ impl Effect {
                 lo: -1e-3,
                 hi: 1e-3,
             },
-            Effect::PointMass { .. } | Effect::SensorMass { .. } | Effect::Shaker { .. } => {
-                Prior::Uniform { lo: 0.0, hi: 0.1 }
-            }
+            Effect::PointMass { .. }
+            | Effect::SensorMass { .. }
+            | Effect::Shaker { .. }
+            | Effect::Resonator { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
             Effect::MaxwellBranch { .. } => Prior::Uniform { lo: 0.0, hi: 2e7 },
             Effect::DegradedBond { .. } => Prior::Uniform { lo: 0.0, hi: 1.0 },
             // k_n >= 1e9 N/m^3: about the adhesive layer's own E_oed / t (2e9 for the paper's
@@ -250,6 +286,7 @@ impl Effect {
             self,
             Effect::PointMass { .. }
                 | Effect::SensorMass { .. }
+                | Effect::Resonator { .. }
                 | Effect::BeamModulus
                 | Effect::Shaker { .. }
                 | Effect::DegradedBond { .. }
@@ -390,6 +427,18 @@ impl Effects {
                 Effect::PointMass { point, .. } if !engine.inputs().contains(&point) => {
                     return Err(super::ForwardError::Setup(format!(
                         "effect {name}: point index {point} is not an input of the engine (a point mass needs the receptances of its point)"
+                    )));
+                }
+                Effect::Resonator { point, .. } if !engine.inputs().contains(&point) => {
+                    return Err(super::ForwardError::Setup(format!(
+                        "effect {name}: point index {point} is not an input of the engine (a resonator needs the receptances of its point)"
+                    )));
+                }
+                Effect::Resonator { stiffness_n_m, .. }
+                    if !(stiffness_n_m.is_finite() && stiffness_n_m > 0.0) =>
+                {
+                    return Err(super::ForwardError::Setup(format!(
+                        "effect {name}: spring stiffness {stiffness_n_m} N/m must be finite and > 0"
                     )));
                 }
                 Effect::SensorMass { points, .. }
@@ -647,22 +696,31 @@ impl Effects {
         let zero = C64::new(0.0, 0.0);
         let pos = |p: usize| inputs.iter().position(|&j| j == p);
         let jin = pos(input).ok_or(crate::frf::FrfError::BadInput(input))?;
-        // Masses: (term index, point, engine input position, value). A sensor mass is three
-        // masses of the same value at its x, y and z points (M + m (w_x w_x^T + w_y w_y^T +
-        // w_z w_z^T)); its derivative is the sum of the three columns.
-        let masses: Vec<(usize, usize, usize, f64)> = self
+        // Masses: (term index, point, engine input position, value, spring). A sensor mass is
+        // three masses of the same value at its x, y and z points (M + m (w_x w_x^T + w_y w_y^T
+        // + w_z w_z^T)); its derivative is the sum of the three columns. A resonator is a mass
+        // on a spring: the same update with its effective mass ([`effective_mass`]).
+        let masses: Vec<(usize, usize, usize, f64, Option<f64>)> = self
             .terms
             .iter()
             .zip(values)
             .enumerate()
             .flat_map(|(t, (term, v))| match term.effect {
                 Effect::PointMass { point, .. } => pos(point)
-                    .map(|j| (t, point, j, *v))
+                    .map(|j| (t, point, j, *v, None))
                     .into_iter()
                     .collect::<Vec<_>>(),
+                Effect::Resonator {
+                    point,
+                    stiffness_n_m,
+                    ..
+                } => pos(point)
+                    .map(|j| (t, point, j, *v, Some(stiffness_n_m)))
+                    .into_iter()
+                    .collect(),
                 Effect::SensorMass { points, .. } => points
                     .iter()
-                    .filter_map(|&p| pos(p).map(|j| (t, p, j, *v)))
+                    .filter_map(|&p| pos(p).map(|j| (t, p, j, *v, None)))
                     .collect(),
                 _ => Vec::new(),
             })
@@ -725,8 +783,10 @@ impl Effects {
                 }
                 continue;
             }
-            // A = I + D H_PP (np x np), D = diag(-w^2 m).
-            let d: Vec<C64> = masses.iter().map(|m| C64::new(-w * w * m.3, 0.0)).collect();
+            // A = I + D H_PP (np x np), D = diag(-w^2 m_eff), with dm_eff/dm per mass.
+            let (m_eff, dm_eff): (Vec<f64>, Vec<f64>) =
+                masses.iter().map(|m| effective_mass(m.3, m.4, w)).unzip();
+            let d: Vec<C64> = m_eff.iter().map(|m| C64::new(-w * w * m, 0.0)).collect();
             let mut a = vec![zero; np * np];
             for (p, mp) in masses.iter().enumerate() {
                 for (q, mq) in masses.iter().enumerate() {
@@ -800,12 +860,13 @@ impl Effects {
             }
             if derivs {
                 // dH'_oi/dd_p = -g_p c_p with g = H_oP A^-1 (the receptance row to the mass
-                // points with the masses on) and c = H_Pi - H_PP u; d_p = -w^2 m_p.
+                // points with the masses on) and c = H_Pi - H_PP u; d_p = -w^2 m_eff,p, so
+                // dd_p/dm_p = -w^2 dm_eff,p/dm_p.
                 for (k, &o) in targets.iter().enumerate() {
                     let hop: Vec<C64> = masses.iter().map(|mm| r(o, mm.2)).collect();
                     let g = row_times_inverse(&a, np, &hop);
                     for (p, m) in masses.iter().enumerate() {
-                        let v = acc * (w * w) * g[p] * c[p];
+                        let v = acc * (w * w * dm_eff[p]) * g[p] * c[p];
                         if k == n {
                             drive_dt[m.0][l] += v;
                         } else {
@@ -820,6 +881,28 @@ impl Effects {
         }
         Ok(res)
     }
+}
+
+/// The effective mass `m_eff` at `omega` of a mass `m` on a spring `k` (rigid without one) and
+/// its derivative in `m`:
+///
+/// ```text
+///   m_eff = m k / (k - w^2 m),   dm_eff/dm = k^2 / (k - w^2 m)^2
+/// ```
+///
+/// (the mass's equation `-w^2 m x_m = k (x_P - x_m)` solved for the force `k (x_m - x_P)` it puts
+/// on the point, `w^2 m_eff x_P`). At the resonator's own frequency the point is pinned: there
+/// `k - w^2 m` is moved off zero by a rounding unit of `k`, which leaves the update finite (it
+/// tends to `H_PP^-1 H_Pi` there).
+fn effective_mass(m: f64, spring: Option<f64>, omega: f64) -> (f64, f64) {
+    let Some(k) = spring else {
+        return (m, 1.0);
+    };
+    let mut den = k - omega * omega * m;
+    if den == 0.0 {
+        den = k * f64::EPSILON;
+    }
+    (m * k / den, (k / den) * (k / den))
 }
 
 /// The shaker at the drive point, applied to the accelerances in `res` (values and derivative

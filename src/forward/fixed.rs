@@ -12,9 +12,10 @@
 //!
 //! Every mass point must be an engine input (the run builds the deterministic engine with every
 //! measured point as an input, so a mass at a measured point qualifies). The shaker and law
-//! effects are not structural transforms of all columns ([`FixedEffectsEngine::unsupported`]
-//! names them); gains and delays are measurement effects, undone on the data instead
-//! ([`measurement_factor`]).
+//! effects are not structural transforms of all columns, and a resonator's modes need its mass
+//! as a DOF of the model, which the modal analyses do not build
+//! ([`FixedEffectsEngine::unsupported`] names them); gains and delays are measurement effects,
+//! undone on the data instead ([`measurement_factor`]).
 
 use super::effects::{Effect, EffectTerm, Effects};
 use crate::common::C64;
@@ -68,7 +69,7 @@ impl<'a> FixedEffectsEngine<'a> {
     }
 
     /// Names of the effects in `effects` that neither this engine nor [`measurement_factor`]
-    /// applies (the shaker, law effects): the deterministic analyses run without them.
+    /// applies (the shaker, resonators, law effects): the deterministic analyses run without them.
     pub fn unsupported(effects: &Effects) -> Vec<String> {
         effects
             .terms

@@ -41,7 +41,7 @@ impl EngineParams {
 pub enum LikelihoodInputs {
     /// The excitation column only: the plain likelihood.
     Excitation,
-    /// Every measured point: the closed loop's candidate masses and declared point masses act
+    /// Every measured point: the closed loop's candidate masses and declared point masses (or resonators) act
     /// there (the Sherman-Morrison-Woodbury update needs their receptances).
     EveryMeasuredPoint,
 }

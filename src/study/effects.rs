@@ -4,12 +4,14 @@
 //!
 //! ```toml
 //! [[structure.effects]]
-//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | degraded_bond | adherend_damping | base_springs
+//! type = "point_mass"     # point_mass | gain | delay | beam_modulus | maxwell_branch | shaker | resonator | degraded_bond | adherend_damping | base_springs
 //! point = 4               # point id (point_mass); `channel = id` for gain and delay
 //! value = 0.012           # SI (kg, 1, s, 1, Pa)
 //! free = false            # true: a parameter to infer, with the default prior or prior = {...}
 //! # tau = 1.6e-3          # s, the relaxation time of a maxwell_branch
 //! # stinger_stiffness = 2e5  # N/m, a shaker's stinger (default 2e5); value = its moving mass (kg)
+//! # type = "resonator" with point = 2 and stiffness = 2e5 (N/m, default 2e5): value = the mass
+//! #   (kg) on a spring at the point, force read at the structure
 //! # type = "degraded_bond" with x_start = 0.040 and width = 0.010 (m, inside the adhesive
 //! #   block; default width 10 mm): value = the loss fraction d in [0, 1), E* -> (1 - d) E* there
 //! # type = "base_springs": value = the compliance 1 / k_n (m^3/N) of springs under the adhesive's
@@ -23,6 +25,7 @@
 //! evidence_threshold = 5.0  # nats of Laplace log-evidence gain an effect needs
 //! p_threshold = 0.01      # only candidates whose score test has p below this are refitted
 //! top = 3                 # candidates refitted per round
+//! resonator_stiffness = 2e5  # N/m, the spring of the resonator candidates
 //! ```
 
 use super::ctx::Ctx;
@@ -31,13 +34,14 @@ use crate::inference::prior::Prior;
 use serde::Deserialize;
 
 /// Effect types a study may name (`type = ...`).
-pub const EFFECT_TYPES: [&str; 9] = [
+pub const EFFECT_TYPES: [&str; 10] = [
     "point_mass",
     "gain",
     "delay",
     "beam_modulus",
     "maxwell_branch",
     "shaker",
+    "resonator",
     "degraded_bond",
     "base_springs",
     "adherend_damping",
@@ -54,6 +58,8 @@ pub struct RawEffect {
     pub value: Option<f64>,
     pub tau: Option<f64>,
     pub stinger_stiffness: Option<f64>,
+    /// N/m, a resonator's spring (default 2e5).
+    pub stiffness: Option<f64>,
     /// m, start of a degraded bond region.
     pub x_start: Option<f64>,
     /// m, width of a degraded bond region.
@@ -75,6 +81,8 @@ pub struct RawClosedLoop {
     pub evidence_threshold: Option<f64>,
     pub p_threshold: Option<f64>,
     pub top: Option<usize>,
+    /// N/m, the spring of the resonator candidates.
+    pub resonator_stiffness: Option<f64>,
 }
 
 /// Where a declared effect acts, by the study's ids (resolved to engine indices by the run's stages).
@@ -96,6 +104,11 @@ pub enum DeclaredKind {
     /// A shaker's moving mass on a stinger (N/m) at the drive point, force read on the shaker
     /// side.
     Shaker {
+        stiffness_n_m: f64,
+    },
+    /// A mass on a spring (N/m) at a point, force read at the structure.
+    Resonator {
+        point: u32,
         stiffness_n_m: f64,
     },
     /// A degraded bond over `[x_start_m, x_start_m + width_m]` (m) of the adhesive block (checked
@@ -135,6 +148,8 @@ pub struct ClosedLoopSettings {
     pub evidence_threshold_nats: f64,
     pub p_threshold: f64,
     pub top: usize,
+    /// Spring of the resonator candidates (N/m).
+    pub resonator_stiffness_n_m: f64,
 }
 
 impl Default for ClosedLoopSettings {
@@ -146,6 +161,7 @@ impl Default for ClosedLoopSettings {
             evidence_threshold_nats: 5.0,
             p_threshold: 0.01,
             top: 3,
+            resonator_stiffness_n_m: crate::forward::effects::DEFAULT_RESONATOR_STIFFNESS_N_M,
         }
     }
 }
@@ -167,12 +183,15 @@ impl ClosedLoopSettings {
     }
 }
 
-/// Whether `declared` holds a point mass (the likelihood's engine then needs the receptances at
-/// the mass's point for the Sherman-Morrison-Woodbury update).
+/// Whether `declared` holds a point mass or a resonator (the likelihood's engine then needs the
+/// receptances at its point for the Sherman-Morrison-Woodbury update).
 pub fn declares_point_mass(declared: &[DeclaredEffect]) -> bool {
-    declared
-        .iter()
-        .any(|d| matches!(d.kind, DeclaredKind::PointMass { .. }))
+    declared.iter().any(|d| {
+        matches!(
+            d.kind,
+            DeclaredKind::PointMass { .. } | DeclaredKind::Resonator { .. }
+        )
+    })
 }
 
 /// Validate `[[structure.effects]]` against the study's points (`point_ids`).
@@ -215,6 +234,9 @@ pub(super) fn effects(
         };
         if r.kind != "shaker" {
             not("stinger_stiffness", r.stinger_stiffness.is_some())?;
+        }
+        if r.kind != "resonator" {
+            not("stiffness", r.stiffness.is_some())?;
         }
         if r.kind != "degraded_bond" {
             not("x_start", r.x_start.is_some())?;
@@ -275,6 +297,17 @@ pub(super) fn effects(
                     .unwrap_or(crate::forward::effects::DEFAULT_STINGER_STIFFNESS_N_M);
                 DeclaredKind::Shaker {
                     stiffness_n_m: ctx.positive(&format!("{key}.stinger_stiffness"), k, "N/m")?,
+                }
+            }
+            "resonator" => {
+                not("channel", r.channel.is_some())?;
+                not("tau", r.tau.is_some())?;
+                let k = r
+                    .stiffness
+                    .unwrap_or(crate::forward::effects::DEFAULT_RESONATOR_STIFFNESS_N_M);
+                DeclaredKind::Resonator {
+                    point: point_of("point", r.point)?,
+                    stiffness_n_m: ctx.positive(&format!("{key}.stiffness"), k, "N/m")?,
                 }
             }
             "degraded_bond" => {
@@ -347,6 +380,7 @@ pub(super) fn effects(
             DeclaredKind::BeamModulus => ("1 (relative)", -0.9, 9.0, false),
             DeclaredKind::MaxwellBranch { .. } => ("Pa", 0.0, 1e11, true),
             DeclaredKind::Shaker { .. } => ("kg", 0.0, 10.0, true),
+            DeclaredKind::Resonator { .. } => ("kg", 0.0, 10.0, true),
             DeclaredKind::DegradedBond { .. } => ("1 (loss fraction)", 0.0, 1.0, true),
             DeclaredKind::BaseSprings { .. } => ("m^3/N (compliance 1 / k_n)", 0.0, 1e-6, true),
             DeclaredKind::AdherendDamping => ("1 (loss factor)", 0.0, 1.0, true),
@@ -467,6 +501,7 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
                 let known_name = [
                     "mass_pt",
                     "mass3_pt",
+                    "resonator_pt",
                     "gain_ch",
                     "delay_ch",
                     "maxwell_fc",
@@ -524,6 +559,11 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
     if top == 0 {
         return Err(ctx.err("closed_loop.top", "must be at least 1 (default 3)"));
     }
+    let resonator_stiffness_n_m = ctx.positive(
+        "closed_loop.resonator_stiffness",
+        r.resonator_stiffness.unwrap_or(d.resonator_stiffness_n_m),
+        "N/m",
+    )?;
     Ok(ClosedLoopSettings {
         enabled: r.enabled.unwrap_or(true),
         candidates,
@@ -531,5 +571,6 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
         evidence_threshold_nats: evidence,
         p_threshold: p,
         top,
+        resonator_stiffness_n_m,
     })
 }

@@ -58,6 +58,7 @@ mod paper_joint;
 mod pipeline_closed_loop;
 mod plot;
 mod replicates;
+mod resonator;
 mod rfm;
 mod rfm_gauss_newton;
 mod rom;
