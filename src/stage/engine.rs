@@ -41,8 +41,8 @@ impl EngineParams {
 pub enum LikelihoodInputs {
     /// The excitation column only: the plain likelihood.
     Excitation,
-    /// Every measured point: the closed loop's candidate masses and declared point masses (or resonators) act
-    /// there (the Sherman-Morrison-Woodbury update needs their receptances).
+    /// Every measured point: the closed loop's candidate masses and declared point masses or
+    /// resonators act there (the Sherman-Morrison-Woodbury update needs their receptances).
     EveryMeasuredPoint,
 }
 
