@@ -45,15 +45,22 @@ type = "maxwell_branch"
 tau = 1.6e-3
 value = 2.0e6
 
+[[structure.effects]]
+type = "resonator"
+point = 2
+stiffness = 1.5e5
+value = 0.02
+
 [closed_loop]
-candidates = ["point_mass", "delay_ch2"]
+candidates = ["point_mass", "delay_ch2", "resonator"]
+resonator_stiffness = 3e5
 max_effects = 2
 evidence_threshold = 6.0
 p_threshold = 0.05
 "#,
     );
     let s = rfmlab::study::load(&f).unwrap();
-    assert_eq!(s.declared_effects.len(), 3);
+    assert_eq!(s.declared_effects.len(), 4);
     assert_eq!(
         s.declared_effects[0].kind,
         DeclaredKind::PointMass { point: 4 }
@@ -69,8 +76,18 @@ p_threshold = 0.05
         s.declared_effects[2].kind,
         DeclaredKind::MaxwellBranch { tau_s: 1.6e-3 }
     );
+    assert_eq!(
+        s.declared_effects[3].kind,
+        DeclaredKind::Resonator {
+            point: 2,
+            stiffness_n_m: 1.5e5
+        }
+    );
+    assert_eq!(s.declared_effects[3].value, 0.02);
     let cl = s.closed_loop.unwrap();
     assert!(cl.enabled);
+    assert!(cl.admits("resonator", "resonator_pt3"));
+    assert_eq!(cl.resonator_stiffness_n_m, 3e5);
     assert!(cl.admits("point_mass", "mass_pt1"));
     assert!(cl.admits("delay", "delay_ch2"));
     assert!(!cl.admits("delay", "delay_ch3"));
@@ -88,7 +105,7 @@ p_threshold = 0.05
 #[test]
 fn bad_declared_effects_exit_2_naming_file_and_key() {
     let dir = tempfile::tempdir().unwrap();
-    let cases: [(&str, &str, &[&str]); 6] = [
+    let cases: [(&str, &str, &[&str]); 8] = [
         (
             "unknown.toml",
             "[[structure.effects]]\ntype = \"sensor_mass\"\npoint = 4\nvalue = 0.012",
@@ -117,6 +134,16 @@ fn bad_declared_effects_exit_2_naming_file_and_key() {
             "candidate.toml",
             "[closed_loop]\ncandidates = [\"shaker_spring\"]",
             &["closed_loop.candidates[0]", "unknown candidate"],
+        ),
+        (
+            "springless.toml",
+            "[[structure.effects]]\ntype = \"resonator\"\npoint = 2\nstiffness = -1e5\nvalue = 0.02",
+            &["structure.effects[0].stiffness", "positive number in N/m"],
+        ),
+        (
+            "loopspring.toml",
+            "[closed_loop]\nresonator_stiffness = 0.0",
+            &["closed_loop.resonator_stiffness", "positive number in N/m"],
         ),
         (
             "pthreshold.toml",

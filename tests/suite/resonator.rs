@@ -13,8 +13,7 @@
 
 use crate::closed_loop::{posterior, simulate, TRUTH};
 use crate::spring_model::measured_engine;
-use crate::structural_effects::rel_err_per_channel;
-use rfmlab::common::C64;
+use crate::structural_effects::{column_error, fd_column, rel_err_per_channel};
 use rfmlab::forward::{Effect, EffectTerm, Effects, ForwardModel};
 use rfmlab::inference::likelihood::FrfPosterior;
 use rfmlab::material::Model3;
@@ -154,32 +153,8 @@ fn resonator_jacobian_matches_finite_differences() {
         // FRF bends fast in m, and a central difference of 1e-6 kg leaves a truncation error of
         // about 1e-5 of the column.
         let h = 1e-7;
-        // At zero (the parameter's bound) the second-order forward difference; else central.
-        let fd: Vec<C64> = if m == 0.0 {
-            let mut pp = p.clone();
-            pp[q] = h;
-            let a = fm.predict(&pp, false).unwrap().values;
-            pp[q] = 2.0 * h;
-            let b = fm.predict(&pp, false).unwrap().values;
-            pred.values
-                .iter()
-                .zip(a.iter().zip(&b))
-                .map(|(f0, (x, y))| (-3.0 * f0 + 4.0 * x - y) / (2.0 * h))
-                .collect()
-        } else {
-            let mut pp = p.clone();
-            pp[q] += h;
-            let a = fm.predict(&pp, false).unwrap().values;
-            pp[q] -= 2.0 * h;
-            let b = fm.predict(&pp, false).unwrap().values;
-            a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect()
-        };
-        let peak = pred.jac[q].iter().map(|z| z.norm()).fold(0.0, f64::max);
-        let err = pred.jac[q]
-            .iter()
-            .zip(&fd)
-            .map(|(j, f)| (j - f).norm())
-            .fold(0.0, f64::max);
+        let fd = fd_column(&fm, &p, q, h, &pred.values);
+        let (err, peak) = column_error(&pred.jac[q], &fd);
         eprintln!("resonator column at {m} kg: error {err:.2e} of {peak:.2e}");
         assert!(peak > 0.0 && err < 1e-5 * peak, "error {err:e} of {peak:e}");
         worst = worst.max(err / peak);

@@ -7,8 +7,8 @@
 //!   couples with the beam's bending rotation);
 //! * its Jacobian column (the sum of the three masses' columns) matches central differences.
 
-use crate::structural_effects::rel_err_per_channel;
-use rfmlab::common::{Axis, Direction, C64};
+use crate::structural_effects::{column_error, fd_column, rel_err_per_channel};
+use rfmlab::common::{Axis, Direction};
 use rfmlab::fe::joint::{build_joint_model, JointSpec, MeshSize, PointSpec};
 use rfmlab::forward::{Effect, EffectTerm, Effects, ForwardModel};
 use rfmlab::frf::{FullModel, FullParams};
@@ -126,19 +126,8 @@ fn sensor_mass_jacobian_matches_finite_differences() {
     p.push(0.011);
     let pred = fm.predict(&p, true).unwrap();
     let q = p.len() - 1;
-    let h = 1e-6;
-    let mut pp = p.clone();
-    pp[q] += h;
-    let a = fm.predict(&pp, false).unwrap().values;
-    pp[q] -= 2.0 * h;
-    let b = fm.predict(&pp, false).unwrap().values;
-    let fd: Vec<C64> = a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect();
-    let peak = pred.jac[q].iter().map(|z| z.norm()).fold(0.0, f64::max);
-    let err = pred.jac[q]
-        .iter()
-        .zip(&fd)
-        .map(|(j, f)| (j - f).norm())
-        .fold(0.0, f64::max);
+    let fd = fd_column(&fm, &p, q, 1e-6, &pred.values);
+    let (err, peak) = column_error(&pred.jac[q], &fd);
     eprintln!("sensor-mass column: error {err:.2e} of {peak:.2e}");
     assert!(peak > 0.0 && err < 1e-5 * peak, "error {err:e} of {peak:e}");
 }

@@ -154,6 +154,46 @@ fn shaker_limits_are_the_bare_structure_and_a_drive_point_mass() {
     assert!(rel_err_per_channel(&bare, &mass, 4) > 1e-2);
 }
 
+/// The finite-difference column `dH/dp_q` of `fm` at `p` with step `h`: central, or at a null
+/// value (a one-sided parameter's bound) the second-order forward difference
+/// `(-3 f(0) + 4 f(h) - f(2 h)) / 2h`. `at_p` is the prediction at `p`.
+pub(crate) fn fd_column(
+    fm: &ForwardModel<'_>,
+    p: &[f64],
+    q: usize,
+    h: f64,
+    at_p: &[C64],
+) -> Vec<C64> {
+    let mut pp = p.to_vec();
+    if p[q] == 0.0 {
+        pp[q] = h;
+        let a = fm.predict(&pp, false).unwrap().values;
+        pp[q] = 2.0 * h;
+        let b = fm.predict(&pp, false).unwrap().values;
+        at_p.iter()
+            .zip(a.iter().zip(&b))
+            .map(|(f0, (x, y))| (-3.0 * f0 + 4.0 * x - y) / (2.0 * h))
+            .collect()
+    } else {
+        pp[q] += h;
+        let a = fm.predict(&pp, false).unwrap().values;
+        pp[q] -= 2.0 * h;
+        let b = fm.predict(&pp, false).unwrap().values;
+        a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect()
+    }
+}
+
+/// The largest difference between the analytic column `jac` and `fd`, and the column's peak.
+pub(crate) fn column_error(jac: &[C64], fd: &[C64]) -> (f64, f64) {
+    let peak = jac.iter().map(|z| z.norm()).fold(0.0, f64::max);
+    let err = jac
+        .iter()
+        .zip(fd)
+        .map(|(j, f)| (j - f).norm())
+        .fold(0.0, f64::max);
+    (err, peak)
+}
+
 fn check_jacobian(fm: &ForwardModel<'_>, p: &[f64]) {
     let pred = fm.predict(p, true).unwrap();
     let peak = pred.values.iter().map(|z| z.norm()).fold(0.0, f64::max);
@@ -163,33 +203,9 @@ fn check_jacobian(fm: &ForwardModel<'_>, p: &[f64]) {
         } else {
             1e-6
         };
-        let mut pp = p.to_vec();
-        // At a null value (a one-sided parameter's bound) the second-order forward
-        // difference (-3 f(0) + 4 f(h) - f(2 h)) / 2h; elsewhere the central one.
-        let fd: Vec<C64> = if p[q] == 0.0 {
-            pp[q] = h;
-            let a = fm.predict(&pp, false).unwrap().values;
-            pp[q] = 2.0 * h;
-            let b = fm.predict(&pp, false).unwrap().values;
-            pred.values
-                .iter()
-                .zip(a.iter().zip(&b))
-                .map(|(f0, (x, y))| (-3.0 * f0 + 4.0 * x - y) / (2.0 * h))
-                .collect()
-        } else {
-            pp[q] += h;
-            let a = fm.predict(&pp, false).unwrap().values;
-            pp[q] -= 2.0 * h;
-            let b = fm.predict(&pp, false).unwrap().values;
-            a.iter().zip(&b).map(|(x, y)| (x - y) / (2.0 * h)).collect()
-        };
-        let col_peak = pred.jac[q].iter().map(|z| z.norm()).fold(0.0, f64::max);
+        let fd = fd_column(fm, p, q, h, &pred.values);
+        let (err, col_peak) = column_error(&pred.jac[q], &fd);
         assert!(col_peak * h > 1e-8 * peak, "column {q} is zero");
-        let err = pred.jac[q]
-            .iter()
-            .zip(&fd)
-            .map(|(j, f)| (j - f).norm())
-            .fold(0.0, f64::max);
         assert!(
             err < 1e-5 * col_peak,
             "column {q}: error {err:e} of {col_peak:e}"
