@@ -194,6 +194,27 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
             100.0 * (1.0 - loss)
         ));
     }
+    // A resonator (after the edits above, which act on the joint's own DOFs): one more DOF, its mass, on a spring to the point (the force is read at the
+    // structure, so the resonator is part of the structure the data see).
+    for (i, &(id, mass, stiffness)) in ex.resonators.iter().enumerate() {
+        let at = model
+            .points
+            .iter()
+            .position(|p| p.id == id)
+            .unwrap_or(usize::MAX);
+        let (with, _) = model
+            .with_shaker(at, mass, stiffness, u32::MAX - i as u32)
+            .map_err(|e| failed("resonators", e))?;
+        model = with;
+        // The resonator's own DOF is no measured point.
+        model.points.pop();
+        notes.push(format!(
+            "resonator at point {id}: {:.4e} kg on {:.4e} N/m ({:.2} Hz)",
+            mass,
+            stiffness,
+            (stiffness / mass).sqrt() / std::f64::consts::TAU
+        ));
+    }
     let (engine, engine_note) = plant_engine(&model, built.excitation, ex)?;
     notes.extend(engine_note);
     let exc = &model.points[built.excitation];
@@ -256,6 +277,7 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
         "mode": if ex.frequency_domain { "frequency" } else { "time" },
         "seed": ex.seed,
         "sensor_masses": ex.sensors.iter().map(|(id, m)| json!({"point": id, "mass_kg": m})).collect::<Vec<_>>(),
+        "resonators": ex.resonators.iter().map(|(id, m, k)| json!({"point": id, "mass_kg": m, "stiffness_n_m": k})).collect::<Vec<_>>(),
         "degraded_bond": ex.degraded_bond.map(|((x0, x1), loss)| json!({"x_start_m": x0, "x_end_m": x1, "loss": loss})),
         "base_springs": ex.base_springs.map(|b| json!({"normal_n_m3": b.normal_n_m3, "tangential_n_m3": b.tangential_n_m3, "compliance_m3_n": 1.0 / b.normal_n_m3})),
         "shaker_side_force": ex.shaker_side_force.map(|s| json!({"shaker_mass_kg": s.armature_mass_kg, "stinger_stiffness_n_m": s.stinger_stiffness_n_m})),

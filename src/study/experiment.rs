@@ -24,6 +24,8 @@ pub struct RawExperimentFile {
     #[serde(default)]
     sensors: Vec<RawSensor>,
     #[serde(default)]
+    resonators: Vec<RawResonator>,
+    #[serde(default)]
     channels: Vec<RawChannel>,
     degraded_bond: Option<RawDegradedBond>,
     base_springs: Option<RawBaseSprings>,
@@ -98,6 +100,16 @@ struct RawSensor {
     mass: f64,
 }
 
+/// A mass on a spring at a point, in the point's direction (the force is read at the
+/// structure).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawResonator {
+    point: u32,
+    mass: f64,
+    stiffness: f64,
+}
+
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawChannel {
@@ -145,6 +157,9 @@ pub struct Experiment {
     pub chain: crate::experiment::spec::ChainParams,
     /// Sensor masses (point id, kg).
     pub sensors: Vec<(u32, f64)>,
+    /// Resonators: a mass (kg) on a spring (N/m) at a point, in its direction (point id, kg,
+    /// N/m).
+    pub resonators: Vec<(u32, f64, f64)>,
     /// Per structure point (in order): complex gain and delay (s).
     pub gains: Vec<C64>,
     pub delays_s: Vec<f64>,
@@ -328,6 +343,20 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
             ctx.non_negative(&format!("sensors[{i}].mass"), s.mass, "kg")?,
         ));
     }
+    let mut resonators = Vec::new();
+    for (i, r) in raw.resonators.iter().enumerate() {
+        if !ids.contains(&r.point) {
+            return Err(ctx.err(
+                format!("resonators[{i}].point"),
+                format!("point {} is not among structure.points {ids:?}", r.point),
+            ));
+        }
+        resonators.push((
+            r.point,
+            ctx.positive(&format!("resonators[{i}].mass"), r.mass, "kg")?,
+            ctx.positive(&format!("resonators[{i}].stiffness"), r.stiffness, "N/m")?,
+        ));
+    }
     let mut gains = vec![C64::new(1.0, 0.0); ids.len()];
     let mut delays_s = vec![0.0; ids.len()];
     for (i, ch) in raw.channels.iter().enumerate() {
@@ -500,6 +529,7 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
         structure,
         chain,
         sensors,
+        resonators,
         gains,
         delays_s,
         levels,

@@ -196,6 +196,21 @@ fn time_domain_cases_name_the_injected_effect() {
     assert!(failures.is_empty(), "failures:\n{}", failures.join("\n"));
 }
 
+/// A mass on a spring at the drive point (20 g on 2e5 N/m), simulated as one more DOF of the
+/// FE model: the loop names `resonator_pt2` first, within 15 % and its interval, and the
+/// adhesive's parameters hold the truth.
+#[test]
+fn time_domain_resonator_at_the_drive_point_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = run_case(dir.path(), "resonator_pt2", None);
+    for (n, _, v, sd) in &l.accepted {
+        eprintln!("accepted {n} = {v:.5e} +- {sd:.1e}");
+    }
+    let failures = judge(&l, "resonator_pt2", false, Some(0.020), 1.2);
+    assert!(failures.is_empty(), "failures:\n{}", failures.join("\n"));
+    assert_eq!(l.accepted.len(), 1, "accepted {:?}", l.accepted);
+}
+
 #[test]
 fn time_domain_null_data_accept_nothing() {
     let dir = tempfile::tempdir().unwrap();
