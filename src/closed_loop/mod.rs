@@ -1060,11 +1060,14 @@ pub(crate) fn evidence_gain(r: &MapResult, current: &MapResult, extra: i64, n_da
     }
 }
 
-/// Whether `a` and `b` are masses (a point mass or a sensor mass) at the same point: once one
-/// is accepted the other is not tried.
+/// Whether `a` and `b` are attachments at the same point (a point mass, a sensor mass or a
+/// resonator): once one is accepted the others are not tried. Below its own frequency a
+/// resonator loads its point as a mass does, so the two would stand in for each other.
 fn same_mass_point(a: &Effect, b: &Effect) -> bool {
     let id = |e: &Effect| match e {
-        Effect::PointMass { id, .. } | Effect::SensorMass { id, .. } => Some(*id),
+        Effect::PointMass { id, .. }
+        | Effect::SensorMass { id, .. }
+        | Effect::Resonator { id, .. } => Some(*id),
         _ => None,
     };
     id(a).is_some() && id(a) == id(b)

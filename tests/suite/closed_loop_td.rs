@@ -206,9 +206,11 @@ fn time_domain_resonator_at_the_drive_point_is_named() {
     for (n, _, v, sd) in &l.accepted {
         eprintln!("accepted {n} = {v:.5e} +- {sd:.1e}");
     }
+    eprintln!("status {}; confounded {:?}", l.status, l.confounded);
     let failures = judge(&l, "resonator_pt2", false, Some(0.020), 1.2);
     assert!(failures.is_empty(), "failures:\n{}", failures.join("\n"));
     assert_eq!(l.accepted.len(), 1, "accepted {:?}", l.accepted);
+    assert_eq!(l.status, "explained", "{}", l.conclusion);
 }
 
 #[test]
