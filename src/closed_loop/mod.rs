@@ -652,7 +652,7 @@ pub fn run_closed_loop_with_laws<'a>(
         for c in candidates {
             if accepted
                 .iter()
-                .any(|(e, _, _)| e == c || same_mass_point(e, c))
+                .any(|(e, _, _)| e == c || same_attachment_point(e, c))
                 || post
                     .likelihood
                     .forward
@@ -1063,7 +1063,7 @@ pub(crate) fn evidence_gain(r: &MapResult, current: &MapResult, extra: i64, n_da
 /// Whether `a` and `b` are attachments at the same point (a point mass, a sensor mass or a
 /// resonator): once one is accepted the others are not tried. Below its own frequency a
 /// resonator loads its point as a mass does, so the two would stand in for each other.
-fn same_mass_point(a: &Effect, b: &Effect) -> bool {
+fn same_attachment_point(a: &Effect, b: &Effect) -> bool {
     let id = |e: &Effect| match e {
         Effect::PointMass { id, .. }
         | Effect::SensorMass { id, .. }
@@ -1088,13 +1088,26 @@ pub fn is_law_effect(e: &Effect) -> bool {
 /// the score test; each resonator follows its point's mass, and the ranking's stable sort
 /// sends both to the refits, where the evidence tells them apart.
 pub fn default_candidates(channel_ids: &[u32], mass_points: &[(usize, u32)]) -> Vec<Effect> {
+    default_candidates_with(
+        channel_ids,
+        mass_points,
+        crate::forward::effects::DEFAULT_RESONATOR_STIFFNESS_N_M,
+    )
+}
+
+/// [`default_candidates`] with the resonators on a spring of `resonator_stiffness_n_m` (N/m).
+pub fn default_candidates_with(
+    channel_ids: &[u32],
+    mass_points: &[(usize, u32)],
+    resonator_stiffness_n_m: f64,
+) -> Vec<Effect> {
     let mut c = Vec::new();
     for &(point, id) in mass_points {
         c.push(Effect::PointMass { point, id });
         c.push(Effect::Resonator {
             point,
             id,
-            stiffness_n_m: crate::forward::effects::DEFAULT_RESONATOR_STIFFNESS_N_M,
+            stiffness_n_m: resonator_stiffness_n_m,
         });
     }
     for (channel, &id) in channel_ids.iter().enumerate() {

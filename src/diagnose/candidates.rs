@@ -1,10 +1,10 @@
 //! The candidate effects of the loop: the defaults of a level (a point mass and a resonator at
-//! every measured point, a gain and a delay per channel, the beam modulus factor, the Maxwell branches), the
-//! opt-in ones with matrices of their own (degraded-bond strips, adherend damping, base
+//! every measured point, a gain and a delay per channel, the beam modulus factor, the Maxwell
+//! branches), the opt-in ones with matrices of their own (degraded-bond strips, adherend damping, base
 //! springs: [`opt_in_term_candidates`]) and the sensor mass, as `[closed_loop] candidates`
 //! admits them; and the effects the term ROM is built for ([`with_declared`]).
 
-use crate::closed_loop::default_candidates;
+use crate::closed_loop::default_candidates_with;
 use crate::fe::joint::JointSpec;
 use crate::forward::Effect;
 use crate::frf::FrfEngine;
@@ -70,8 +70,7 @@ pub(crate) fn opt_in_term_candidates(
 
 /// The candidates at `level` that `settings` admit: the defaults at its channels (a point mass
 /// and a resonator on `settings`' spring where a channel's point is an input of `engine`), the
-/// sensor masses, the Maxwell branches
-/// over its band, then `with_terms` (the opt-in term candidates); without the beam factor when
+/// sensor masses, the Maxwell branches over its band, then `with_terms` (the opt-in term candidates); without the beam factor when
 /// the adherend has viscous damping `C_b` (its exact scaling needs none).
 pub(crate) fn level_candidates(
     level: &LevelData,
@@ -88,14 +87,12 @@ pub(crate) fn level_candidates(
         .filter(|(o, _)| engine.inputs().contains(o))
         .map(|(o, id)| (*o, *id))
         .collect();
-    let mut candidates = default_candidates(&level.response_ids, &mass_points);
-    if let Some(k) = settings.map(|s| s.resonator_stiffness_n_m) {
-        for c in &mut candidates {
-            if let Effect::Resonator { stiffness_n_m, .. } = c {
-                *stiffness_n_m = k;
-            }
-        }
-    }
+    let resonator_stiffness = settings.map_or(
+        crate::forward::effects::DEFAULT_RESONATOR_STIFFNESS_N_M,
+        |s| s.resonator_stiffness_n_m,
+    );
+    let mut candidates =
+        default_candidates_with(&level.response_ids, &mass_points, resonator_stiffness);
     candidates.extend(sensor_mass_candidates(
         &built.model.points,
         engine.inputs(),

@@ -246,8 +246,8 @@ impl Effect {
     }
     /// Default prior when the effect is free: uniform over a stated plausible range (the
     /// evidence depends on it: a ten times wider range costs ln 10 = 2.3 nats).
-    /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor, a shaker's moving mass, a resonator's), beam
-    /// modulus +-20 %, Maxwell branch modulus 0-20 MPa (a few times the stiffness of the paper's adhesive, E0 about 5 MPa).
+    /// gain +-20 %, delay +-1 ms, mass 0-100 g (a sensor, a shaker's moving mass, a
+    /// resonator's), beam modulus +-20 %, Maxwell branch modulus 0-20 MPa (a few times the stiffness of the paper's adhesive, E0 about 5 MPa).
     /// Degraded bond: loss fraction uniform on [0, 1). Base springs: compliance 0-1e-9 m^3/N.
     /// Adherend damping: loss factor uniform on [0, 0.01] (steel beams and bolted or clamped
     /// fixtures: 1e-4 to a few 1e-3).

@@ -194,8 +194,9 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
             100.0 * (1.0 - loss)
         ));
     }
-    // A resonator (after the edits above, which act on the joint's own DOFs): one more DOF, its mass, on a spring to the point (the force is read at the
-    // structure, so the resonator is part of the structure the data see).
+    // A resonator (after the edits above, which act on the joint's own DOFs): one more DOF, its
+    // mass, on a spring to the point. The force is read at the structure, so the resonator is
+    // part of the structure the data see.
     for (i, &(id, mass, stiffness)) in ex.resonators.iter().enumerate() {
         let at = model
             .points

@@ -59,7 +59,7 @@ impl LikelihoodInputs {
             return None;
         }
         Some(
-            if closed_loop || crate::study::effects::declares_point_mass(declared) {
+            if closed_loop || crate::study::effects::declares_attachment(declared) {
                 LikelihoodInputs::EveryMeasuredPoint
             } else {
                 LikelihoodInputs::Excitation

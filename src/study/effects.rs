@@ -185,7 +185,7 @@ impl ClosedLoopSettings {
 
 /// Whether `declared` holds a point mass or a resonator (the likelihood's engine then needs the
 /// receptances at its point for the Sherman-Morrison-Woodbury update).
-pub fn declares_point_mass(declared: &[DeclaredEffect]) -> bool {
+pub fn declares_attachment(declared: &[DeclaredEffect]) -> bool {
     declared.iter().any(|d| {
         matches!(
             d.kind,
