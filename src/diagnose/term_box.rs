@@ -13,11 +13,11 @@ pub fn term_modulus_range(p: &TermParams, band_hz: (f64, f64)) -> crate::rom::Mo
         e_storage_pa: (f64::INFINITY, 0.0),
         e_loss_pa: (f64::INFINITY, 0.0),
     };
-    crate::study::build::widen_to_initial_moduli(&mut r, &p.box_models, band_hz, 50);
+    crate::stage::engine::widen_to_initial_moduli(&mut r, &p.box_models, band_hz, 50);
     if r.e_storage_pa.0 < r.e_storage_pa.1 && r.e_loss_pa.0 < r.e_loss_pa.1 {
         r
     } else {
-        crate::study::build::initial_modulus_range(&p.all_models, band_hz)
+        crate::stage::engine::initial_modulus_range(&p.all_models, band_hz)
     }
 }
 

@@ -11,7 +11,7 @@
 //! certified against the full model like every other value.
 //! The term ROM's modulus box ([`super::term_modulus_range`]) is that of the study's inference
 //! models: E*(w) of each model's initial values over the band, widened by 2 either way (the
-//! rule of the effect-free ROM's box, [`crate::study::build::initial_modulus_range`], without
+//! rule of the effect-free ROM's box, [`crate::stage::engine::initial_modulus_range`], without
 //! its floor at the default box E' 0.5-50 MPa, E'' 0.01-20 MPa). Over the default box the enriched basis stalls
 //! near 1.4e-6 of the peak (above the 1e-6 target): the soft corner (E' 0.5 MPa, a 10 times
 //! softer adhesive than the paper's) needs the Krylov vectors of its own. The loop only

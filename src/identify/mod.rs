@@ -16,7 +16,6 @@ pub mod leakage;
 mod response;
 
 use crate::common::C64;
-use crate::forward::MeasurementModel;
 use crate::frf::FrfEngine;
 use crate::iem::IemResult;
 use crate::material::ConstitutiveModel;
@@ -52,8 +51,9 @@ pub struct LevelInputs<'a> {
     pub level: &'a LevelData,
     /// One law per entry of [`IdentificationParams::models`].
     pub laws: &'a [Box<dyn ConstitutiveModel>],
-    /// The H1 estimator's model on the level's lines, when the study states its estimator.
-    pub measurement: Option<MeasurementModel>,
+    /// The H1 estimator, when the study states it: the identification then corrects for its
+    /// leakage with the level's measurement model ([`crate::stage::measurement::measurement_model`]).
+    pub estimator: Option<&'a crate::study::Estimator>,
     /// The study file, named by input errors.
     pub file: &'a Path,
 }
@@ -206,7 +206,12 @@ pub fn analyse_level(
     let ctx = Level {
         params,
         inputs,
-        leak: inputs.measurement.clone().map(|measurement| Leakage {
+        leak: crate::stage::measurement::measurement_model(
+            inputs.estimator,
+            inputs.level,
+            inputs.file,
+        )?
+        .map(|measurement| Leakage {
             engine: inputs.engine,
             measurement,
         }),

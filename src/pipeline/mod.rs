@@ -84,9 +84,9 @@ fn run_here(
         extra(e);
     };
     let study = &lowered.study;
-    let run = stages::prepare(plan, study, ex, &progress)?;
     let point_ids: Vec<u32> = study.structure.points.iter().map(|p| p.id).collect();
     let checkpoints = checkpoint_folder(&plan.output_dir);
+    let run = stages::prepare(plan, study, ex, &progress)?;
     let bayes_run = crate::bayes::RunContext {
         posterior: crate::bayes::PosteriorInputs {
             file: &study.file,

@@ -130,11 +130,7 @@ pub(super) fn level(
         engine: det_engine,
         level,
         laws: &run.laws,
-        measurement: crate::stage::measurement::measurement_model(
-            plan.data.estimator.as_ref(),
-            level,
-            &study.file,
-        )?,
+        estimator: plan.data.estimator.as_ref(),
         file: &study.file,
     };
     let id = crate::identify::analyse_level(&plan.identification, &inputs, progress)?;

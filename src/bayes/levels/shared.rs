@@ -66,8 +66,11 @@ pub(super) fn shared_evidence(
     let model = pl.model.as_str();
     let nl = law.n_params();
     let inf = &stage.samplers;
-    let mut post_a = build_posterior(&run.posterior, stage, engine, low, law)?;
-    let mut post_b = build_posterior(&run.posterior, stage, engine, high, law)?;
+    // The two levels' posteriors, built alike; the high level's extra parameters follow the
+    // shared ones below.
+    let [post_a, post_b] =
+        [low, high].map(|level| build_posterior(&run.posterior, stage, engine, level, law));
+    let (mut post_a, mut post_b) = (post_a?, post_b?);
     let linearised = inf.linearised_measurement
         && post_a.likelihood.forward.obs.measurement.is_some()
         && post_b.likelihood.forward.obs.measurement.is_some();
