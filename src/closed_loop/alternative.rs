@@ -346,10 +346,22 @@ pub fn refit_law<'a>(
     // on the data with the profiled parameter held; the smallest weighted residual wins.
     let v = post.likelihood.variances(&phys[n_model..]);
     let held: Vec<usize> = profiled_index(alt).into_iter().collect();
+    // With a term of the term ROM, the profile and the refit run on the measurement bias
+    // linearised at their start (and the refit's re-linearised at its MAP).
+    let linearised = super::uses_linearised_bias(&post.likelihood.forward, &effects);
     let mut best: Option<(ModulusFit, Vec<f64>, f64)> = None;
     for st in starts {
         let mut p = st.params.clone();
         p.extend_from_slice(&phys[n_old..n_model]);
+        if linearised
+            && post
+                .likelihood
+                .forward
+                .linearise_model_measurement(&p)
+                .is_err()
+        {
+            continue;
+        }
         let Ok(Some((p, q))) = profile_point(&post.likelihood, &v, p, &held) else {
             continue;
         };
@@ -375,7 +387,21 @@ pub fn refit_law<'a>(
     let mut p0 = p_start;
     p0.extend_from_slice(&phys[n_model..]);
     let x0 = post.unconstrained(&p0);
-    let fit = find_map(&*post, Some(&x0), refit_map, &|| {});
+    let n_fwd = post.likelihood.forward.n_params();
+    let fit = if linearised {
+        post.likelihood
+            .forward
+            .linearise_model_measurement(&p0[..n_fwd])?;
+        find_map(&*post, Some(&x0), refit_map, &|| {})
+            .map_err(|e| e.to_string())
+            .and_then(|mut r| {
+                crate::inference::refine::relinearise_model_to_map(post, &mut r, refit_map)
+                    .map_err(|e| e.to_string())?;
+                Ok(r)
+            })
+    } else {
+        find_map(&*post, Some(&x0), refit_map, &|| {}).map_err(|e| e.to_string())
+    };
     let n_data = post.likelihood.data.values.len();
     post.likelihood.forward.law = old;
     install(post, base_priors, noise_priors, effects)?;

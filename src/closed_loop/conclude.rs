@@ -73,7 +73,7 @@ impl FinalModel {
     }
 
     /// The warm refit of `post`'s current model from the final fit's values.
-    fn refit(&self, post: &FrfPosterior<'_>) -> Result<MapResult, ClosedLoopError> {
+    fn refit(&self, post: &mut FrfPosterior<'_>) -> Result<MapResult, ClosedLoopError> {
         refit(post, &self.after.names, &self.after.values, &self.map)
     }
 }
@@ -127,9 +127,11 @@ fn remove_accepted(
 }
 
 /// The warm Gauss-Newton refit of `post`'s current model from the physical values of `names`
-/// in `values` (the final fit's, restricted to the model's parameters).
+/// in `values` (the final fit's, restricted to the model's parameters); on the linearised
+/// measurement bias, re-linearised at the MAP, when the model has a term of the term ROM
+/// ([`super::uses_linearised_bias`]).
 fn refit(
-    post: &FrfPosterior<'_>,
+    post: &mut FrfPosterior<'_>,
     names: &[String],
     values: &[f64],
     map: &MapParams,
@@ -150,7 +152,18 @@ fn refit(
         ));
     }
     let x = post.unconstrained(&p0);
-    Ok(find_map(post, Some(&x), map, &|| {})?)
+    let forward = &post.likelihood.forward;
+    if !super::uses_linearised_bias(forward, &forward.effects) {
+        return Ok(find_map(post, Some(&x), map, &|| {})?);
+    }
+    let np = forward.n_params();
+    post.likelihood
+        .forward
+        .linearise_model_measurement(&p0[..np])?;
+    let mut r = find_map(post, Some(&x), map, &|| {})?;
+    crate::inference::refine::relinearise_model_to_map(post, &mut r, map)
+        .map_err(|e| ClosedLoopError::Setup(format!("re-linearising the measurement bias: {e}")))?;
+    Ok(r)
 }
 
 /// The drop-one check (when the final residual is not consistent with `null`) and the

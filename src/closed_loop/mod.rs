@@ -46,6 +46,7 @@ use crate::inference::likelihood::{FrfLikelihood, FrfPosterior};
 pub mod start;
 use crate::inference::map::{find_map, MapError, MapParams, MapResult, SearchMethod};
 use crate::inference::prior::Prior;
+use crate::inference::refine::relinearise_model_to_map;
 use crate::linalg::dense::{chol_solve, cholesky};
 use crate::material::ConstitutiveModel;
 use libm::erfc;
@@ -515,6 +516,19 @@ pub(crate) fn weighted_rss(data: &[C64], values: &[C64], v: &[f64]) -> f64 {
         .sum()
 }
 
+/// Whether the loop's searches on `forward` with `effects` run on the measurement bias
+/// linearised at their start and re-linearised at their MAP
+/// ([`crate::inference::refine::relinearise_model_to_map`]) instead of the measurement
+/// model's fine grid: with a term of the term ROM among the effects, each evaluation is a dense
+/// solve of the reduced system per evaluation line, and the fine grid has several lines per
+/// measured line. The pencil's evaluations are cheap enough on the fine grid.
+pub(crate) fn uses_linearised_bias(
+    forward: &crate::forward::ForwardModel<'_>,
+    effects: &Effects,
+) -> bool {
+    forward.obs.measurement.is_some() && effects.has_term_matrices()
+}
+
 /// A forward model sharing `lik`'s observation with its effects and `candidate` free (last).
 pub(crate) fn candidate_model<'a>(
     lik: &FrfLikelihood<'a>,
@@ -742,11 +756,17 @@ pub fn run_closed_loop_with_laws<'a>(
                     value: start,
                     free: true,
                 });
+                let linearised = uses_linearised_bias(&post.likelihood.forward, &eff);
                 install(post, &law_priors, &noise_priors, eff)?;
                 let mut p0 = model_start;
                 p0.push(start);
                 p0.extend_from_slice(&phys[np_now..]);
                 let x_start = post.unconstrained(&p0);
+                if linearised {
+                    post.likelihood
+                        .forward
+                        .linearise_model_measurement(&p0[..=np_now])?;
+                }
                 // The warm refit; when it fails or its Laplace Hessian is not positive definite
                 // (stopped short of the mode), the full multistart search from the same start.
                 let warm = find_map(&*post, Some(&x_start), &refit_map, none);
@@ -782,6 +802,15 @@ pub fn run_closed_loop_with_laws<'a>(
                 } else {
                     warm
                 };
+                // On the linearised bias the search ends at the linearisation's MAP: re-linearise
+                // there until it stops moving (then it is the exact model's MAP).
+                let refit = refit.map_err(|e| e.to_string()).and_then(|mut r| {
+                    if linearised {
+                        relinearise_model_to_map(post, &mut r, &refit_map)
+                            .map_err(|e| e.to_string())?;
+                    }
+                    Ok(r)
+                });
                 let r = match refit {
                     Ok(r) => r,
                     Err(e) => {

@@ -53,7 +53,14 @@ pub fn profile_start(
 ) -> Result<ProfileStart, ForwardError> {
     let lik = &post.likelihood;
     let np = lik.forward.n_params();
-    let fm = candidate_model(lik, candidate)?;
+    let mut fm = candidate_model(lik, candidate)?;
+    // With a term of the term ROM the profile runs on the measurement bias linearised at the
+    // current fit (the start needs the valley, not its last digits; the refit re-linearises).
+    if super::uses_linearised_bias(&fm, &fm.effects) {
+        let mut at = phys[..np].to_vec();
+        at.push(candidate.null_value());
+        fm.linearise_model_measurement(&at)?;
+    }
     let v = lik.variances(&phys[np..]);
     let mut sizes = vec![one_step];
     if let Prior::Uniform { lo, hi } = candidate.default_prior() {

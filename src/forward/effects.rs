@@ -221,6 +221,15 @@ impl Effect {
                 | Effect::AdherendDamping
         )
     }
+    /// Whether the effect has matrices of its own: a term of the term ROM
+    /// ([`crate::rom::terms`]), evaluated by a dense solve of the reduced system per line
+    /// instead of the pencil's sums (seconds per evaluation on a measurement model's fine grid).
+    pub fn has_term_matrices(&self) -> bool {
+        matches!(
+            self,
+            Effect::DegradedBond { .. } | Effect::BaseSprings { .. } | Effect::AdherendDamping
+        )
+    }
     /// Whether the score test at zero is one-sided: that of a one-sided effect whose column at
     /// zero points the way a small size acts. Not a resonator's: at zero its column is a rigid
     /// mass's (`dm_eff/dm = 1`), but above its own frequency a finite one has a negative
@@ -395,6 +404,10 @@ impl Effects {
                 }
             })
             .collect()
+    }
+    /// Whether any term has matrices of its own ([`Effect::has_term_matrices`]).
+    pub fn has_term_matrices(&self) -> bool {
+        self.terms.iter().any(|t| t.effect.has_term_matrices())
     }
     /// Whether any term changes the structure.
     pub fn has_structural(&self) -> bool {

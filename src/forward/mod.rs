@@ -72,7 +72,11 @@ pub struct ForwardModel<'a> {
 pub struct LinearBias {
     pub p0: Vec<f64>,
     pub b0: Vec<C64>,
-    pub jac_log: Vec<Vec<C64>>,
+    /// `d b / d ln p_q` for the law's parameters (positive), `d b / d p_q` for the free
+    /// effects' (which may be zero or negative), `[q][line * n_out + k]`.
+    pub jac: Vec<Vec<C64>>,
+    /// Whether parameter `q` is linearised in `ln p_q` (the law's) or in `p_q` (the effects').
+    pub log: Vec<bool>,
 }
 
 /// What is observed, and how: the structure (an FRF engine), the measured column's layout and
@@ -127,7 +131,9 @@ impl<'a> ForwardModel<'a> {
     /// Replace the effects (checked against the engine and the channels).
     pub fn set_effects(&mut self, effects: Effects) -> Result<(), ForwardError> {
         effects.check(self.obs.engine, self.obs.outputs.len())?;
-        if !effects.is_empty() {
+        // A bias linearised for other effects no longer applies (without effects before or
+        // after, the law's linearisation stands).
+        if !effects.is_empty() || !self.effects.is_empty() {
             self.linear_bias = None;
         }
         self.effects = effects;
@@ -755,12 +761,21 @@ impl ForwardModel<'_> {
     fn linearise_with_effects(&self, p: &[f64]) -> Result<Linearised<'_>, ForwardError> {
         let nl = self.law.n_params();
         let n = self.obs.outputs.len();
-        let measurement = self.obs.measurement.as_ref();
+        let measurement = self
+            .obs
+            .measurement
+            .as_ref()
+            .filter(|_| self.linear_bias.is_none());
         let omega = match measurement {
             None => self.obs.omega_rad_s.clone(),
             Some(m) => m.fine_omega(),
         };
-        let (grid, drive) = self.exact_on(&omega, p, true)?;
+        let (mut grid, drive) = self.exact_on(&omega, p, true)?;
+        // The linearised bias is structural: it joins the values and the grid's columns (on
+        // the lines) before the channel factor.
+        if let Some(lb) = &self.linear_bias {
+            lb.add_to(p, &mut grid.values, Some(&mut grid.jac));
+        }
         let (mut values, rows) = match measurement {
             None => (grid.values, None),
             Some(m) => {
@@ -824,25 +839,31 @@ impl ForwardModel<'_> {
 }
 
 impl LinearBias {
-    /// Add `b0 + sum_q jac_log_q (ln p_q - ln p0_q)` to `values` and, when given, `jac_log_q /
-    /// p_q` to the Jacobian columns (created when empty).
+    /// Add `b0 + sum_q jac_q d_q` to `values`, `d_q = ln p_q - ln p0_q` (law) or
+    /// `p_q - p0_q` (effects), and, when given, `jac_q / p_q` or `jac_q` to the Jacobian
+    /// columns (created when empty).
     fn add_to(&self, p: &[f64], values: &mut [C64], jac: Option<&mut Vec<Vec<C64>>>) {
         for (o, v) in values.iter_mut().enumerate() {
             *v += self.b0[o];
         }
-        for (q, col) in self.jac_log.iter().enumerate() {
-            let d = (p[q] / self.p0[q]).ln();
+        for (q, col) in self.jac.iter().enumerate() {
+            let d = if self.log[q] {
+                (p[q] / self.p0[q]).ln()
+            } else {
+                p[q] - self.p0[q]
+            };
             for (v, a) in values.iter_mut().zip(col) {
                 *v += a * d;
             }
         }
         if let Some(jac) = jac {
             if jac.is_empty() {
-                *jac = vec![vec![C64::new(0.0, 0.0); values.len()]; self.jac_log.len()];
+                *jac = vec![vec![C64::new(0.0, 0.0); values.len()]; self.jac.len()];
             }
-            for (q, col) in self.jac_log.iter().enumerate() {
+            for (q, col) in self.jac.iter().enumerate() {
+                let s = if self.log[q] { 1.0 / p[q] } else { 1.0 };
                 for (j, a) in jac[q].iter_mut().zip(col) {
-                    *j += a / p[q];
+                    *j += a * s;
                 }
             }
         }
@@ -850,38 +871,65 @@ impl LinearBias {
 }
 
 impl ForwardModel<'_> {
-    /// Replace the measurement operator by its bias linearised at `p0` (in `ln p`): exact at
-    /// `p0`, second order in `ln(p / p0)` elsewhere, and as cheap as the exact accelerance at
-    /// the lines. The bias is a few per cent of `H` at the peaks and varies slowly with `p`:
-    /// the neglected term is 2.7e-4 of `|H|` at the worst line 1 % from `p0` on the test
-    /// chain, a quarter of that at 0.5 % (tests/suite/inference_likelihood.rs), so within a
-    /// posterior (sds of a fraction of a per cent) it is far below the H1 random error; each
-    /// run checks it on posterior draws (`bayes::linearisation`). Without a measurement model
-    /// this does nothing.
+    /// Replace the measurement operator by its bias linearised at `p0` (the law's parameters
+    /// in `ln p`, the free effects' in `p`): exact at `p0`, second order in the step elsewhere,
+    /// and as cheap as the exact accelerance at the lines. The bias is a few per cent of `H` at
+    /// the peaks and varies slowly with `p`: the neglected term is 2.7e-4 of `|H|` at the worst
+    /// line 1 % from `p0` on the test chain, a quarter of that at 0.5 %
+    /// (tests/suite/inference_likelihood.rs), so within a posterior (sds of a fraction of a per
+    /// cent) it is far below the H1 random error; each run checks it on posterior draws
+    /// (`bayes::linearisation`). `p0` holds the law's parameters; with effects in the model this
+    /// does nothing (see [`Self::linearise_model_measurement`]), nor without a measurement
+    /// model.
     pub fn linearise_measurement(&mut self, p0: &[f64]) -> Result<(), ForwardError> {
-        self.linear_bias = None;
-        if self.obs.measurement.is_none() || !self.effects.is_empty() {
+        if !self.effects.is_empty() {
+            self.linear_bias = None;
             return Ok(());
         }
-        let full = self.predict(p0, true)?;
-        let exact = self.exact(p0, true)?;
+        self.linearise_model_measurement(p0)
+    }
+
+    /// [`Self::linearise_measurement`] at `p0` holding every parameter of the model (the
+    /// law's, linearised in `ln p`, then the free effects', in `p`): the closed loop's searches
+    /// on a term ROM run on it. The bias is the structure's: channel gains and delays act on it
+    /// as on the exact response. Without a measurement model this does nothing.
+    pub fn linearise_model_measurement(&mut self, p0: &[f64]) -> Result<(), ForwardError> {
+        self.linear_bias = None;
+        if self.obs.measurement.is_none() {
+            return Ok(());
+        }
+        if p0.len() != self.n_params() {
+            return Err(ForwardError::Setup(format!(
+                "linearising the measurement bias: {} values for the model's {} parameters",
+                p0.len(),
+                self.n_params()
+            )));
+        }
+        let nl = self.law.n_params();
+        let full = self.predict_structure(p0, true)?;
+        let exact = self.exact_on(&self.obs.omega_rad_s, p0, true)?.0;
         let b0 = full
             .values
             .iter()
             .zip(&exact.values)
             .map(|(a, b)| a - b)
             .collect();
-        let jac_log = full
+        let log: Vec<bool> = (0..p0.len()).map(|q| q < nl).collect();
+        let jac = full
             .jac
             .iter()
             .zip(&exact.jac)
-            .zip(p0)
-            .map(|((a, b), p)| a.iter().zip(b).map(|(x, y)| (x - y) * *p).collect())
+            .zip(p0.iter().zip(&log))
+            .map(|((a, b), (p, &lg))| {
+                let s = if lg { *p } else { 1.0 };
+                a.iter().zip(b).map(|(x, y)| (x - y) * s).collect()
+            })
             .collect();
         self.linear_bias = Some(LinearBias {
             p0: p0.to_vec(),
             b0,
-            jac_log,
+            jac,
+            log,
         });
         Ok(())
     }

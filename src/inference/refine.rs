@@ -109,6 +109,48 @@ pub fn relinearise_to_map(
     Ok(())
 }
 
+/// A move of the MAP, in posterior sds, below which [`relinearise_model_to_map`] stops: the
+/// log posterior at the MAP is then off by about `(1e-3)^2 / 2` nats at most.
+pub const RELINEARISED_MOVE_SD: f64 = 1e-3;
+
+/// [`relinearise_to_map`] for a forward model with free effects: every parameter of the
+/// forward model is linearised (the law's in `ln p`, the effects' in `p`), and the MAP has
+/// stopped moving when no unconstrained coordinate of the forward model moves by more than
+/// [`RELINEARISED_MOVE_SD`] of its Laplace sd (1e-7 when the Hessian is not positive
+/// definite). Leaves the bias linearised at the final MAP, where the linearised and the exact
+/// likelihood agree in value and gradient (so the MAP's Laplace evidence is the exact
+/// model's, to that tolerance).
+pub fn relinearise_model_to_map(
+    post: &mut FrfPosterior<'_>,
+    map: &mut MapResult,
+    params: &MapParams,
+) -> Result<(), RefineError> {
+    let np = post.likelihood.forward.n_params();
+    for _ in 0..MAX_RELINEARISATIONS {
+        post.likelihood
+            .forward
+            .linearise_model_measurement(&map.map_physical[..np])?;
+        let again = polish(post, map, params)?;
+        let d = again.laplace.dim();
+        let settled = (0..np).all(|q| {
+            let tol = if again.laplace.positive_definite {
+                RELINEARISED_MOVE_SD * again.laplace.cov_x[q * d + q].max(0.0).sqrt()
+            } else {
+                1e-7
+            };
+            (again.map_x[q] - map.map_x[q]).abs() <= tol
+        });
+        adopt(map, again);
+        if settled {
+            break;
+        }
+    }
+    post.likelihood
+        .forward
+        .linearise_model_measurement(&map.map_physical[..np])?;
+    Ok(())
+}
+
 /// The channels' error correlation per line from the standardised residuals at the physical
 /// parameters `physical` (law's, then noise scales), over `window` lines.
 pub fn correlation_at(

@@ -9,12 +9,9 @@
 //!   differences, with and without a measurement model;
 //! * no effects: predictions are bit-identical to the model without the field.
 
-use crate::spring_model::{chain, measured_engine, MEASURED};
+use crate::spring_model::{chain, hann_measurement, measured_engine, MEASURED};
 use rfmlab::common::C64;
-use rfmlab::experiment::Window;
-use rfmlab::forward::{
-    Effect, EffectTerm, Effects, EstimatorSpec, ForwardModel, MeasurementModel, MeasurementParams,
-};
+use rfmlab::forward::{Effect, EffectTerm, Effects, ForwardModel};
 use rfmlab::material::Model3;
 use rfmlab::rfm::DenseEngine;
 use std::f64::consts::TAU;
@@ -171,18 +168,7 @@ fn jacobian_with_effects_matches_finite_differences() {
     let eng = measured_engine();
     let w = lines();
     let lines_hz: Vec<f64> = w.iter().map(|w| w / TAU).collect();
-    let mm = MeasurementModel::new(
-        EstimatorSpec {
-            window: Window::Hann,
-            block_s: 1.0 / 6.0,
-            fs_hz: 4096.0,
-            force_band_hz: (2.0, 1000.0),
-            shaker: None,
-        },
-        &lines_hz,
-        &MeasurementParams::default(),
-    )
-    .unwrap();
+    let mm = hann_measurement(&lines_hz);
     for measurement in [None, Some(mm)] {
         let mut fm = ForwardModel::new(&eng, &Model3, &w, 1, &[0, 1, 2, 3], measurement).unwrap();
         let free = |effect| EffectTerm {

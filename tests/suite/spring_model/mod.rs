@@ -64,3 +64,20 @@ impl Normal {
         (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
     }
 }
+
+/// The H1 measurement model of the chain's tests: Hann windows of 1/6 s (6 Hz lines) at
+/// 4096 Hz, a white force over 2-1000 Hz, on the lines `lines_hz`.
+pub fn hann_measurement(lines_hz: &[f64]) -> rfmlab::forward::MeasurementModel {
+    rfmlab::forward::MeasurementModel::new(
+        rfmlab::forward::EstimatorSpec {
+            window: rfmlab::experiment::Window::Hann,
+            block_s: 1.0 / 6.0,
+            fs_hz: 4096.0,
+            force_band_hz: (2.0, 1000.0),
+            shaker: None,
+        },
+        lines_hz,
+        &rfmlab::forward::MeasurementParams::default(),
+    )
+    .unwrap()
+}
