@@ -861,9 +861,8 @@ impl LinearBias {
                 *jac = vec![vec![C64::new(0.0, 0.0); values.len()]; self.jac.len()];
             }
             for (q, col) in self.jac.iter().enumerate() {
-                let s = if self.log[q] { 1.0 / p[q] } else { 1.0 };
                 for (j, a) in jac[q].iter_mut().zip(col) {
-                    *j += a * s;
+                    *j += if self.log[q] { a / p[q] } else { *a };
                 }
             }
         }
