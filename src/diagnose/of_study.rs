@@ -80,19 +80,7 @@ impl DiagnoseParams {
             channel_correlation: inf.channel_correlation,
             settings: study.closed_loop.clone(),
             declared: study.declared_effects.clone(),
-            terms: TermParams {
-                joint: crate::study::build::joint_spec(&study.structure),
-                tolerance: study.solver.rom_tolerance,
-                box_models: study
-                    .models
-                    .iter()
-                    .filter(|m| inf.models.iter().any(|x| x.eq_ignore_ascii_case(&m.name)))
-                    .cloned()
-                    .collect(),
-                all_models: study.models.clone(),
-                cache: crate::stage::rom_cache_dir(&study.output_dir),
-                study_file: study.file.clone(),
-            },
+            terms: TermParams::of(study),
             null: NullChainParams {
                 estimator: measurements.and_then(|m| m.estimator.clone()),
                 force_rms_n: measurements
@@ -158,4 +146,32 @@ pub(crate) fn build_posterior<'a>(
         declared: &study.declared_effects,
     };
     crate::bayes::posterior::build_posterior(&inputs, &stage, engine, level, law)
+}
+
+impl TermParams {
+    /// The term ROM's settings of `study`: its joint, ROM tolerance, the `[inference]` models'
+    /// (box) and every model's initial values, and the cache beside its output folder.
+    pub fn of(study: &Study) -> TermParams {
+        let inference_models: &[String] = study
+            .inference
+            .as_ref()
+            .map_or(&[], |i| i.models.as_slice());
+        TermParams {
+            joint: crate::study::build::joint_spec(&study.structure),
+            tolerance: study.solver.rom_tolerance,
+            box_models: study
+                .models
+                .iter()
+                .filter(|m| {
+                    inference_models
+                        .iter()
+                        .any(|x| x.eq_ignore_ascii_case(&m.name))
+                })
+                .cloned()
+                .collect(),
+            all_models: study.models.clone(),
+            cache: crate::stage::rom_cache_dir(&study.output_dir),
+            study_file: study.file.clone(),
+        }
+    }
 }

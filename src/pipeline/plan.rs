@@ -38,6 +38,10 @@ pub struct Plan {
     /// loop's settings and the stage's (model, levels, candidates, term ROM).
     pub closed_loop: Option<ClosedLoopParams>,
     pub closed_loop_stage: Option<crate::diagnose::DiagnoseParams>,
+    /// The term ROM's settings when the study declares effects with matrices of their own (a
+    /// degraded bond, base springs, adherend damping): the inference stages' likelihood then
+    /// runs on the term ROM ([`crate::diagnose::terms::term_rom_for`]).
+    pub declared_terms: Option<crate::diagnose::TermParams>,
     /// Where [`crate::report::write`] puts the results by default.
     pub output_dir: PathBuf,
     /// Whether the report draws figures.
@@ -114,6 +118,8 @@ impl Plan {
             basins: s.inference.as_ref().and_then(|i| i.basins.clone()),
             closed_loop,
             closed_loop_stage,
+            declared_terms: (!crate::diagnose::with_declared(&s.declared_effects, &[]).is_empty())
+                .then(|| crate::diagnose::TermParams::of(s)),
             output_dir: s.output_dir.clone(),
             figures: s.analyses.figures,
             study,

@@ -21,6 +21,9 @@ pub(super) struct Prepared {
     pub data: Vec<LevelData>,
     pub engines: Engines,
     pub mesh_error: Vec<ModeDiscretisation>,
+    /// The term ROM of the study's declared degraded bonds, base springs and adherend damping
+    /// (when it declares any and runs inference), over the likelihood's engine.
+    pub declared_terms: Option<crate::rom::TermRom>,
 }
 
 impl Prepared {
@@ -31,6 +34,32 @@ impl Prepared {
     /// The likelihood's engine (the deterministic one when no separate one was built).
     fn likelihood(&self) -> &dyn FrfEngine {
         self.engines.likelihood.as_deref().unwrap_or(self.engine())
+    }
+    /// The inference stages' engine: the likelihood's, with the declared effects' terms when
+    /// the study declares effects with matrices of their own.
+    pub fn inference_engine(&self) -> Result<InferenceEngine<'_>, RunError> {
+        Ok(match &self.declared_terms {
+            Some(t) => InferenceEngine::WithTerms(
+                crate::rom::WithTerms::new(self.likelihood(), t)
+                    .map_err(|e| RunError::Engine(e.to_string()))?,
+            ),
+            None => InferenceEngine::Plain(self.likelihood()),
+        })
+    }
+}
+
+/// The engine the inference stages run on ([`Prepared::inference_engine`]).
+pub(super) enum InferenceEngine<'a> {
+    Plain(&'a dyn FrfEngine),
+    WithTerms(crate::rom::WithTerms<'a>),
+}
+
+impl InferenceEngine<'_> {
+    pub fn get(&self) -> &dyn FrfEngine {
+        match self {
+            InferenceEngine::Plain(e) => *e,
+            InferenceEngine::WithTerms(w) => w,
+        }
     }
 }
 
@@ -94,12 +123,38 @@ pub(super) fn prepare(
     progress(Event::Finish);
     ex.count("rom builds", engines.rom_builds);
     ex.lap("engine")?;
+    // Declared effects with matrices of their own: the term ROM over the likelihood's engine.
+    let declared_terms = match (&plan.declared_terms, plan.inference.is_empty()) {
+        (Some(terms), false) => {
+            progress(Event::Start {
+                step: "building the term ROM of the declared effects".into(),
+                total: 0,
+            });
+            let engine = engines
+                .likelihood
+                .as_deref()
+                .unwrap_or(engines.engine.as_ref());
+            let effects = crate::diagnose::with_declared(&study.declared_effects, &[]);
+            let t = crate::diagnose::terms::term_rom_for(
+                terms,
+                &built,
+                engine,
+                &effects,
+                crate::stage::data::band_of(&data),
+            )?;
+            progress(Event::Finish);
+            ex.lap("term ROM")?;
+            t.map(|(rom, _)| rom)
+        }
+        _ => None,
+    };
     Ok(Prepared {
         laws,
         built,
         data,
         engines,
         mesh_error,
+        declared_terms,
     })
 }
 
@@ -141,8 +196,8 @@ pub(super) fn level(
         return Ok(r);
     }
     let fits: Vec<&crate::rfm::RfmResult> = r.global.iter().map(|g| &g.result).collect();
-    r.posteriors =
-        bayes::infer_level(bayes_run, &stages, run.likelihood(), level, &fits, progress)?;
+    let lik = run.inference_engine()?;
+    r.posteriors = bayes::infer_level(bayes_run, &stages, lik.get(), level, &fits, progress)?;
     ex.lap(format!("inference {}", level.name))?;
     if let Some(settings) = &plan.basins {
         bayes::basins_of_level(
@@ -150,7 +205,7 @@ pub(super) fn level(
             &stages,
             settings,
             &plan.identification.rfm,
-            run.likelihood(),
+            lik.get(),
             run.engine(),
             level,
             &mut r.posteriors,
@@ -176,12 +231,13 @@ pub(super) fn across_levels(
         .iter()
         .map(|r| (r.level.as_str(), r.posteriors.as_slice()))
         .collect();
+    let lik = run.inference_engine()?;
     let compared = across::compare(
         bayes_run,
         &plan.inference,
         &settings,
         &plan.data,
-        run.likelihood(),
+        lik.get(),
         &run.data,
         &posteriors,
     )?;
