@@ -13,17 +13,25 @@ use std::f64::consts::TAU;
 
 const TRUTH: [f64; 3] = [4.7121e6, 5.5573e6, 6.0491e3];
 
-#[test]
-fn vjp_with_effects_equals_the_full_jacobian() {
-    let eng = measured_engine();
-    let w: Vec<f64> = (0..160).map(|i| TAU * (8.0 + 6.0 * i as f64)).collect();
-    let lines_hz: Vec<f64> = w.iter().map(|w| w / TAU).collect();
-    let mm = hann_measurement(&lines_hz);
-    let term = |effect, value, free| EffectTerm {
+/// The tests' lines (rad/s): 8 to 962 Hz every 6 Hz.
+fn lines() -> Vec<f64> {
+    (0..160).map(|i| TAU * (8.0 + 6.0 * i as f64)).collect()
+}
+
+fn term(effect: Effect, value: f64, free: bool) -> EffectTerm {
+    EffectTerm {
         effect,
         value,
         free,
-    };
+    }
+}
+
+#[test]
+fn vjp_with_effects_equals_the_full_jacobian() {
+    let eng = measured_engine();
+    let w = lines();
+    let lines_hz: Vec<f64> = w.iter().map(|w| w / TAU).collect();
+    let mm = hann_measurement(&lines_hz);
     for measurement in [None, Some(mm)] {
         let mut fm = ForwardModel::new(&eng, &Model3, &w, 1, &[0, 1, 2, 3], measurement).unwrap();
         fm.set_effects(Effects {
@@ -76,14 +84,9 @@ fn vjp_with_effects_equals_the_full_jacobian() {
 #[test]
 fn linearised_bias_with_effects_is_exact_at_p0_and_second_order_around_it() {
     let eng = measured_engine();
-    let w: Vec<f64> = (0..160).map(|i| TAU * (8.0 + 6.0 * i as f64)).collect();
+    let w = lines();
     let lines_hz: Vec<f64> = w.iter().map(|w| w / TAU).collect();
     let mm = hann_measurement(&lines_hz);
-    let term = |effect, value, free| EffectTerm {
-        effect,
-        value,
-        free,
-    };
     let effects = Effects {
         terms: vec![
             term(Effect::PointMass { point: 3, id: 4 }, 0.0, true),
