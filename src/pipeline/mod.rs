@@ -86,7 +86,8 @@ fn run_here(
     let study = &lowered.study;
     let point_ids: Vec<u32> = study.structure.points.iter().map(|p| p.id).collect();
     let checkpoints = checkpoint_folder(&plan.output_dir);
-    let run = stages::prepare(plan, study, ex, &progress)?;
+    let mut run = stages::prepare(plan, study, ex, &progress)?;
+    stages::declared_terms(plan, study, &mut run, ex, &progress)?;
     let bayes_run = crate::bayes::RunContext {
         posterior: crate::bayes::PosteriorInputs {
             file: &study.file,

@@ -24,6 +24,8 @@ pub(super) struct Prepared {
     /// The term ROM of the study's declared degraded bonds, base springs and adherend damping
     /// (when it declares any and runs inference), over the likelihood's engine.
     pub declared_terms: Option<crate::rom::TermRom>,
+    /// The band of the levels' lines (Hz).
+    pub band_hz: (f64, f64),
 }
 
 impl Prepared {
@@ -81,6 +83,7 @@ pub(super) fn prepare(
     progress(Event::Finish);
     ex.lap("build model")?;
     let mut data = crate::stage::data::load_levels(Some(&plan.data), &built, &study.file)?;
+    let band_hz = crate::stage::data::band_of(&data);
     crate::stage::model::check_initial_values(models, &study.file, &built, &data, &laws)?;
     ex.lap("load and check data")?;
     let mesh_error = if plan.identification.mesh_error {
@@ -123,39 +126,49 @@ pub(super) fn prepare(
     progress(Event::Finish);
     ex.count("rom builds", engines.rom_builds);
     ex.lap("engine")?;
-    // Declared effects with matrices of their own: the term ROM over the likelihood's engine.
-    let declared_terms = match (&plan.declared_terms, plan.inference.is_empty()) {
-        (Some(terms), false) => {
-            progress(Event::Start {
-                step: "building the term ROM of the declared effects".into(),
-                total: 0,
-            });
-            let engine = engines
-                .likelihood
-                .as_deref()
-                .unwrap_or(engines.engine.as_ref());
-            let effects = crate::diagnose::with_declared(&study.declared_effects, &[]);
-            let t = crate::diagnose::terms::term_rom_for(
-                terms,
-                &built,
-                engine,
-                &effects,
-                crate::stage::data::band_of(&data),
-            )?;
-            progress(Event::Finish);
-            ex.lap("term ROM")?;
-            t.map(|(rom, _)| rom)
-        }
-        _ => None,
-    };
     Ok(Prepared {
         laws,
         built,
         data,
         engines,
         mesh_error,
-        declared_terms,
+        declared_terms: None,
+        band_hz,
     })
+}
+
+/// The term ROM of the study's declared degraded bonds, base springs and adherend damping,
+/// over the likelihood's engine, when the plan declares any and runs inference.
+pub(super) fn declared_terms(
+    plan: &Plan,
+    study: &Study,
+    run: &mut Prepared,
+    ex: &mut Executor,
+    progress: &(dyn Fn(Event) + Sync),
+) -> Result<(), RunError> {
+    let Some(terms) = plan
+        .declared_terms
+        .as_ref()
+        .filter(|_| !plan.inference.is_empty())
+    else {
+        return Ok(());
+    };
+    progress(Event::Start {
+        step: "building the term ROM of the declared effects".into(),
+        total: 0,
+    });
+    let effects = crate::diagnose::with_declared(&study.declared_effects, &[]);
+    let t = crate::diagnose::terms::term_rom_for(
+        terms,
+        &run.built,
+        run.likelihood(),
+        &effects,
+        run.band_hz,
+    )?;
+    progress(Event::Finish);
+    ex.lap("term ROM")?;
+    run.declared_terms = t.map(|(rom, _)| rom);
+    Ok(())
 }
 
 /// One level: the deterministic identification (on the structure with the declared point
