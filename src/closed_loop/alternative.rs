@@ -387,21 +387,10 @@ pub fn refit_law<'a>(
     let mut p0 = p_start;
     p0.extend_from_slice(&phys[n_model..]);
     let x0 = post.unconstrained(&p0);
-    let n_fwd = post.likelihood.forward.n_params();
-    let fit = if linearised {
-        post.likelihood
-            .forward
-            .linearise_model_measurement(&p0[..n_fwd])?;
-        find_map(&*post, Some(&x0), refit_map, &|| {})
-            .map_err(|e| e.to_string())
-            .and_then(|mut r| {
-                crate::inference::refine::relinearise_model_to_map(post, &mut r, refit_map)
-                    .map_err(|e| e.to_string())?;
-                Ok(r)
-            })
-    } else {
-        find_map(&*post, Some(&x0), refit_map, &|| {}).map_err(|e| e.to_string())
-    };
+    let fit = super::search_on_linearised_bias(post, &p0, refit_map, |post| {
+        find_map(post, Some(&x0), refit_map, &|| {})
+    })
+    .map_err(|e| e.to_string());
     let n_data = post.likelihood.data.values.len();
     post.likelihood.forward.law = old;
     install(post, base_priors, noise_priors, effects)?;

@@ -127,9 +127,9 @@ fn remove_accepted(
 }
 
 /// The warm Gauss-Newton refit of `post`'s current model from the physical values of `names`
-/// in `values` (the final fit's, restricted to the model's parameters); on the linearised
-/// measurement bias, re-linearised at the MAP, when the model has a term of the term ROM
-/// ([`super::uses_linearised_bias`]).
+/// in `values` (the final fit's, restricted to the model's parameters), on the linearised
+/// measurement bias when the model has a term of the term ROM
+/// ([`super::search_on_linearised_bias`]).
 fn refit(
     post: &mut FrfPosterior<'_>,
     names: &[String],
@@ -152,18 +152,9 @@ fn refit(
         ));
     }
     let x = post.unconstrained(&p0);
-    let forward = &post.likelihood.forward;
-    if !super::uses_linearised_bias(forward, &forward.effects) {
-        return Ok(find_map(post, Some(&x), map, &|| {})?);
-    }
-    let np = forward.n_params();
-    post.likelihood
-        .forward
-        .linearise_model_measurement(&p0[..np])?;
-    let mut r = find_map(post, Some(&x), map, &|| {})?;
-    crate::inference::refine::relinearise_model_to_map(post, &mut r, map)
-        .map_err(|e| ClosedLoopError::Setup(format!("re-linearising the measurement bias: {e}")))?;
-    Ok(r)
+    Ok(super::search_on_linearised_bias(post, &p0, map, |post| {
+        find_map(post, Some(&x), map, &|| {})
+    })?)
 }
 
 /// The drop-one check (when the final residual is not consistent with `null`) and the

@@ -46,7 +46,7 @@ use crate::inference::likelihood::{FrfLikelihood, FrfPosterior};
 pub mod start;
 use crate::inference::map::{find_map, MapError, MapParams, MapResult, SearchMethod};
 use crate::inference::prior::Prior;
-use crate::inference::refine::relinearise_model_to_map;
+use crate::inference::refine::{relinearise_model_to_map, RefineError};
 use crate::linalg::dense::{chol_solve, cholesky};
 use crate::material::ConstitutiveModel;
 use libm::erfc;
@@ -149,6 +149,16 @@ pub enum ClosedLoopError {
     Map(#[from] MapError),
     #[error("{0}")]
     Setup(String),
+}
+
+impl From<RefineError> for ClosedLoopError {
+    fn from(e: RefineError) -> Self {
+        match e {
+            RefineError::Search(m) => ClosedLoopError::Map(m),
+            RefineError::Measurement(f) => ClosedLoopError::Forward(f),
+            other => ClosedLoopError::Setup(other.to_string()),
+        }
+    }
 }
 
 /// Residual statistics of one channel.
@@ -529,6 +539,29 @@ pub(crate) fn uses_linearised_bias(
     forward.obs.measurement.is_some() && effects.has_term_matrices()
 }
 
+/// `search` (a MAP search of `post`) on the measurement bias linearised at `p0` (physical
+/// values, the forward model's parameters first) and re-linearised at the MAP it ends at, until
+/// that stops moving, when [`uses_linearised_bias`] holds for `post`'s model: its result is
+/// then the exact model's MAP. Otherwise `search` on the exact kernel.
+pub(crate) fn search_on_linearised_bias(
+    post: &mut FrfPosterior<'_>,
+    p0: &[f64],
+    params: &MapParams,
+    search: impl FnOnce(&FrfPosterior<'_>) -> Result<MapResult, MapError>,
+) -> Result<MapResult, RefineError> {
+    let forward = &post.likelihood.forward;
+    if !uses_linearised_bias(forward, &forward.effects) {
+        return Ok(search(post)?);
+    }
+    let np = forward.n_params();
+    post.likelihood
+        .forward
+        .linearise_model_measurement(&p0[..np])?;
+    let mut r = search(post)?;
+    relinearise_model_to_map(post, &mut r, params)?;
+    Ok(r)
+}
+
 /// A forward model sharing `lik`'s observation with its effects and `candidate` free (last).
 pub(crate) fn candidate_model<'a>(
     lik: &FrfLikelihood<'a>,
@@ -756,60 +789,49 @@ pub fn run_closed_loop_with_laws<'a>(
                     value: start,
                     free: true,
                 });
-                let linearised = uses_linearised_bias(&post.likelihood.forward, &eff);
                 install(post, &law_priors, &noise_priors, eff)?;
                 let mut p0 = model_start;
                 p0.push(start);
                 p0.extend_from_slice(&phys[np_now..]);
                 let x_start = post.unconstrained(&p0);
-                if linearised {
-                    post.likelihood
-                        .forward
-                        .linearise_model_measurement(&p0[..=np_now])?;
-                }
-                // The warm refit; when it fails or its Laplace Hessian is not positive definite
-                // (stopped short of the mode), the full multistart search from the same start.
-                let warm = find_map(&*post, Some(&x_start), &refit_map, none);
-                // A warm refit that ends with a parameter at an edge of its prior has a Hessian
-                // that is not positive definite because of the edge, not because it stopped short:
-                // the multistart search would end there too (the fractional-law case ran 17 CPU
-                // min of such searches), so it is not run.
-                // Law candidates (a Maxwell branch) are not searched again either: their start is
-                // already the profile over the branch modulus, and a branch whose relaxation time
-                // the data do not resolve has a flat direction, so the multistart search ends with
-                // the same indefinite Hessian after many times the cost (the fractional-law case
-                // spent 13 CPU min there without finishing); the verdict says so.
                 let law_candidate = is_law_effect(&c.effect);
-                let warm_ok = law_candidate
-                    || warm.as_ref().is_ok_and(|r| {
-                        r.laplace.positive_definite
-                            || start::at_prior_edge(&post.priors, &r.map_physical)
-                    });
-                let refit = if params.warm_refits && !warm_ok {
-                    match (warm, find_map(&*post, Some(&x_start), &params.map, none)) {
-                        (Ok(a), Ok(b)) => Ok(
-                            if b.laplace.positive_definite
-                                || b.starts[b.best].objective < a.starts[a.best].objective
-                            {
-                                b
-                            } else {
-                                a
-                            },
-                        ),
-                        (Ok(a), Err(_)) => Ok(a),
-                        (Err(_), b) => b,
+                let refit = search_on_linearised_bias(post, &p0, &refit_map, |post| {
+                    // The warm refit; when it fails or its Laplace Hessian is not positive
+                    // definite (stopped short of the mode), the full multistart search from the
+                    // same start.
+                    let warm = find_map(post, Some(&x_start), &refit_map, none);
+                    // A warm refit that ends with a parameter at an edge of its prior has a
+                    // Hessian that is not positive definite because of the edge, not because it
+                    // stopped short: the multistart search would end there too (the
+                    // fractional-law case ran 17 CPU min of such searches), so it is not run.
+                    // Law candidates (a Maxwell branch) are not searched again either: their
+                    // start is already the profile over the branch modulus, and a branch whose
+                    // relaxation time the data do not resolve has a flat direction, so the
+                    // multistart search ends with the same indefinite Hessian after many times
+                    // the cost (the fractional-law case spent 13 CPU min there without
+                    // finishing); the verdict says so.
+                    let warm_ok = law_candidate
+                        || warm.as_ref().is_ok_and(|r| {
+                            r.laplace.positive_definite
+                                || start::at_prior_edge(&post.priors, &r.map_physical)
+                        });
+                    if params.warm_refits && !warm_ok {
+                        match (warm, find_map(post, Some(&x_start), &params.map, none)) {
+                            (Ok(a), Ok(b)) => Ok(
+                                if b.laplace.positive_definite
+                                    || b.starts[b.best].objective < a.starts[a.best].objective
+                                {
+                                    b
+                                } else {
+                                    a
+                                },
+                            ),
+                            (Ok(a), Err(_)) => Ok(a),
+                            (Err(_), b) => b,
+                        }
+                    } else {
+                        warm
                     }
-                } else {
-                    warm
-                };
-                // On the linearised bias the search ends at the linearisation's MAP: re-linearise
-                // there until it stops moving (then it is the exact model's MAP).
-                let refit = refit.map_err(|e| e.to_string()).and_then(|mut r| {
-                    if linearised {
-                        relinearise_model_to_map(post, &mut r, &refit_map)
-                            .map_err(|e| e.to_string())?;
-                    }
-                    Ok(r)
                 });
                 let r = match refit {
                     Ok(r) => r,

@@ -75,8 +75,8 @@ pub struct LinearBias {
     /// `d b / d ln p_q` for the law's parameters (positive), `d b / d p_q` for the free
     /// effects' (which may be zero or negative), `[q][line * n_out + k]`.
     pub jac: Vec<Vec<C64>>,
-    /// Whether parameter `q` is linearised in `ln p_q` (the law's) or in `p_q` (the effects').
-    pub log: Vec<bool>,
+    /// The first `n_log` parameters (the law's) are linearised in `ln p_q`, the rest in `p_q`.
+    pub n_log: usize,
 }
 
 /// What is observed, and how: the structure (an FRF engine), the measured column's layout and
@@ -847,7 +847,7 @@ impl LinearBias {
             *v += self.b0[o];
         }
         for (q, col) in self.jac.iter().enumerate() {
-            let d = if self.log[q] {
+            let d = if q < self.n_log {
                 (p[q] / self.p0[q]).ln()
             } else {
                 p[q] - self.p0[q]
@@ -862,7 +862,7 @@ impl LinearBias {
             }
             for (q, col) in self.jac.iter().enumerate() {
                 for (j, a) in jac[q].iter_mut().zip(col) {
-                    *j += if self.log[q] { a / p[q] } else { *a };
+                    *j += if q < self.n_log { a / p[q] } else { *a };
                 }
             }
         }
@@ -913,14 +913,14 @@ impl ForwardModel<'_> {
             .zip(&exact.values)
             .map(|(a, b)| a - b)
             .collect();
-        let log: Vec<bool> = (0..p0.len()).map(|q| q < nl).collect();
         let jac = full
             .jac
             .iter()
             .zip(&exact.jac)
-            .zip(p0.iter().zip(&log))
-            .map(|((a, b), (p, &lg))| {
-                let s = if lg { *p } else { 1.0 };
+            .zip(p0)
+            .enumerate()
+            .map(|(q, ((a, b), p))| {
+                let s = if q < nl { *p } else { 1.0 };
                 a.iter().zip(b).map(|(x, y)| (x - y) * s).collect()
             })
             .collect();
@@ -928,7 +928,7 @@ impl ForwardModel<'_> {
             p0: p0.to_vec(),
             b0,
             jac,
-            log,
+            n_log: nl,
         });
         Ok(())
     }

@@ -45,8 +45,7 @@ fn run_case_with(
     seed: Option<u64>,
     candidates: Option<&str>,
 ) -> DiagnoseLevel {
-    let study_text = simulate_case(dir, name, seed, |e| e);
-    let tag = format!("td_{name}_{}", seed.unwrap_or(0));
+    let (tag, study_text) = simulate_case(dir, name, seed, |e| e);
     let study_text = match candidates {
         Some(c) => {
             let line = study_text
@@ -76,13 +75,14 @@ fn run_case_with(
 }
 
 /// Simulate the case `name` (its experiment file edited by `edit`) into `dir` with
-/// `rfmlab simulate`, and return studies/closed_loop_td.toml reading its data and truth.
+/// `rfmlab simulate`, and return the files' tag and studies/closed_loop_td.toml reading its
+/// data and truth.
 fn simulate_case(
     dir: &Path,
     name: &str,
     seed: Option<u64>,
     edit: impl Fn(String) -> String,
-) -> String {
+) -> (String, String) {
     let src = root().join(format!("studies/data/closed_loop/cases/td_{name}.toml"));
     let mut exp = edit(std::fs::read_to_string(&src).unwrap());
     if let Some(s) = seed {
@@ -112,7 +112,7 @@ fn simulate_case(
         "simulate {name}: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    std::fs::read_to_string(root().join("studies/closed_loop_td.toml"))
+    let study = std::fs::read_to_string(root().join("studies/closed_loop_td.toml"))
         .unwrap()
         .replace(
             "data/closed_loop/td_mass_pt4_L1.uff",
@@ -121,7 +121,8 @@ fn simulate_case(
         .replace(
             "data/closed_loop/td_mass_pt4.truth.json",
             &dir.join(format!("{tag}.truth.json")).display().to_string(),
-        )
+        );
+    (tag, study)
 }
 
 /// A declared effect with matrices of its own in a run (not the loop): the study declares the
@@ -131,7 +132,7 @@ fn simulate_case(
 #[test]
 fn declared_adherend_damping_is_inferred_by_the_run() {
     let dir = tempfile::tempdir().unwrap();
-    let text = simulate_case(dir.path(), "beam_damping", None, |e| {
+    let (_, text) = simulate_case(dir.path(), "beam_damping", None, |e| {
         e.replace("mode = \"time\"", "mode = \"frequency\"")
     });
     let start = text.find("[measurements.estimator]").unwrap();
