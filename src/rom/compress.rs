@@ -166,6 +166,76 @@ pub(crate) fn pod_basis(
     train: &[Sample],
     sv_tol: f64,
 ) -> Result<Mat<f64>, RomError> {
+    Ok(leading(&snapshot_factor(rom, train, sv_tol)?, sv_tol)?.0)
+}
+
+/// Eigenvalues of a compliance term's reduced matrix below this fraction of its largest span
+/// the block of [`pod_basis_split`] that the springs do not load.
+pub(crate) const SPLIT_NULL_BELOW: f64 = 1e-10;
+
+/// The POD basis of [`pod_basis`] kept apart on the two blocks of a compliance term's reduced
+/// matrix `g` (symmetric positive semi-definite): its near-null space `N` (eigenvalues at most
+/// [`SPLIT_NULL_BELOW`] of the largest: motions the springs do not load) and its range `R`,
+/// each compressed on its own (singular values above `sv_tol` of the largest of all snapshots),
+/// `U = [Q_N U_N, Q_R U_R]`, returned with the number of columns of its first block.
+///
+/// At the rigid limit (springs 1e19 times stiffer than the structure) the reduced system is a
+/// penalty method: one basis for both blocks has vectors that meet the constraint to `sv_tol`
+/// instead of to rounding, and the penalty times that error squared stiffens the model (on the
+/// 10 mm joint, 2.3e-3 of the peak at the rigid limit). Split, the compressed range block
+/// keeps `U_R^T G U_R` positive definite, so the rigid limit sets its coordinates to zero and
+/// leaves the Galerkin solution on `Q_N U_N`, which the springs do not load. The projected
+/// term must then be exactly zero on that block ([`TermRom::rotated_split`]): its entries there
+/// are rounding (on the paper's joint, 46 eigenvalues below 6e-16 of the largest, the next at
+/// 7e-9), and the penalty would amplify them.
+pub(crate) fn pod_basis_split(
+    rom: &TermRom,
+    train: &[Sample],
+    sv_tol: f64,
+    g: &Mat<f64>,
+) -> Result<(Mat<f64>, usize), RomError> {
+    let n = rom.rom.n_r;
+    let acc = snapshot_factor(rom, train, sv_tol)?;
+    let smax = acc.col_iter().map(|c| c.norm_l2()).fold(0.0_f64, f64::max);
+    let evd = super::basis::symmetric_part(g)
+        .self_adjoint_eigen(faer::Side::Lower)
+        .map_err(|e| RomError::Factorization(format!("eigenvalues of the springs' term: {e:?}")))?;
+    let lam: Vec<f64> = (0..n).map(|i| evd.S()[i]).collect();
+    let lmax = lam.iter().fold(0.0_f64, |a, &l| a.max(l.abs()));
+    let q = evd.U();
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    let mut k_null = 0;
+    for null in [true, false] {
+        let idx: Vec<usize> = (0..n)
+            .filter(|&i| (lam[i].abs() <= SPLIT_NULL_BELOW * lmax) == null)
+            .collect();
+        if idx.is_empty() {
+            continue;
+        }
+        let qb = Mat::from_fn(n, idx.len(), |i, j| q[(i, idx[j])]);
+        let wb = qb.transpose() * &acc;
+        let svd = wb
+            .thin_svd()
+            .map_err(|e| RomError::Factorization(format!("SVD of the snapshots: {e:?}")))?;
+        let sig: Vec<f64> = svd.S().column_vector().iter().copied().collect();
+        let k = sig.iter().take_while(|&&s| s > sv_tol * smax).count();
+        let ub = &qb * svd.U().subcols(0, k);
+        cols.extend((0..k).map(|j| (0..n).map(|i| ub[(i, j)]).collect()));
+        if null {
+            k_null = k;
+        }
+    }
+    if cols.is_empty() {
+        return Err(RomError::Params(
+            "no snapshot above the POD tolerance".into(),
+        ));
+    }
+    Ok((Mat::from_fn(n, cols.len(), |i, j| cols[j][i]), k_null))
+}
+
+/// `U diag(sigma)` of the normalised solutions at `train` (singular values above 1e-3
+/// `sv_tol` of the largest): a factor `F` with `F F^T = W W^T` to that accuracy.
+fn snapshot_factor(rom: &TermRom, train: &[Sample], sv_tol: f64) -> Result<Mat<f64>, RomError> {
     let n = rom.rom.n_r;
     // Chunks of samples, each compressed with the running basis (U diag(sigma) and the chunk
     // side by side, then a thin SVD): memory stays O(n_r x chunk).
@@ -200,7 +270,7 @@ pub(crate) fn pod_basis(
         let (u, sig) = leading(&w, 1e-3 * sv_tol)?;
         acc = Mat::from_fn(n, u.ncols(), |i, j| u[(i, j)] * sig[j]);
     }
-    Ok(leading(&acc, sv_tol)?.0)
+    Ok(acc)
 }
 
 /// The left singular vectors of `w` (and their singular values) above `rel` times the
@@ -243,6 +313,22 @@ fn congruence(a: &Mat<f64>, u: &Mat<f64>) -> Mat<f64> {
 }
 
 impl TermRom {
+    /// [`TermRom::rotated`] onto a basis of [`pod_basis_split`] for term `term`, whose first
+    /// `k_null` columns span the term's null space: the projected term is set to zero on their
+    /// rows and columns (there it is rounding).
+    pub(crate) fn rotated_split(&self, u: &Mat<f64>, k_null: usize, term: usize) -> TermRom {
+        let mut r = self.rotated(u);
+        let g = &mut r.g_r[term];
+        for i in 0..g.nrows() {
+            for j in 0..k_null {
+                g[(i, j)] = 0.0;
+                g[(j, i)] = 0.0;
+            }
+        }
+        r.g_pinv = super::terms::pinvs(&r.g_r, &r.maps);
+        r
+    }
+
     /// The Galerkin projection of this ROM onto the columns of `u` (n_r x k, orthonormal).
     pub(crate) fn rotated(&self, u: &Mat<f64>) -> TermRom {
         let r = &self.rom;
@@ -392,5 +478,68 @@ mod tests {
         assert_eq!(halton(3, 2), 0.75);
         assert!((halton(1, 3) - 1.0 / 3.0).abs() < 1e-15);
         assert!((halton(5, 3) - (2.0 / 3.0 + 1.0 / 9.0)).abs() < 1e-15);
+    }
+
+    /// A compliance term with a null space (springs that load 3 of 10 coordinates) at its rigid
+    /// limit (1e19 times the structure's stiffness): a generic rotation smears the term's
+    /// rounding over the null block, which the penalty amplifies; the split basis keeps the
+    /// null block apart, zeroes the term there and keeps the receptances.
+    #[test]
+    fn the_split_basis_keeps_a_compliance_term_exact_at_its_rigid_limit() {
+        let n = 10;
+        let mut rom = small_rom(n);
+        rom.rom.inputs = vec![0];
+        // (exact zeros outside the three directions: the reference is exact at the limit)
+        rom.g_r = vec![Mat::from_fn(n, n, |i, j| {
+            if i == j && [2, 5, 7].contains(&i) {
+                1.0 + i as f64
+            } else {
+                0.0
+            }
+        })];
+        rom.maps = vec![TermMap::Compliance {
+            v_ref: 1.0,
+            v_floor: 1e-19,
+        }];
+        rom.g_pinv = super::super::terms::pinvs(&rom.g_r, &rom.maps);
+        let rigid = |value: f64| {
+            [TermCoef {
+                index: 0,
+                value,
+                offset: C64::new(1.0, 0.0),
+                per_modulus: 0.0,
+            }]
+        };
+        let train: Vec<Sample> = (0..40)
+            .map(|k| Sample {
+                omega: 1.0 + 0.25 * k as f64,
+                modulus: C64::new(1.0 + 0.05 * k as f64, 0.2),
+                terms: rigid(if k % 2 == 0 { 0.0 } else { 0.1 }).to_vec(),
+            })
+            .collect();
+        let (u, k_null) = pod_basis_split(&rom, &train, 1e-12, &rom.g_r[0]).unwrap();
+        assert_eq!((u.ncols(), k_null), (n, n - 3));
+        let split = rom.rotated_split(&u, k_null, 0);
+        let generic = rom.rotated(&sym(n, 9, 0.0).qr().compute_Q());
+        for (w, e, v) in [
+            (3.0, C64::new(2.0, 0.3), 0.0),
+            (7.5, C64::new(0.5, 0.1), 0.1),
+        ] {
+            let a = rom.line_h(w, e, &rigid(v)).unwrap();
+            let scale = a.iter().map(|z| z.norm()).fold(0.0, f64::max);
+            let dev = |r: &TermRom| {
+                let b = r.line_h(w, e, &rigid(v)).unwrap();
+                a.iter()
+                    .zip(&b)
+                    .map(|(x, y)| (x - y).norm())
+                    .fold(0.0, f64::max)
+                    / scale
+            };
+            assert!(dev(&split) < 1e-9, "split: {:e} at v = {v}", dev(&split));
+            if v == 0.0 {
+                // (the comparison can fail: rounding of 1e-16 times a penalty of 1e19)
+                assert!(dev(&generic) > 1e-6, "generic: {:e}", dev(&generic));
+            }
+        }
     }
 }

@@ -156,15 +156,12 @@ pub fn build_term_rom(
     let enriched_size = rom.rom.n_r;
     let mut compression_error = None;
     let t = Instant::now();
-    // Not with a compliance term: at its rigid limit (springs 1e19 times stiffer than the
-    // structure) the reduced system is a penalty method, and a compressed basis whose vectors
-    // meet the constraint to 1e-8 instead of to rounding is stiffer there by that much squared
-    // times 1e19 (on the 10 mm joint: 2.3e-3 of the peak at c = 0 after compression, 3.5e-8
-    // before).
+    // With a compliance term the POD keeps the springs' near-null space and range apart
+    // (compress::pod_basis_split): its rigid limit is a penalty method.
     let compliance = terms
         .iter()
-        .any(|s| matches!(s.map, TermMap::Compliance { .. }));
-    if let (Some(cp), true, false) = (params.compress, err <= params.tolerance, compliance) {
+        .position(|s| matches!(s.map, TermMap::Compliance { .. }));
+    if let (Some(cp), true) = (params.compress, err <= params.tolerance) {
         // See super::compress: kept only when it agrees with the enriched ROM on samples of
         // its own and passes the same certificate.
         let train = compress::samples(params.band_hz, params.range, terms, 0, cp.samples)?;
@@ -175,9 +172,18 @@ pub fn build_term_rom(
             cp.samples,
             cp.check_samples,
         )?;
-        let u = compress::pod_basis(&rom, &train, cp.sv_tol)?;
+        let (u, split) = match compliance {
+            Some(k) => {
+                let (u, k_null) = compress::pod_basis_split(&rom, &train, cp.sv_tol, &rom.g_r[k])?;
+                (u, Some((k_null, k)))
+            }
+            None => (compress::pod_basis(&rom, &train, cp.sv_tol)?, None),
+        };
         if u.ncols() < rom.rom.n_r {
-            let small = rom.rotated(&u);
+            let small = match split {
+                Some((k_null, k)) => rom.rotated_split(&u, k_null, k),
+                None => rom.rotated(&u),
+            };
             let e_check = compress::check_error(&small, &rom, &check)?;
             compression_error = Some(e_check);
             if e_check <= params.tolerance {
