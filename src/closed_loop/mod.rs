@@ -706,7 +706,7 @@ pub fn run_closed_loop_with_laws<'a>(
                     .effects
                     .terms
                     .iter()
-                    .any(|t| t.effect.name() == c.name())
+                    .any(|t| t.effect.name() == c.name() || other_springs_shape(&t.effect, c))
             {
                 continue;
             }
@@ -1122,6 +1122,11 @@ fn same_attachment_point(a: &Effect, b: &Effect) -> bool {
         _ => None,
     };
     id(a).is_some() && id(a) == id(b)
+}
+
+/// Whether `a` and `b` are base springs of two shapes: one base has one set of springs.
+fn other_springs_shape(a: &Effect, b: &Effect) -> bool {
+    matches!(a, Effect::BaseSprings { .. }) && matches!(b, Effect::BaseSprings { .. })
 }
 
 /// Whether `e` changes the constitutive law (a Maxwell branch) rather than the structure or

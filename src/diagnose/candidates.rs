@@ -59,9 +59,11 @@ pub(crate) fn opt_in_term_candidates(
 ) -> Vec<Effect> {
     let mut all = term_candidates(joint, crate::forward::effects::DEFAULT_BOND_STRIP_M);
     if joint.is_some() {
-        all.push(Effect::BaseSprings {
-            normal_over_tangential: crate::forward::effects::DEFAULT_BASE_NORMAL_OVER_TANGENTIAL,
-        });
+        all.extend(crate::forward::effects::BASE_SPRING_SHAPES.iter().map(
+            |&normal_over_tangential| Effect::BaseSprings {
+                normal_over_tangential,
+            },
+        ));
     }
     all.into_iter()
         .filter(|e| settings.is_some_and(|c| c.names(|n| n == e.kind() || n == e.name())))

@@ -56,30 +56,50 @@ pub fn base_springs_term(
     spec: &crate::fe::joint::JointSpec,
     normal_over_tangential: f64,
 ) -> Result<(crate::fe::StructuralModel, TermSpec), TermError> {
+    let (m, mut t) = base_springs_terms(spec, &[normal_over_tangential])?;
+    Ok((m, t.remove(0)))
+}
+
+/// [`base_springs_term`] for several shapes of the springs (ratios `normal_over_tangential`,
+/// the first held by the model): one compliance term each, the others replacing the held
+/// springs when on ([`TermSpec::held`]), so that one term ROM serves every shape.
+pub fn base_springs_terms(
+    spec: &crate::fe::joint::JointSpec,
+    normal_over_tangential: &[f64],
+) -> Result<(crate::fe::StructuralModel, Vec<TermSpec>), TermError> {
     let b = crate::fe::base::base_spring_model(spec)?;
-    let g = b.combined(normal_over_tangential)?;
+    let gs: Vec<crate::fe::model::SpMat> = normal_over_tangential
+        .iter()
+        .map(|&r| b.combined(r))
+        .collect::<Result<_, _>>()?;
     let mut m = b.free.clone();
-    m.k_b = crate::rom::term_build::add_scaled(&m.k_b, &g, 1.0 / BASE_V_REF)?;
+    m.k_b = crate::rom::term_build::add_scaled(&m.k_b, &gs[0], 1.0 / BASE_V_REF)?;
     m.description = format!(
         "{} on base springs of compliance {BASE_V_REF:e} m^3/N",
         m.description
     );
-    let t = TermSpec {
-        name: Effect::BaseSprings {
-            normal_over_tangential,
-        }
-        .name(),
-        matrix: g,
-        offset: C64::new(1.0, 0.0),
-        per_modulus: 0.0,
-        enrich_values: BASE_ENRICH.to_vec(),
-        cert_values: BASE_CERT.to_vec(),
-        map: TermMap::Compliance {
-            v_ref: BASE_V_REF,
-            v_floor: BASE_V_FLOOR,
-        },
-    };
-    Ok((m, t))
+    let terms = normal_over_tangential
+        .iter()
+        .zip(&gs)
+        .enumerate()
+        .map(|(k, (&normal_over_tangential, g))| TermSpec {
+            name: Effect::BaseSprings {
+                normal_over_tangential,
+            }
+            .name(),
+            matrix: g.clone(),
+            offset: C64::new(1.0, 0.0),
+            per_modulus: 0.0,
+            enrich_values: BASE_ENRICH.to_vec(),
+            cert_values: BASE_CERT.to_vec(),
+            map: TermMap::Compliance {
+                v_ref: BASE_V_REF,
+                v_floor: BASE_V_FLOOR,
+            },
+            held: (k > 0).then(|| gs[0].clone()),
+        })
+        .collect();
+    Ok((m, terms))
 }
 
 /// Adherend loss factors the certificate checks (the default prior's upper edge, 0.01, and
@@ -98,6 +118,7 @@ pub fn adherend_damping_term(model: &crate::fe::model::StructuralModel) -> TermS
         enrich_values: Vec::new(),
         cert_values: DAMPING_CERT.to_vec(),
         map: TermMap::Linear,
+        held: None,
     }
 }
 
@@ -115,10 +136,19 @@ pub fn term_rom_for(
 ) -> Result<Option<(TermRom, TermCertificate)>, RunError> {
     let mut specs: Vec<TermSpec> = Vec::new();
     // Base springs change the model's DOFs (the base face is free): every term then lives on
-    // the free-base joint.
-    let base = effects
-        .iter()
-        .find(|(e, _)| matches!(e, Effect::BaseSprings { .. }));
+    // the free-base joint. Each shape of the springs (ratio of normal to tangential stiffness)
+    // is a term of its own.
+    let mut shapes: Vec<(f64, &String)> = Vec::new();
+    for (e, key) in effects {
+        if let Effect::BaseSprings {
+            normal_over_tangential,
+        } = *e
+        {
+            if !shapes.iter().any(|(r, _)| *r == normal_over_tangential) {
+                shapes.push((normal_over_tangential, key));
+            }
+        }
+    }
     let joint = |key: &String, what: &str| {
         p.joint.as_ref().ok_or_else(|| {
             key_error(
@@ -129,17 +159,12 @@ pub fn term_rom_for(
         })
     };
     let mut model = None;
-    if let Some((e, key)) = base {
-        let Effect::BaseSprings {
-            normal_over_tangential,
-        } = *e
-        else {
-            unreachable!("matched above")
-        };
+    if let Some((_, key)) = shapes.first() {
         let spec = joint(key, "base springs")?;
-        let (m, t) = base_springs_term(spec, normal_over_tangential)
-            .map_err(|err| key_error(&p.study_file, key.clone(), err.to_string()))?;
-        specs.push(t);
+        let ratios: Vec<f64> = shapes.iter().map(|(r, _)| *r).collect();
+        let (m, ts) = base_springs_terms(spec, &ratios)
+            .map_err(|err| key_error(&p.study_file, (*key).clone(), err.to_string()))?;
+        specs.extend(ts);
         model = Some(m);
     }
     for (e, key) in effects {
@@ -176,6 +201,7 @@ pub fn term_rom_for(
             enrich_values: BOND_ENRICH.to_vec(),
             cert_values: BOND_CERT.to_vec(),
             map: Default::default(),
+            held: None,
         });
     }
     if specs.is_empty() {

@@ -99,6 +99,25 @@ pub enum Effect {
 /// Poisson's ratio 0.3 (`E_oed / G = 2 (1 - nu) / (1 - 2 nu) = 3.5`).
 pub const DEFAULT_BASE_NORMAL_OVER_TANGENTIAL: f64 = 3.5;
 
+/// The shapes of base springs the closed loop tries (ratios of normal to tangential
+/// stiffness): the thin elastic layer ([`DEFAULT_BASE_NORMAL_OVER_TANGENTIAL`]) and equal
+/// springs (a support as stiff in its plane as normal to it). The shape is not a detail: on
+/// the independent compliant base (equal springs) the layer's shape absorbs the springs with
+/// the adhesive's parameters 2-4 % high, equal springs recover them within 1 sd.
+pub const BASE_SPRING_SHAPES: [f64; 2] = [DEFAULT_BASE_NORMAL_OVER_TANGENTIAL, 1.0];
+
+/// The name of base springs of shape `normal_over_tangential`: `base_springs` for the default
+/// shape, `base_springs_iso` for equal springs, else `base_springs_nt<ratio>`.
+pub fn base_springs_name(normal_over_tangential: f64) -> String {
+    if normal_over_tangential == DEFAULT_BASE_NORMAL_OVER_TANGENTIAL {
+        "base_springs".into()
+    } else if normal_over_tangential == 1.0 {
+        "base_springs_iso".into()
+    } else {
+        format!("base_springs_nt{normal_over_tangential}")
+    }
+}
+
 /// Name of the adherend-damping term and parameter.
 pub const ADHEREND_DAMPING: &str = "adherend_damping";
 
@@ -129,7 +148,9 @@ impl Effect {
             Effect::DegradedBond { x_start_m, width_m } => {
                 format!("bond_x{:.1}mm_w{:.1}mm", 1e3 * x_start_m, 1e3 * width_m)
             }
-            Effect::BaseSprings { .. } => "base_springs".into(),
+            Effect::BaseSprings {
+                normal_over_tangential,
+            } => base_springs_name(*normal_over_tangential),
             Effect::AdherendDamping => ADHEREND_DAMPING.into(),
         }
     }

@@ -232,6 +232,9 @@ pub fn term_key(
         h.update(b"T");
         h.update(s.name.as_bytes());
         hash_sp(&mut h, "G", Some(&s.matrix));
+        if let Some(held) = &s.held {
+            hash_sp(&mut h, "held", Some(held));
+        }
         f(&mut h, s.offset.re);
         f(&mut h, s.offset.im);
         f(&mut h, s.per_modulus);
@@ -262,6 +265,9 @@ struct TermRomJson {
     g_r: Vec<DenseJson>,
     names: Vec<String>,
     maps: Vec<TermMap>,
+    /// The held springs each compliance term replaces (TermSpec::held).
+    #[serde(default)]
+    g_held: Vec<Option<DenseJson>>,
     certificate: TermCertificate,
 }
 
@@ -281,6 +287,11 @@ pub fn save_terms(
             g_r: rom.g_r.iter().map(DenseJson::from).collect(),
             names: rom.names.clone(),
             maps: rom.maps.clone(),
+            g_held: rom
+                .g_held
+                .iter()
+                .map(|h| h.as_ref().map(DenseJson::from))
+                .collect(),
             certificate: cert.clone(),
         },
     )
@@ -302,6 +313,22 @@ pub fn load_terms(path: &Path, key: &str) -> Option<(TermRom, TermCertificate)> 
         .map(|d| d.to_mat().filter(|m| m.nrows() == n && m.ncols() == n))
         .collect::<Option<Vec<_>>>()?;
     let g_pinv = pinvs(&g_r, &j.maps);
+    let g_held = if j.g_held.is_empty() {
+        vec![None; g_r.len()]
+    } else if j.g_held.len() == g_r.len() {
+        j.g_held
+            .iter()
+            .map(|h| match h {
+                Some(d) => d
+                    .to_mat()
+                    .filter(|m| m.nrows() == n && m.ncols() == n)
+                    .map(Some),
+                None => Some(None),
+            })
+            .collect::<Option<Vec<_>>>()?
+    } else {
+        return None;
+    };
     Some((
         TermRom {
             rom,
@@ -309,6 +336,7 @@ pub fn load_terms(path: &Path, key: &str) -> Option<(TermRom, TermCertificate)> 
             names: j.names,
             maps: j.maps,
             g_pinv,
+            g_held,
         },
         j.certificate,
     ))

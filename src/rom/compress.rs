@@ -102,7 +102,8 @@ fn term_value(spec: &TermSpec, u: f64) -> f64 {
 }
 
 /// `n` samples from index `start` of the sequence over the band, the box (log-uniform in E'
-/// and E'', E'' from zero uniform) and the terms' ranges (every term on at once).
+/// and E'', E'' from zero uniform) and the terms' ranges (every term on at once, but one
+/// compliance term: the shapes of the same springs are alternatives).
 pub(crate) fn samples(
     band_hz: (f64, f64),
     range: ModulusRange,
@@ -124,6 +125,9 @@ pub(crate) fn samples(
             a + u * (b - a)
         }
     };
+    let compliance: Vec<usize> = (0..specs.len())
+        .filter(|&i| matches!(specs[i].map, super::terms::TermMap::Compliance { .. }))
+        .collect();
     Ok((start..start + n)
         .map(|k| {
             let u = |d: usize| halton(k + 1, PRIMES[d]);
@@ -137,6 +141,12 @@ pub(crate) fn samples(
                 terms: specs
                     .iter()
                     .enumerate()
+                    // (one shape of the springs at a time: sample k has the (k mod m)-th of
+                    // the m compliance terms)
+                    .filter(|(i, _)| match compliance.iter().position(|c| c == i) {
+                        Some(j) => k % compliance.len() == j,
+                        None => true,
+                    })
                     .map(|(i, s)| TermCoef {
                         index: i,
                         value: term_value(s, u(3 + i)),
@@ -173,8 +183,9 @@ pub(crate) fn pod_basis(
 /// the block of [`pod_basis_split`] that the springs do not load.
 pub(crate) const SPLIT_NULL_BELOW: f64 = 1e-10;
 
-/// The POD basis of [`pod_basis`] kept apart on the two blocks of a compliance term's reduced
-/// matrix `g` (symmetric positive semi-definite): its near-null space `N` (eigenvalues at most
+/// The POD basis of [`pod_basis`] kept apart on the two blocks of the compliance terms' reduced
+/// matrix `g` (symmetric positive semi-definite; with several shapes of the springs, the sum
+/// of their matrices): its near-null space `N` (eigenvalues at most
 /// [`SPLIT_NULL_BELOW`] of the largest: motions the springs do not load) and its range `R`,
 /// each compressed on its own (singular values above `sv_tol` of the largest of all snapshots),
 /// `U = [Q_N U_N, Q_R U_R]`, returned with the number of columns of its first block.
@@ -197,22 +208,15 @@ pub(crate) fn pod_basis_split(
     let n = rom.rom.n_r;
     let acc = snapshot_factor(rom, train, sv_tol)?;
     let smax = acc.col_iter().map(|c| c.norm_l2()).fold(0.0_f64, f64::max);
-    let evd = super::basis::symmetric_part(g)
-        .self_adjoint_eigen(faer::Side::Lower)
-        .map_err(|e| RomError::Factorization(format!("eigenvalues of the springs' term: {e:?}")))?;
-    let lam: Vec<f64> = (0..n).map(|i| evd.S()[i]).collect();
-    let lmax = lam.iter().fold(0.0_f64, |a, &l| a.max(l.abs()));
-    let q = evd.U();
+    let (q, k_q) = split_rotation(g)?;
     let mut cols: Vec<Vec<f64>> = Vec::new();
     let mut k_null = 0;
     for null in [true, false] {
-        let idx: Vec<usize> = (0..n)
-            .filter(|&i| (lam[i].abs() <= SPLIT_NULL_BELOW * lmax) == null)
-            .collect();
-        if idx.is_empty() {
+        let (lo, hi) = if null { (0, k_q) } else { (k_q, n) };
+        if lo == hi {
             continue;
         }
-        let qb = Mat::from_fn(n, idx.len(), |i, j| q[(i, idx[j])]);
+        let qb = Mat::from_fn(n, hi - lo, |i, j| q[(i, lo + j)]);
         let wb = qb.transpose() * &acc;
         let svd = wb
             .thin_svd()
@@ -231,6 +235,27 @@ pub(crate) fn pod_basis_split(
         ));
     }
     Ok((Mat::from_fn(n, cols.len(), |i, j| cols[j][i]), k_null))
+}
+
+/// The eigenvectors of the compliance terms' reduced matrix `g` (symmetric positive
+/// semi-definite), those of its near-null space first (eigenvalues at most
+/// [`SPLIT_NULL_BELOW`] of the largest), with their number: the rotation after which
+/// [`TermRom::rotated_split`] sets the terms' rounding on that block to zero.
+pub(crate) fn split_rotation(g: &Mat<f64>) -> Result<(Mat<f64>, usize), RomError> {
+    let n = g.nrows();
+    let evd = super::basis::symmetric_part(g)
+        .self_adjoint_eigen(faer::Side::Lower)
+        .map_err(|e| RomError::Factorization(format!("eigenvalues of the springs' term: {e:?}")))?;
+    let lam: Vec<f64> = (0..n).map(|i| evd.S()[i]).collect();
+    let lmax = lam.iter().fold(0.0_f64, |a, &l| a.max(l.abs()));
+    let null = |i: usize| lam[i].abs() <= SPLIT_NULL_BELOW * lmax;
+    let order: Vec<usize> = (0..n)
+        .filter(|&i| null(i))
+        .chain((0..n).filter(|&i| !null(i)))
+        .collect();
+    let k_null = (0..n).filter(|&i| null(i)).count();
+    let u = evd.U();
+    Ok((Mat::from_fn(n, n, |i, j| u[(i, order[j])]), k_null))
 }
 
 /// `U diag(sigma)` of the normalised solutions at `train` (singular values above 1e-3
@@ -313,16 +338,25 @@ fn congruence(a: &Mat<f64>, u: &Mat<f64>) -> Mat<f64> {
 }
 
 impl TermRom {
-    /// [`TermRom::rotated`] onto a basis of [`pod_basis_split`] for term `term`, whose first
-    /// `k_null` columns span the term's null space: the projected term is set to zero on their
-    /// rows and columns (there it is rounding).
-    pub(crate) fn rotated_split(&self, u: &Mat<f64>, k_null: usize, term: usize) -> TermRom {
+    /// [`TermRom::rotated`] onto a basis of [`pod_basis_split`] whose first `k_null` columns
+    /// span the compliance terms' common null space: every compliance term (and the springs it
+    /// replaces) is set to zero on their rows and columns (there it is rounding).
+    pub(crate) fn rotated_split(&self, u: &Mat<f64>, k_null: usize) -> TermRom {
         let mut r = self.rotated(u);
-        let g = &mut r.g_r[term];
-        for i in 0..g.nrows() {
-            for j in 0..k_null {
-                g[(i, j)] = 0.0;
-                g[(j, i)] = 0.0;
+        let zero = |g: &mut Mat<f64>| {
+            for i in 0..g.nrows() {
+                for j in 0..k_null {
+                    g[(i, j)] = 0.0;
+                    g[(j, i)] = 0.0;
+                }
+            }
+        };
+        for k in 0..r.g_r.len() {
+            if matches!(r.maps[k], super::terms::TermMap::Compliance { .. }) {
+                zero(&mut r.g_r[k]);
+                if let Some(h) = r.g_held[k].as_mut() {
+                    zero(h);
+                }
             }
         }
         r.g_pinv = super::terms::pinvs(&r.g_r, &r.maps);
@@ -355,6 +389,11 @@ impl TermRom {
             g_r,
             names: self.names.clone(),
             maps: self.maps.clone(),
+            g_held: self
+                .g_held
+                .iter()
+                .map(|h| h.as_ref().map(|h| congruence(h, u)))
+                .collect(),
         }
     }
 }
@@ -403,6 +442,7 @@ mod tests {
             names: vec!["t".into()],
             maps: vec![TermMap::Linear],
             g_pinv: vec![None],
+            g_held: vec![None],
         }
     }
 
@@ -449,6 +489,7 @@ mod tests {
             enrich_values: vec![0.95],
             cert_values: vec![0.5],
             map: TermMap::Linear,
+            held: None,
         };
         let range = ModulusRange {
             e_storage_pa: (0.5, 2.0),
@@ -519,7 +560,7 @@ mod tests {
             .collect();
         let (u, k_null) = pod_basis_split(&rom, &train, 1e-12, &rom.g_r[0]).unwrap();
         assert_eq!((u.ncols(), k_null), (n, n - 3));
-        let split = rom.rotated_split(&u, k_null, 0);
+        let split = rom.rotated_split(&u, k_null);
         let generic = rom.rotated(&sym(n, 9, 0.0).qr().compute_Q());
         for (w, e, v) in [
             (3.0, C64::new(2.0, 0.3), 0.0),

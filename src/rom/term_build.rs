@@ -53,6 +53,29 @@ pub fn model_with_term(
         )));
     }
     let mut out = model.clone();
+    if let (Some(h), TermMap::Compliance { v_ref, v_floor }) = (&spec.held, spec.map) {
+        // Another shape of the held springs: G / v in place of H / v_ref.
+        if spec.per_modulus != 0.0 || spec.offset.im != 0.0 {
+            return Err(RomError::Model(format!(
+                "term {}: a compliance term in place of held springs must have a real offset and no modulus part",
+                spec.name
+            )));
+        }
+        if h.nrows() != model.n_dof() || h.ncols() != model.n_dof() {
+            return Err(RomError::Model(format!(
+                "term {}: the held springs are {} x {}, the model has {} DOFs",
+                spec.name,
+                h.nrows(),
+                h.ncols(),
+                model.n_dof()
+            )));
+        }
+        let o = spec.offset.re;
+        out.k_b = add_scaled(&out.k_b, &spec.matrix, o / v.max(v_floor))?;
+        out.k_b = add_scaled(&out.k_b, h, -o / v_ref)?;
+        out.description = format!("{} + term {} at {v}", model.description, spec.name);
+        return Ok(out);
+    }
     let fv = spec.map.f(v);
     let p = spec.offset * fv;
     if p.re != 0.0 {
@@ -69,6 +92,17 @@ pub fn model_with_term(
     }
     out.description = format!("{} + term {} at {v}", model.description, spec.name);
     Ok(out)
+}
+
+/// The sum of the compliance terms' reduced matrices (None without one): the springs' shapes
+/// share its null space, the motions off the base face.
+fn compliance_sum(rom: &TermRom) -> Option<Mat<f64>> {
+    let mut k = (0..rom.g_r.len()).filter(|&k| matches!(rom.maps[k], TermMap::Compliance { .. }));
+    let mut g = rom.g_r[k.next()?].clone();
+    for i in k {
+        g += &rom.g_r[i];
+    }
+    Some(g)
 }
 
 /// Build and certify a reduced model of `model` with the extra `terms` (see the module doc),
@@ -134,13 +168,23 @@ pub fn build_term_rom(
         }
         let g_r: Vec<Mat<f64>> = terms.iter().map(|t| basis.project(&t.matrix)).collect();
         let maps: Vec<TermMap> = terms.iter().map(|t| t.map).collect();
-        let rom = TermRom {
+        let mut rom = TermRom {
             rom: reduce(model, &basis, inputs, params),
             g_pinv: pinvs(&g_r, &maps),
             g_r,
             names: terms.iter().map(|t| t.name.clone()).collect(),
             maps,
+            g_held: terms
+                .iter()
+                .map(|t| t.held.as_ref().map(|h| basis.project(h)))
+                .collect(),
         };
+        if let Some(g) = compliance_sum(&rom) {
+            // The springs' rigid limit is a penalty method: rotate to their null space and
+            // range, and zero the terms' rounding on the null block (compress::split_rotation).
+            let (q, k_null) = compress::split_rotation(&g)?;
+            rom = rom.rotated_split(&q, k_null);
+        }
         seconds_basis += t.elapsed().as_secs_f64();
         let t = Instant::now();
         let (worst, per_case) = certify_cases(&rom, terms, &cases, &moduli, &lines)?;
@@ -158,9 +202,6 @@ pub fn build_term_rom(
     let t = Instant::now();
     // With a compliance term the POD keeps the springs' near-null space and range apart
     // (compress::pod_basis_split): its rigid limit is a penalty method.
-    let compliance = terms
-        .iter()
-        .position(|s| matches!(s.map, TermMap::Compliance { .. }));
     if let (Some(cp), true) = (params.compress, err <= params.tolerance) {
         // See super::compress: kept only when it agrees with the enriched ROM on samples of
         // its own and passes the same certificate.
@@ -172,16 +213,16 @@ pub fn build_term_rom(
             cp.samples,
             cp.check_samples,
         )?;
-        let (u, split) = match compliance {
-            Some(k) => {
-                let (u, k_null) = compress::pod_basis_split(&rom, &train, cp.sv_tol, &rom.g_r[k])?;
-                (u, Some((k_null, k)))
-            }
+        let (u, split) = match compliance_sum(&rom) {
             None => (compress::pod_basis(&rom, &train, cp.sv_tol)?, None),
+            Some(g) => {
+                let (u, k_null) = compress::pod_basis_split(&rom, &train, cp.sv_tol, &g)?;
+                (u, Some(k_null))
+            }
         };
         if u.ncols() < rom.rom.n_r {
             let small = match split {
-                Some((k_null, k)) => rom.rotated_split(&u, k_null, k),
+                Some(k_null) => rom.rotated_split(&u, k_null),
                 None => rom.rotated(&u),
             };
             let e_check = compress::check_error(&small, &rom, &check)?;

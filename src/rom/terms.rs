@@ -89,6 +89,10 @@ pub struct TermSpec {
     pub cert_values: Vec<f64>,
     /// How v enters the coefficient.
     pub map: TermMap,
+    /// A compliance term whose matrix differs from the springs the model holds at `1 / v_ref`
+    /// (another shape of the same springs): those held springs, replaced by `G / v` when the
+    /// term is on (`c G = G / v - H / v_ref`). None: the model holds `G` itself.
+    pub held: Option<SpMat>,
 }
 
 impl TermSpec {
@@ -142,6 +146,9 @@ pub struct TermRom {
     pub(crate) maps: Vec<TermMap>,
     /// Pseudo-inverse of `G_k,r` for compliance terms (see [`TermRom::line`]).
     pub(crate) g_pinv: Vec<Option<Mat<f64>>>,
+    /// `H_k,r` of a compliance term that replaces held springs of another shape
+    /// ([`TermSpec::held`]); None where the model holds `G_k` itself.
+    pub(crate) g_held: Vec<Option<Mat<f64>>>,
 }
 
 /// Pseudo-inverse of a symmetric positive semi-definite matrix (eigenvalues below 1e-6 of
@@ -192,6 +199,7 @@ impl TermRom {
             names: self.names.clone(),
             maps: self.maps.clone(),
             g_pinv: self.g_pinv.clone(),
+            g_held: self.g_held.clone(),
         })
     }
 
@@ -240,7 +248,21 @@ impl TermRom {
         }
         let z_other = other.then(|| z.clone());
         for t in terms.iter().filter(|t| self.is_compliance(t)) {
-            add(&mut z, t);
+            match (&self.g_held[t.index], self.maps[t.index]) {
+                // Another shape: G / v in place of the held H / v_ref.
+                (Some(h), TermMap::Compliance { v_ref, v_floor }) => {
+                    let o = t.offset + t.per_modulus * e;
+                    let (a, b) = (o / t.value.max(v_floor), o / v_ref);
+                    let g = &self.g_r[t.index];
+                    for i in 0..n {
+                        let (gc, hc) = (column(g, i), column(h, i));
+                        for j in 0..n {
+                            z[i * n + j] += a * gc[j] - b * hc[j];
+                        }
+                    }
+                }
+                _ => add(&mut z, t),
+            }
         }
         (z, z_other)
     }
@@ -310,7 +332,8 @@ impl TermRom {
         }
         // A compliance term (c = f(v) o, f(v) = 1 / v - 1 / v_ref): its derivative
         // o x_i^T G x_j / v^2 = y_i^T G^+ y_j / o with the springs' forces
-        // y = o G x / v = b - Z_other x + o G x / v_ref, free of the cancellation that G x (of
+        // y = o G x / v = b - Z_other x + o H x / v_ref (H the held springs: G itself, or
+        // another shape's, TermSpec::held), free of the cancellation that G x (of
         // order v) suffers near the rigid limit. (With several compliance terms each one's y would
         // need the others in Z_other: one is supported.)
         let n_compliance = terms.iter().filter(|t| self.is_compliance(t)).count();
@@ -352,7 +375,10 @@ impl TermRom {
             let TermMap::Compliance { v_ref, .. } = self.maps[tc.index] else {
                 unreachable!("filtered above")
             };
-            let g = &self.g_r[tc.index];
+            // (the springs the model holds: G itself, or another shape's H)
+            let g = self.g_held[tc.index]
+                .as_ref()
+                .unwrap_or(&self.g_r[tc.index]);
             let oc = tc.offset + tc.per_modulus * e;
             // (with derivatives every output is solved, in order: slot[c] = c)
             for c in 0..no {

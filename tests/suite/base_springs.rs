@@ -273,3 +273,92 @@ fn forward_model_column_of_the_base_springs_matches_differences() {
         assert!(r2 > 0.99, "c = {c:.3e}: R^2 {r2}");
     }
 }
+
+/// Two shapes of the springs in one term ROM (rfmlab::diagnose::terms::base_springs_terms: the
+/// model holds the thin layer's shape, the equal springs replace it when on) against the
+/// independent full models of the joint on each shape's springs (fe::base::joint_model_on_springs)
+/// and the fixed base; the replacing term's derivative against differences of the reduced
+/// sweep. The shapes differ by more than the tolerance: the checks can fail.
+#[test]
+fn two_spring_shapes_share_one_term_rom_and_match_the_full_models() {
+    use rfmlab::frf::{FrfEngine, FullModel, FullParams, TermCoef};
+    use std::f64::consts::TAU;
+    let spec = crate::runner_common::joint_spec();
+    let built = crate::runner_common::built_structure();
+    let inputs = [built.excitation];
+    let (model, terms) = rfmlab::diagnose::terms::base_springs_terms(&spec, &[3.5, 1.0]).unwrap();
+    assert_eq!(terms[0].name, "base_springs");
+    assert_eq!(terms[1].name, "base_springs_iso");
+    let (rom, cert) = rfmlab::rom::term_build::build_term_rom(
+        &model,
+        &inputs,
+        &crate::rom_terms::params(),
+        &terms,
+    )
+    .unwrap();
+    eprintln!(
+        "two shapes: n_r {} (enriched {}), certificate {:.3e} {:?}",
+        cert.basis_size, cert.enriched_basis_size, cert.max_rel_error, cert.per_case
+    );
+    assert!(cert.passed && cert.max_rel_error <= 1e-6);
+    assert!(cert.basis_size < cert.enriched_basis_size, "compressed");
+    let w: Vec<f64> = (0..60).map(|k| TAU * (3.3 + 8.1 * k as f64)).collect();
+    let e = vec![C64::new(4.1e6, 1.3e6); w.len()];
+    let coef = |index: usize, value: f64| {
+        [TermCoef {
+            index,
+            value,
+            offset: C64::new(1.0, 0.0),
+            per_modulus: 0.0,
+        }]
+    };
+    let c_case = 1.0 / 3.0e10;
+    let on = |ratio: f64| {
+        rfmlab::fe::base::joint_model_on_springs(
+            &spec,
+            &BaseSprings {
+                normal_n_m3: 1.0 / c_case,
+                tangential_n_m3: 1.0 / (ratio * c_case),
+            },
+            "k",
+        )
+        .unwrap()
+    };
+    let full = |m: &rfmlab::fe::StructuralModel| {
+        FullModel::new(m, &inputs, FullParams::default())
+            .unwrap()
+            .sweep(&w, &e, false)
+            .unwrap()
+    };
+    let layer = full(&on(3.5));
+    let equal = full(&on(1.0));
+    let fixed = full(&built.model);
+    for (name, index, v, reference) in [
+        ("layer", 0, c_case, &layer),
+        ("equal", 1, c_case, &equal),
+        ("fixed by the equal springs' term", 1, 0.0, &fixed),
+    ] {
+        let (got, _) = rom.sweep_terms(&w, &e, &coef(index, v), false).unwrap();
+        let err = crate::rom_terms::rel_err(&got, reference);
+        eprintln!("{name}: error {err:.3e}");
+        assert!(err <= 1e-6, "{name}: {err:.3e}");
+    }
+    let apart = crate::rom_terms::rel_err(&layer, &equal);
+    eprintln!("layer against equal springs: {apart:.3e}");
+    assert!(apart > 1e-4);
+    // dH/dc of the replacing term at the case's size: central difference.
+    let h = 1e-3 * c_case;
+    let (_, dt) = rom.sweep_terms(&w, &e, &coef(1, c_case), true).unwrap();
+    let (p, _) = rom
+        .sweep_terms(&w, &e, &coef(1, c_case + h), false)
+        .unwrap();
+    let (m, _) = rom
+        .sweep_terms(&w, &e, &coef(1, c_case - h), false)
+        .unwrap();
+    let err = (0..p.h.len())
+        .map(|i| ((p.h[i] - m.h[i]) / (2.0 * h) - dt[0][i]).norm())
+        .fold(0.0, f64::max);
+    let size = dt[0].iter().map(|z| z.norm()).fold(0.0, f64::max);
+    eprintln!("dH/dc of the equal springs: |analytic - FD| {err:.3e} of {size:.3e}");
+    assert!(err <= 1e-5 * size, "{err:.3e} of {size:.3e}");
+}

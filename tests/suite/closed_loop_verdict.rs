@@ -235,6 +235,53 @@ fn explained_wrongly(l: &DiagnoseLevel, expected: &[&str]) -> bool {
             .any(|(n, _, _, _)| !expected.iter().any(|e| n.starts_with(e)))
 }
 
+/// The independent compliant base (equal normal and tangential springs) with base springs
+/// among the candidates: both shapes are tried, the equal springs are accepted and sized
+/// within their interval of the truth, and the level ends `confounded` with every adhesive
+/// parameter's truth inside the reported range. Minutes in a debug build (the two-shape term
+/// ROM and the loop on it): `cargo test --release --test suite -- --ignored
+/// independent_compliant_base_with_base_springs`.
+#[test]
+#[ignore]
+fn independent_compliant_base_with_base_springs_is_confounded_around_the_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = run_independent_with(
+        dir.path(),
+        "support_td",
+        "L1",
+        "[\"point_mass\", \"resonator\", \"gain\", \"delay\", \"beam_modulus\", \"shaker\", \"maxwell_branch\", \"alternative_law\", \"base_springs\"]",
+    );
+    assert!(
+        !explained_wrongly(&l, &["base_springs"]),
+        "{}",
+        l.verdict.sentence
+    );
+    assert_eq!(l.status, "confounded", "{}", l.verdict.sentence);
+    // The truth's springs: 3.0e10 N/m^3 normal and tangential (the data's README).
+    let truth = 1.0 / 3.0e10;
+    let (name, _, size, sd) = &l.accepted[0];
+    assert_eq!(name, "base_springs_iso");
+    assert!((size - truth).abs() < 2.0 * sd, "{size:e} +- {sd:e}");
+    let c = &l.verdict.confounded[0];
+    assert!(
+        c.size_range.0 <= truth && truth <= c.size_range.1,
+        "{:?}",
+        c.size_range
+    );
+    for (p, lo, hi) in &c.ranges {
+        let t = l
+            .parameters
+            .iter()
+            .find(|q| &q.name == p)
+            .and_then(|q| q.truth)
+            .unwrap();
+        assert!(
+            *lo <= t && t <= *hi,
+            "{p}: truth {t:e} outside [{lo:e}, {hi:e}]"
+        );
+    }
+}
+
 /// The default candidates hold no base springs (opt-in: their term ROM takes minutes), so on
 /// the independent compliant base the loop cannot explain the residual: it must say so
 /// (`unexplained`, with the excess over the null level, where it is and a warning on the

@@ -41,6 +41,7 @@ fn terms(spec: &rfmlab::fe::joint::JointSpec, k_b: &rfmlab::fe::model::SpMat) ->
             enrich_values: vec![0.95],
             cert_values: vec![0.0, 0.5, 0.95],
             map: Default::default(),
+            held: None,
         });
     }
     out.push(TermSpec {
@@ -51,6 +52,7 @@ fn terms(spec: &rfmlab::fe::joint::JointSpec, k_b: &rfmlab::fe::model::SpMat) ->
         enrich_values: vec![],
         cert_values: vec![0.01],
         map: Default::default(),
+        held: None,
     });
     out
 }
@@ -310,6 +312,7 @@ fn degraded_bond_effect_equals_the_full_model_with_the_strip_degraded() {
         enrich_values: vec![0.5, 0.95],
         cert_values: vec![0.95],
         map: Default::default(),
+        held: None,
     }];
     let (tr, cert) = build_term_rom(model, &inputs, &params(), &ts).unwrap();
     assert!(cert.passed);
