@@ -126,7 +126,7 @@ pub(crate) fn samples(
         }
     };
     let compliance: Vec<usize> = (0..specs.len())
-        .filter(|&i| matches!(specs[i].map, super::terms::TermMap::Compliance { .. }))
+        .filter(|&i| specs[i].map.is_compliance())
         .collect();
     Ok((start..start + n)
         .map(|k| {
@@ -351,12 +351,10 @@ impl TermRom {
                 }
             }
         };
-        for k in 0..r.g_r.len() {
-            if matches!(r.maps[k], super::terms::TermMap::Compliance { .. }) {
-                zero(&mut r.g_r[k]);
-                if let Some(h) = r.g_held[k].as_mut() {
-                    zero(h);
-                }
+        for k in self.compliance_terms() {
+            zero(&mut r.g_r[k]);
+            if let Some(h) = r.g_held[k].as_mut() {
+                zero(h);
             }
         }
         r.g_pinv = super::terms::pinvs(&r.g_r, &r.maps);

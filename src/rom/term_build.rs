@@ -97,7 +97,7 @@ pub fn model_with_term(
 /// The sum of the compliance terms' reduced matrices (None without one): the springs' shapes
 /// share its null space, the motions off the base face.
 fn compliance_sum(rom: &TermRom) -> Option<Mat<f64>> {
-    let mut k = (0..rom.g_r.len()).filter(|&k| matches!(rom.maps[k], TermMap::Compliance { .. }));
+    let mut k = rom.compliance_terms();
     let mut g = rom.g_r[k.next()?].clone();
     for i in k {
         g += &rom.g_r[i];

@@ -55,6 +55,10 @@ pub enum TermMap {
 }
 
 impl TermMap {
+    /// Whether the term is a compliance ([`TermMap::Compliance`]).
+    pub fn is_compliance(&self) -> bool {
+        matches!(self, TermMap::Compliance { .. })
+    }
     /// `f(v)`.
     pub fn f(&self, v: f64) -> f64 {
         match *self {
@@ -217,7 +221,12 @@ impl TermRom {
 
     /// Whether `t` is a compliance term ([`TermMap::Compliance`]).
     fn is_compliance(&self, t: &TermCoef) -> bool {
-        matches!(self.maps[t.index], TermMap::Compliance { .. })
+        self.maps[t.index].is_compliance()
+    }
+
+    /// The indices of the compliance terms (the shapes of the base springs).
+    pub(crate) fn compliance_terms(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.maps.len()).filter(|&k| self.maps[k].is_compliance())
     }
 
     /// `Z_r(w, E*) + sum_k c_k G_k,r` (row-major, complex symmetric) and, when `other`, the
