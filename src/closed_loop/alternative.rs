@@ -160,6 +160,7 @@ pub fn fit_modulus_holding(
                 max_iters: MODULUS_FIT_ITERS,
                 tol: f64::MIN_POSITIVE,
                 rel_tol: 1e-14,
+                give_up_above: f64::INFINITY,
             },
         );
         if !out.f.is_finite() {
@@ -253,6 +254,27 @@ pub fn law_starts(
     v
 }
 
+/// The start of a law's refit in a later round of the loop: `alt` fitted to the current law's
+/// `E*(w)` (`current` at `p_current`) from its earlier refit `previous`, the fractional order
+/// held at the earlier refit's value. None when `previous` is not admissible or the fit fails.
+pub fn warm_law_start(
+    alt: &dyn ConstitutiveModel,
+    current: &dyn ConstitutiveModel,
+    p_current: &[f64],
+    omega_rad_s: &[f64],
+    previous: &[f64],
+) -> Option<ModulusFit> {
+    if previous.len() != alt.n_params() || crate::material::check_params(alt, previous).is_err() {
+        return None;
+    }
+    let target: Vec<C64> = omega_rad_s
+        .iter()
+        .map(|&w| current.modulus(p_current, w))
+        .collect();
+    let held: Vec<usize> = profiled_index(alt).into_iter().collect();
+    fit_modulus_holding(alt, omega_rad_s, &target, &[previous.to_vec()], &held)
+}
+
 /// The index of the parameter [`refit_law`] holds in its profile (the fractional order).
 fn profiled_index(alt: &dyn ConstitutiveModel) -> Option<usize> {
     (alt.name() == FRACTIONAL_ZENER).then_some(3)
@@ -309,6 +331,14 @@ pub type PassingLaw = Option<(Vec<Prior>, MapResult)>;
 /// loop), `noise_priors` the noise's. Returns the candidate's row (round 0; the caller sets
 /// it) and, when it passes (Laplace Hessian positive definite, evidence gain at least
 /// `threshold_nats`, no law parameter at an edge of its prior), its priors and MAP.
+///
+/// `previous` is this law's refit in an earlier round of the loop (its parameters), if any:
+/// the refit then starts from the fit to the current `E*(w)` with the fractional order held at
+/// the earlier refit's ([`warm_law_start`]) instead of profiling every start of
+/// [`law_starts`]. An accepted effect moves the law's mode only a little, and the profile's
+/// starts each cost a linearisation of the measurement bias and Gauss-Newton steps on the
+/// whole model.
+#[allow(clippy::too_many_arguments)]
 pub fn refit_law<'a>(
     post: &mut FrfPosterior<'a>,
     alt: &'a dyn ConstitutiveModel,
@@ -317,6 +347,7 @@ pub fn refit_law<'a>(
     noise_priors: &[Prior],
     refit_map: &MapParams,
     threshold_nats: f64,
+    previous: Option<&[f64]>,
 ) -> Result<(LawCandidate, PassingLaw), ClosedLoopError> {
     let old = post.likelihood.forward.law;
     let n_old = old.n_params();
@@ -337,10 +368,15 @@ pub fn refit_law<'a>(
             accepted: false,
             verdict: String::new(),
         },
+        search: String::new(),
     };
     let omega = post.likelihood.forward.obs.omega_rad_s.clone();
     let n_model = post.likelihood.forward.n_params();
-    let starts = law_starts(alt, old, &phys[..n_old], &omega);
+    let starts =
+        match previous.and_then(|prev| warm_law_start(alt, old, &phys[..n_old], &omega, prev)) {
+            Some(warm) => vec![warm],
+            None => law_starts(alt, old, &phys[..n_old], &omega),
+        };
     post.likelihood.forward.law = alt;
     // The profile: each start's other parameters (effects too) follow by Gauss-Newton steps
     // on the data with the profiled parameter held; the smallest weighted residual wins.
@@ -387,8 +423,15 @@ pub fn refit_law<'a>(
     let mut p0 = p_start;
     p0.extend_from_slice(&phys[n_model..]);
     let x0 = post.unconstrained(&p0);
-    let fit = super::search_on_linearised_bias(post, &p0, refit_map, |post| {
-        find_map(post, Some(&x0), refit_map, &|| {})
+    // The law must beat the current fit: a search that stays far above it (a law that cannot
+    // take the data's shape, whose Gauss-Newton steps creep at a large residual) gives up.
+    let law_map = MapParams {
+        give_up_above: -(current.laplace.log_likelihood + current.laplace.log_prior)
+            + LAW_GIVE_UP_MARGIN_NATS,
+        ..refit_map.clone()
+    };
+    let fit = super::search_on_linearised_bias(post, &p0, &law_map, |post| {
+        find_map(post, Some(&x0), &law_map, &|| {})
     })
     .map_err(|e| e.to_string());
     let n_data = post.likelihood.data.values.len();
@@ -401,6 +444,10 @@ pub fn refit_law<'a>(
             return Ok((row, None));
         }
     };
+    row.search = format!(
+        "{} Gauss-Newton iterations, {} Newton steps, {} evaluations, {}",
+        r.starts[r.best].iterations, r.polish_steps, r.evaluations, r.starts[r.best].stop_reason
+    );
     let sd = r.laplace.sd_physical();
     row.params = r.map_physical[..n_new].to_vec();
     row.sd = sd[..n_new].to_vec();
@@ -408,7 +455,15 @@ pub fn refit_law<'a>(
     let gain = super::evidence_gain(&r, current, n_new as i64 - n_old as i64, n_data);
     row.refit.log_evidence = r.laplace.log_evidence;
     row.refit.evidence_gain = gain;
-    row.refit.verdict = if !r.laplace.positive_definite {
+    let gave_up = r.starts[r.best].stop_reason.starts_with("given up");
+    row.refit.verdict = if gave_up {
+        format!(
+            "cannot reach the current fit: its search gave up {:.0} nats short (evidence gain {gain:.0} nats where it stopped)",
+            -(r.laplace.log_likelihood + r.laplace.log_prior)
+                + current.laplace.log_likelihood
+                + current.laplace.log_prior
+        )
+    } else if !r.laplace.positive_definite {
         "Laplace Hessian not positive definite".to_string()
     } else if !(gain >= threshold_nats) {
         format!("evidence gain {gain:.2} nats < {threshold_nats}")
@@ -420,6 +475,12 @@ pub fn refit_law<'a>(
     let passes = row.refit.verdict == "passes";
     Ok((row, passes.then_some((priors, r))))
 }
+
+/// How far (nats) above the current fit's `-log p` a law's refit may stay before its search
+/// gives up (after [`crate::inference::lm::GIVE_UP_RATIO`] Newton decrements): a margin for the
+/// two models' priors and coordinates, which differ by tens of nats, far below the hundreds
+/// of thousands a law that cannot take the data's shape stays above.
+pub const LAW_GIVE_UP_MARGIN_NATS: f64 = 1000.0;
 
 /// Gauss-Newton steps per start in [`refit_law`]'s profile.
 pub const PROFILE_STEPS: usize = 6;

@@ -267,6 +267,9 @@ pub struct LawCandidate {
     pub sd: Vec<f64>,
     /// Evidence, gain and verdict (`size`, `sd` NaN: a law has no size).
     pub refit: Refit,
+    /// The refit's search in words (iterations, evaluations, why it stopped); empty when
+    /// there was none.
+    pub search: String,
 }
 
 /// What the loop found.
@@ -948,6 +951,13 @@ pub fn run_closed_loop_with_laws<'a>(
                 alt.name()
             ));
             install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
+            let t_law = std::time::Instant::now();
+            // This law's refit in an earlier round (a warm start).
+            let previous = law_table
+                .iter()
+                .rev()
+                .find(|r| r.law == alt.name() && !r.params.is_empty())
+                .map(|r| r.params.clone());
             let outcome = alternative::refit_law(
                 post,
                 alt,
@@ -956,8 +966,22 @@ pub fn run_closed_loop_with_laws<'a>(
                 &noise_priors,
                 &refit_map,
                 params.threshold_nats,
+                previous.as_deref(),
             )?;
             let (cand, fit) = outcome;
+            say(format!(
+                "round {}: {} refitted{}: {} ({}; {:.1} s)",
+                round + 1,
+                alt.name(),
+                if previous.is_some() {
+                    " from its refit of the previous round"
+                } else {
+                    ""
+                },
+                cand.refit.verdict,
+                cand.search,
+                t_law.elapsed().as_secs_f64()
+            ));
             law_table.push(LawCandidate { round, ..cand });
             let li = law_table.len() - 1;
             if let Some((priors, r)) = fit {

@@ -109,14 +109,19 @@ impl From<ExperimentError> for NullError {
     }
 }
 
-/// The fitted model (law and effects at `p`, no measurement model) as a rig's plant. The
-/// replicates ask for the same grid every time: the last grid's answer is kept.
+/// The fitted model (law and effects at `p`, no measurement model) as a rig's plant. Every
+/// replicate asks for the same grids (the force band's and the lines'), so each grid's answer
+/// is kept: a single kept grid was evicted by the other one, and every replicate paid two
+/// sweeps of the fine grids (most of the calibration's time with a term ROM).
 struct ModelPlant<'m, 'a> {
     fm: &'m ForwardModel<'a>,
     p: Vec<f64>,
     drive: usize,
-    cache: std::sync::Mutex<Option<Grid>>,
+    cache: std::sync::Mutex<Vec<Grid>>,
 }
+
+/// Grids a [`ModelPlant`] keeps (the simulation asks for two).
+const PLANT_GRIDS_KEPT: usize = 4;
 
 /// A frequency grid (Hz) and the plant's accelerance on it, `[channel][line]`.
 type Grid = (Vec<f64>, Vec<Vec<C64>>);
@@ -130,15 +135,16 @@ impl Plant for ModelPlant<'_, '_> {
     }
     fn accelerance(&self, freq_hz: &[f64]) -> Result<Vec<Vec<C64>>, ExperimentError> {
         if let Ok(c) = self.cache.lock() {
-            if let Some((f, v)) = c.as_ref() {
-                if f.as_slice() == freq_hz {
-                    return Ok(v.clone());
-                }
+            if let Some((_, v)) = c.iter().find(|(f, _)| f.as_slice() == freq_hz) {
+                return Ok(v.clone());
             }
         }
         let out = self.evaluate(freq_hz)?;
         if let Ok(mut c) = self.cache.lock() {
-            *c = Some((freq_hz.to_vec(), out.clone()));
+            if c.len() >= PLANT_GRIDS_KEPT {
+                c.remove(0);
+            }
+            c.push((freq_hz.to_vec(), out.clone()));
         }
         Ok(out)
     }
@@ -278,7 +284,7 @@ pub fn calibrate(
                 fm,
                 p: phys[..np].to_vec(),
                 drive,
-                cache: std::sync::Mutex::new(None),
+                cache: std::sync::Mutex::new(Vec::new()),
             };
             let Some(coh_data) = &lik.data.coherence else {
                 return Err(NullError::Data(

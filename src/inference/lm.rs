@@ -28,7 +28,19 @@ pub struct LmParams {
     pub tol: f64,
     /// Relative tolerance: stop also when the decrement is below `rel_tol |f|`. Default 0.
     pub rel_tol: f64,
+    /// Give up (reason "given up: ...") when, after [`GIVE_UP_AFTER`] iterations, the
+    /// objective is still above this by more than [`GIVE_UP_RATIO`] Newton decrements: the
+    /// search cannot reach it at the pace its quadratic model predicts. For a candidate that
+    /// must beat a known fit (an alternative law refitted against the current one); `INFINITY`
+    /// never gives up.
+    pub give_up_above: f64,
 }
+
+/// Iterations before [`LmParams::give_up_above`] is checked.
+pub const GIVE_UP_AFTER: u64 = 3;
+/// Newton decrements the objective may be above [`LmParams::give_up_above`] before the
+/// search gives up.
+pub const GIVE_UP_RATIO: f64 = 100.0;
 
 /// Where the search ended.
 #[derive(Clone, Debug, PartialEq)]
@@ -79,6 +91,13 @@ where
             let dec = 0.5 * s.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>();
             if dec < params.tol || dec < params.rel_tol * f.abs() {
                 reason = "converged: Newton decrement below tolerance".into();
+                break;
+            }
+            if it >= GIVE_UP_AFTER && f - params.give_up_above > GIVE_UP_RATIO * dec {
+                reason = format!(
+                    "given up: {:.4e} above the objective to beat, with {dec:.3e} predicted by the quadratic model",
+                    f - params.give_up_above
+                );
                 break;
             }
         }
@@ -142,6 +161,7 @@ mod tests {
             max_iters: 500,
             tol: 1e-20,
             rel_tol: 0.0,
+            give_up_above: f64::INFINITY,
         }
     }
 

@@ -43,6 +43,10 @@ pub struct MapParams {
     pub seed: u64,
     /// How each start searches. Default L-BFGS.
     pub search: SearchMethod,
+    /// A Gauss-Newton search gives up when its objective `-log p` (physical) stays this far
+    /// above the value to beat ([`super::lm::LmParams::give_up_above`]); its end point is then
+    /// not polished. Default `INFINITY` (never).
+    pub give_up_above: f64,
 }
 
 /// The local search of each start.
@@ -67,6 +71,7 @@ impl Default for MapParams {
             polish_tol: 1e-10,
             seed: 0,
             search: SearchMethod::Lbfgs,
+            give_up_above: f64::INFINITY,
         }
     }
 }
@@ -327,11 +332,13 @@ fn gn_objective(
 /// Stops when the Newton decrement `g^T H^-1 g / 2` (undamped curvature) is below `tol`, after
 /// `max_iters` iterations, or when no damped step decreases the objective. Returns (x,
 /// objective, iterations, stop reason), or None when the posterior has no curvature.
+#[allow(clippy::too_many_arguments)]
 fn gauss_newton_search(
     post: &dyn Posterior,
     x0: &[f64],
     max_iters: u64,
     tol: f64,
+    give_up_above: f64,
     physical: bool,
     count: &std::sync::atomic::AtomicUsize,
 ) -> Option<(Vec<f64>, f64, u64, String)> {
@@ -368,6 +375,7 @@ fn gauss_newton_search(
             max_iters,
             tol,
             rel_tol: 0.0,
+            give_up_above,
         },
     );
     Some((out.x, out.f, out.iterations, out.reason))
@@ -579,9 +587,15 @@ pub fn find_map(
         .enumerate()
         .map(|(i, (kind, x0))| {
             let gn = match params.search {
-                SearchMethod::GaussNewton => {
-                    gauss_newton_search(post, x0, params.max_iters, params.polish_tol, true, &count)
-                }
+                SearchMethod::GaussNewton => gauss_newton_search(
+                    post,
+                    x0,
+                    params.max_iters,
+                    params.polish_tol,
+                    params.give_up_above,
+                    true,
+                    &count,
+                ),
                 SearchMethod::Lbfgs => None,
             };
             let (end_x, objective, iterations, stop_reason) =
@@ -620,7 +634,9 @@ pub fn find_map(
     // polish's Newton decrement), so only an L-BFGS end point is polished.
     let gn_converged = params.search == SearchMethod::GaussNewton
         && results[best].stop_reason.starts_with("converged");
-    let (x, polish_steps) = if gn_converged {
+    // A search that gave up is not polished: its end point is only where it stopped.
+    let given_up = results[best].stop_reason.starts_with("given up");
+    let (x, polish_steps) = if gn_converged || given_up {
         (results[best].end_x.clone(), 0)
     } else {
         polish(post, &results[best].end_x, params.polish_tol, true)?
@@ -628,13 +644,22 @@ pub fn find_map(
     // Laplace at the mode of the density in x (where it is closest to Gaussian); it is next
     // to the physical MAP, differing only by the transform's Jacobian.
     let gn_x = if gn_converged {
-        gauss_newton_search(post, &x, params.max_iters, params.polish_tol, false, &count)
-            .filter(|r| r.3.starts_with("converged"))
+        gauss_newton_search(
+            post,
+            &x,
+            params.max_iters,
+            params.polish_tol,
+            f64::INFINITY,
+            false,
+            &count,
+        )
+        .filter(|r| r.3.starts_with("converged"))
     } else {
         None
     };
     let xl = match gn_x {
         Some(r) => r.0,
+        None if given_up => x.clone(),
         None => polish(post, &x, params.polish_tol, false)?.0,
     };
     let laplace = laplace_at(post, &xl)?;

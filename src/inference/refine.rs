@@ -131,6 +131,10 @@ pub fn relinearise_model_to_map(
             .forward
             .linearise_model_measurement(&map.map_physical[..np])?;
         let again = polish(post, map, params)?;
+        if again.starts[again.best].stop_reason.starts_with("given up") {
+            adopt(map, again);
+            break;
+        }
         let d = again.laplace.dim();
         let settled = (0..np).all(|q| {
             let tol = if again.laplace.positive_definite {

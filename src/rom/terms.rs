@@ -36,6 +36,54 @@ fn column(a: &Mat<f64>, p: usize) -> &[f64] {
         .as_slice()
 }
 
+/// Complex columns as one real matrix `[Re X | Im X]` (n x 2m), for products with real
+/// matrices as a single real matrix product.
+struct SplitCols {
+    ri: Mat<f64>,
+    m: usize,
+}
+
+impl SplitCols {
+    fn new(cols: &[&[C64]], n: usize) -> Self {
+        let m = cols.len();
+        let ri = Mat::from_fn(n, 2 * m, |k, c| {
+            if c < m {
+                cols[c][k].re
+            } else {
+                cols[c - m][k].im
+            }
+        });
+        SplitCols { ri, m }
+    }
+
+    /// `A X` for a real `A` (n x n).
+    fn times(&self, a: &Mat<f64>) -> SplitProduct {
+        let mut out = Mat::<f64>::zeros(a.nrows(), self.ri.ncols());
+        faer::linalg::matmul::matmul(
+            out.as_mut(),
+            faer::Accum::Replace,
+            a.as_ref(),
+            self.ri.as_ref(),
+            1.0,
+            faer::Par::Seq,
+        );
+        SplitProduct { ri: out, m: self.m }
+    }
+}
+
+/// The product of a real matrix with [`SplitCols`], read back as complex columns.
+struct SplitProduct {
+    ri: Mat<f64>,
+    m: usize,
+}
+
+impl SplitProduct {
+    /// Entry `k` of complex column `c`.
+    fn col(&self, k: usize, c: usize) -> C64 {
+        C64::new(self.ri[(k, c)], self.ri[(k, self.m + c)])
+    }
+}
+
 /// A compliance term's derivative is a forward difference below this fraction of `v_ref`
 /// (see [`TermRom`]'s line solve) ...
 pub const COMPLIANCE_FD_BELOW: f64 = 1e-2;
@@ -319,26 +367,13 @@ impl TermRom {
         if !derivs {
             return Ok((h, Vec::new(), Vec::new(), Vec::new()));
         }
-        // A x_j for a real symmetric A (n_r x n_r), by A's contiguous columns.
-        let apply = |a: &Mat<f64>, xj: &[C64]| -> Vec<C64> {
-            (0..n)
-                .map(|p| {
-                    let col = column(a, p);
-                    (0..n).map(|q| xj[q] * col[q]).sum()
-                })
-                .collect()
-        };
-        // S_eff = S_r + sum v_k q_k G_k,r
-        let mut s_eff = r.s_r.clone();
-        for t in terms.iter().filter(|t| t.per_modulus != 0.0) {
-            let g = &self.g_r[t.index];
-            let c = self.maps[t.index].f(t.value) * t.per_modulus;
-            for j in 0..n {
-                for i in 0..n {
-                    s_eff[(i, j)] += c * g[(i, j)];
-                }
-            }
-        }
+        // The products with the real symmetric reduced matrices are done for all columns at
+        // once, as real matrix products on [Re X | Im X] (sequential: the lines are what runs in
+        // parallel, so results do not depend on the thread count).
+        let inputs_x: Vec<&[C64]> = r.inputs.iter().map(|&j| x[slot[j]].as_slice()).collect();
+        let x_in = SplitCols::new(&inputs_x, n);
+        // S_eff x_j = S_r x_j + sum v_k q_k G_k,r x_j
+        let sx = x_in.times(&r.s_r);
         // A compliance term (c = f(v) o, f(v) = 1 / v - 1 / v_ref): its derivative
         // o x_i^T G x_j / v^2 = y_i^T G^+ y_j / o with the springs' forces
         // y = o G x / v = b - Z_other x + o H x / v_ref (H the held springs: G itself, or
@@ -390,41 +425,74 @@ impl TermRom {
                 .unwrap_or(&self.g_r[tc.index]);
             let oc = tc.offset + tc.per_modulus * e;
             // (with derivatives every output is solved, in order: slot[c] = c)
+            let all_x: Vec<&[C64]> = (0..no).map(|c| x[slot[c]].as_slice()).collect();
+            let gx = SplitCols::new(&all_x, n).times(g);
+            // Z_other is complex symmetric: its row-major storage is its column-major one.
+            let z_o = faer::MatRef::from_column_major_slice(zo, n, n);
+            let x_all = Mat::<C64>::from_fn(n, no, |k, c| all_x[c][k]);
+            let mut zx = Mat::<C64>::zeros(n, no);
+            faer::linalg::matmul::matmul(
+                zx.as_mut(),
+                faer::Accum::Replace,
+                z_o,
+                x_all.as_ref(),
+                C64::new(1.0, 0.0),
+                faer::Par::Seq,
+            );
             for c in 0..no {
-                let xc = &x[slot[c]];
-                let gx = apply(g, xc);
                 let yc: Vec<C64> = (0..n)
-                    .map(|p| {
-                        let zx: C64 = (0..n).map(|q| zo[p * n + q] * xc[q]).sum();
-                        C64::new(r.b_r[(p, c)], 0.0) - zx + gx[p] * oc / v_ref
-                    })
+                    .map(|p| C64::new(r.b_r[(p, c)], 0.0) - zx[(p, c)] + gx.col(p, c) * oc / v_ref)
                     .collect();
                 y.push(yc);
             }
         }
+        // G_k,r x_j for the terms whose derivatives use it (a modulus-dependent term's share
+        // of dH/dE', or a term's own column outside the compliance paths).
+        let gx: Vec<Option<SplitProduct>> = terms
+            .iter()
+            .map(|t| {
+                let own =
+                    !(self.is_compliance(t) && (fd.is_some() || self.g_pinv[t.index].is_some()));
+                (t.per_modulus != 0.0 || own).then(|| x_in.times(&self.g_r[t.index]))
+            })
+            .collect();
+        // G^+ y_j of a compliance term (no difference quotient).
+        let gpy: Vec<Option<SplitProduct>> = terms
+            .iter()
+            .map(
+                |t| match (self.is_compliance(t), &fd, &self.g_pinv[t.index]) {
+                    (true, None, Some(gp)) => {
+                        let y_in: Vec<&[C64]> =
+                            r.inputs.iter().map(|&j| y[slot[j]].as_slice()).collect();
+                        Some(SplitCols::new(&y_in, n).times(gp))
+                    }
+                    _ => None,
+                },
+            )
+            .collect();
+        let dot = |a: &[C64], b: &SplitProduct, jj: usize| -> C64 {
+            (0..n).map(|k| a[k] * b.col(k, jj)).sum()
+        };
         let mut dh = vec![zero; no * ni];
         let mut sh = vec![zero; no * ni];
         let mut dt = vec![vec![zero; no * ni]; terms.len()];
         for (jj, &j) in r.inputs.iter().enumerate() {
             let xj = &x[slot[j]];
-            let sx = apply(&s_eff, xj);
-            let gx: Vec<Vec<C64>> = terms
-                .iter()
-                .map(|t| apply(&self.g_r[t.index], xj))
-                .collect();
-            // G^+ y_j of a compliance term, once per input.
-            let gpy: Vec<Option<Vec<C64>>> = terms
-                .iter()
-                .map(
-                    |t| match (self.is_compliance(t), &fd, &self.g_pinv[t.index]) {
-                        (true, None, Some(gp)) => Some(apply(gp, &y[slot[j]])),
-                        _ => None,
-                    },
-                )
+            // S_eff x_j
+            let s_eff_x: Vec<C64> = (0..n)
+                .map(|k| {
+                    let mut v = sx.col(k, jj);
+                    for (t, g) in terms.iter().zip(&gx) {
+                        if let (true, Some(g)) = (t.per_modulus != 0.0, g) {
+                            v += self.maps[t.index].f(t.value) * t.per_modulus * g.col(k, jj);
+                        }
+                    }
+                    v
+                })
                 .collect();
             for i in 0..no {
                 let xi = &x[slot[i]];
-                dh[i * ni + jj] = -(0..n).map(|k| xi[k] * sx[k]).sum::<C64>();
+                dh[i * ni + jj] = -(0..n).map(|k| xi[k] * s_eff_x[k]).sum::<C64>();
                 sh[i * ni + jj] = (0..n).map(|k| xj[k] * r.sb_r[(k, i)]).sum();
                 for (k, t) in terms.iter().enumerate() {
                     if let (true, Some(d)) = (self.is_compliance(t), &fd) {
@@ -434,12 +502,12 @@ impl TermRom {
                     if let Some(gy_j) = &gpy[k] {
                         // y_i^T G^+ y_j (times the offset: c = f(v) offset)
                         let yi = &y[slot[i]];
-                        let gy: C64 = (0..n).map(|p| yi[p] * gy_j[p]).sum();
-                        dt[k][i * ni + jj] = gy / (t.offset + t.per_modulus * e);
+                        dt[k][i * ni + jj] = dot(yi, gy_j, jj) / (t.offset + t.per_modulus * e);
                         continue;
                     }
                     let dc = self.maps[t.index].df(t.value) * (t.offset + t.per_modulus * e);
-                    dt[k][i * ni + jj] = -dc * (0..n).map(|q| xi[q] * gx[k][q]).sum::<C64>();
+                    let g = gx[k].as_ref().expect("computed for this term's own column");
+                    dt[k][i * ni + jj] = -dc * dot(xi, g, jj);
                 }
             }
         }
