@@ -5,6 +5,10 @@
 //! the loop alone (`loop_seconds`) and the whole command (engine build included). The old path
 //! (every refit a full multistart search) runs side by side when RFMLAB_BENCH_OLD=1.
 //! Run with `cargo bench --bench closed_loop`; RFMLAB_BENCH_RUNS sets the runs (default 3).
+//! RFMLAB_BENCH_STUDY names another study (relative to the package), e.g.
+//! `studies/closed_loop_virtual_springs.toml`: the independent compliant base with base springs
+//! among the candidates (its term ROM is built on the first run and cached in
+//! `results/.rom-cache`; the loop time excludes it, the command time of the first run includes it).
 
 use rfmlab::closed_loop::ClosedLoopParams;
 use std::path::Path;
@@ -21,14 +25,21 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let file = root.join("studies/closed_loop_mass.toml");
-    if !root
-        .join("studies/data/closed_loop/mass_pt4_L1.uff")
-        .is_file()
-    {
-        eprintln!("closed_loop: studies/data/closed_loop/mass_pt4_L1.uff is missing (skipped)");
-        return;
-    }
+    let file = match std::env::var("RFMLAB_BENCH_STUDY") {
+        Ok(s) => root.join(s),
+        Err(_) => {
+            if !root
+                .join("studies/data/closed_loop/mass_pt4_L1.uff")
+                .is_file()
+            {
+                eprintln!(
+                    "closed_loop: studies/data/closed_loop/mass_pt4_L1.uff is missing (skipped)"
+                );
+                return;
+            }
+            root.join("studies/closed_loop_mass.toml")
+        }
+    };
     let runs: usize = std::env::var("RFMLAB_BENCH_RUNS")
         .ok()
         .and_then(|s| s.parse().ok())
@@ -51,11 +62,18 @@ fn main() {
             ..ClosedLoopParams::default()
         };
         let (mut loop_s, mut total_s) = (Vec::new(), Vec::new());
+        let mut per_level: Vec<(String, Vec<f64>)> = Vec::new();
         let mut conclusion = String::new();
         for _ in 0..runs {
             let s = rfmlab::diagnose::diagnose_study(&study, None, &params).expect("diagnose");
             loop_s.push(s.levels.iter().map(|l| l.loop_seconds).sum::<f64>());
             total_s.push(s.seconds);
+            for l in &s.levels {
+                match per_level.iter_mut().find(|(n, _)| *n == l.level) {
+                    Some((_, v)) => v.push(l.loop_seconds),
+                    None => per_level.push((l.level.clone(), vec![l.loop_seconds])),
+                }
+            }
             conclusion = s
                 .levels
                 .iter()
@@ -68,6 +86,9 @@ fn main() {
             median(loop_s),
             median(total_s)
         );
+        for (level, v) in per_level {
+            println!("    {level}: loop median {:7.1} s", median(v));
+        }
     }
     let _ = std::fs::remove_dir_all(&tmp);
 }

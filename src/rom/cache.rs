@@ -337,6 +337,7 @@ pub fn load_terms(path: &Path, key: &str) -> Option<(TermRom, TermCertificate)> 
             maps: j.maps,
             g_pinv,
             g_held,
+            memo: Default::default(),
         },
         j.certificate,
     ))

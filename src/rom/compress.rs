@@ -392,6 +392,7 @@ impl TermRom {
                 .iter()
                 .map(|h| h.as_ref().map(|h| congruence(h, u)))
                 .collect(),
+            memo: Default::default(),
         }
     }
 }
@@ -441,6 +442,7 @@ mod tests {
             maps: vec![TermMap::Linear],
             g_pinv: vec![None],
             g_held: vec![None],
+            memo: Default::default(),
         }
     }
 

@@ -178,6 +178,7 @@ pub fn build_term_rom(
                 .iter()
                 .map(|t| t.held.as_ref().map(|h| basis.project(h)))
                 .collect(),
+            memo: Default::default(),
         };
         if let Some(g) = compliance_sum(&rom) {
             // The springs' rigid limit is a penalty method: rotate to their null space and

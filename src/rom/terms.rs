@@ -201,6 +201,36 @@ pub struct TermRom {
     /// `H_k,r` of a compliance term that replaces held springs of another shape
     /// ([`TermSpec::held`]); None where the model holds `G_k` itself.
     pub(crate) g_held: Vec<Option<Mat<f64>>>,
+    /// The last sweeps' results (see [`SweepMemo`]).
+    pub(crate) memo: SweepMemo,
+}
+
+/// A sweep's arguments and result.
+type MemoEntry = (
+    (Vec<f64>, Vec<C64>, Vec<TermCoef>, bool),
+    (Sweep, Vec<Vec<C64>>),
+);
+
+/// The last few sweeps of a [`TermRom`], returned again when asked with the same arguments.
+/// The closed loop's score tests sweep the same model once per candidate (every candidate
+/// that is not a term of its own leaves the sweep's arguments as they are), and a sweep with
+/// terms costs a dense LU per line. A copy of the ROM starts empty.
+#[derive(Default)]
+pub(crate) struct SweepMemo(std::sync::Mutex<Vec<MemoEntry>>);
+
+/// Sweeps a [`SweepMemo`] keeps (the data's lines and the measurement model's grid).
+const MEMO_SWEEPS: usize = 4;
+
+impl Clone for SweepMemo {
+    fn clone(&self) -> Self {
+        SweepMemo::default()
+    }
+}
+
+impl std::fmt::Debug for SweepMemo {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("SweepMemo")
+    }
 }
 
 /// Pseudo-inverse of a symmetric positive semi-definite matrix (eigenvalues below 1e-6 of
@@ -252,6 +282,7 @@ impl TermRom {
             maps: self.maps.clone(),
             g_pinv: self.g_pinv.clone(),
             g_held: self.g_held.clone(),
+            memo: SweepMemo::default(),
         })
     }
 
@@ -523,6 +554,34 @@ impl TermRom {
     ) -> Result<(Sweep, Vec<Vec<C64>>), FrfError> {
         crate::frf::check_line_lengths(omega, modulus)?;
         self.check(terms)?;
+        let same = |k: &(Vec<f64>, Vec<C64>, Vec<TermCoef>, bool)| {
+            k.3 == derivs && k.0 == omega && k.1 == modulus && k.2 == terms
+        };
+        if let Ok(m) = self.memo.0.lock() {
+            if let Some((_, out)) = m.iter().find(|(k, _)| same(k)) {
+                return Ok(out.clone());
+            }
+        }
+        let out = self.sweep_lines(omega, modulus, terms, derivs)?;
+        if let Ok(mut m) = self.memo.0.lock() {
+            if m.len() >= MEMO_SWEEPS {
+                m.remove(0);
+            }
+            m.push((
+                (omega.to_vec(), modulus.to_vec(), terms.to_vec(), derivs),
+                out.clone(),
+            ));
+        }
+        Ok(out)
+    }
+
+    fn sweep_lines(
+        &self,
+        omega: &[f64],
+        modulus: &[C64],
+        terms: &[TermCoef],
+        derivs: bool,
+    ) -> Result<(Sweep, Vec<Vec<C64>>), FrfError> {
         let lines: Vec<_> = omega
             .par_iter()
             .zip(modulus.par_iter())
