@@ -1,4 +1,5 @@
-//! Small types shared by every module: the complex scalar, axis directions.
+//! Small types shared by every module: the complex scalar, axis directions, a memo of recent
+//! results.
 
 pub use num_complex::Complex64 as C64;
 
@@ -114,5 +115,48 @@ pub fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
         b - (b - a) * (1.0 - t)
     } else {
         a + (b - a) * t
+    }
+}
+
+/// The last `N` results of a computation, returned again when asked with an equal key: a small
+/// first-in-first-out memo behind a lock, for an object asked the same question repeatedly
+/// through a shared reference (a term ROM's sweeps, a simulated plant's grids). A copy starts
+/// empty; a poisoned lock only turns the memo off.
+pub struct Recent<K, V, const N: usize>(std::sync::Mutex<Vec<(K, V)>>);
+
+impl<K, V, const N: usize> Default for Recent<K, V, N> {
+    fn default() -> Self {
+        Recent(std::sync::Mutex::new(Vec::new()))
+    }
+}
+
+impl<K, V, const N: usize> Clone for Recent<K, V, N> {
+    fn clone(&self) -> Self {
+        Recent::default()
+    }
+}
+
+impl<K, V, const N: usize> std::fmt::Debug for Recent<K, V, N> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Recent<{N}>")
+    }
+}
+
+impl<K: PartialEq, V: Clone, const N: usize> Recent<K, V, N> {
+    /// The kept result for `key`, else `compute()`'s, kept (the oldest dropped beyond `N`).
+    pub fn get_or_try<E>(&self, key: K, compute: impl FnOnce() -> Result<V, E>) -> Result<V, E> {
+        if let Ok(m) = self.0.lock() {
+            if let Some((_, v)) = m.iter().find(|(k, _)| *k == key) {
+                return Ok(v.clone());
+            }
+        }
+        let v = compute()?;
+        if let Ok(mut m) = self.0.lock() {
+            if m.len() >= N {
+                m.remove(0);
+            }
+            m.push((key, v.clone()));
+        }
+        Ok(v)
     }
 }

@@ -427,7 +427,7 @@ pub fn refit_law<'a>(
     // take the data's shape, whose Gauss-Newton steps creep at a large residual) gives up.
     let law_map = MapParams {
         give_up_above: -(current.laplace.log_likelihood + current.laplace.log_prior)
-            + LAW_GIVE_UP_MARGIN_NATS,
+            + super::GIVE_UP_MARGIN_NATS,
         ..refit_map.clone()
     };
     let fit = super::search_on_linearised_bias(post, &p0, &law_map, |post| {
@@ -475,12 +475,6 @@ pub fn refit_law<'a>(
     let passes = row.refit.verdict == "passes";
     Ok((row, passes.then_some((priors, r))))
 }
-
-/// How far (nats) above the current fit's `-log p` a law's refit may stay before its search
-/// gives up (after [`crate::inference::lm::GIVE_UP_RATIO`] Newton decrements): a margin for the
-/// two models' priors and coordinates, which differ by tens of nats, far below the hundreds
-/// of thousands a law that cannot take the data's shape stays above.
-pub const LAW_GIVE_UP_MARGIN_NATS: f64 = 1000.0;
 
 /// Gauss-Newton steps per start in [`refit_law`]'s profile.
 pub const PROFILE_STEPS: usize = 6;

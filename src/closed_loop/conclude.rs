@@ -80,7 +80,7 @@ impl FinalModel {
     /// [`FinalModel::refit`] that gives up once it cannot bring the normalised chi-square down
     /// to `threshold` ([`crate::inference::map::MapParams::give_up_above`]): its `-log p`
     /// stays above the final fit's plus the residual's allowance up to the threshold,
-    /// `(threshold dof - chi2) / 2`, plus [`DROP_GIVE_UP_MARGIN_NATS`]. Leaving out an effect
+    /// `(threshold dof - chi2) / 2`, plus [`super::GIVE_UP_MARGIN_NATS`]. Leaving out an effect
     /// that the data need (a 12 g mass: chi-square 837 without it) otherwise sends the refit
     /// creeping at a residual hundreds of thousands of nats above the final fit's (186 s on a
     /// term ROM).
@@ -92,17 +92,12 @@ impl FinalModel {
         let res = &self.after.residuals;
         let allowance = (0.5 * (threshold * res.dof - res.chi2)).max(0.0);
         let map = MapParams {
-            give_up_above: -self.after.log_posterior + allowance + DROP_GIVE_UP_MARGIN_NATS,
+            give_up_above: -self.after.log_posterior + allowance + super::GIVE_UP_MARGIN_NATS,
             ..self.map.clone()
         };
         refit(post, &self.after.names, &self.after.values, &map)
     }
 }
-
-/// Nats above the final fit's `-log p` plus the residual's allowance beyond which a refit
-/// without an accepted effect gives up ([`FinalModel::refit_to_reach`]): a margin for the
-/// dropped effect's prior and the noise model's terms, which differ by tens of nats.
-pub const DROP_GIVE_UP_MARGIN_NATS: f64 = 1000.0;
 
 /// `conclusion` without the accepted effects named in `gone` (their `name = size +- sd unit`
 /// entries, as the loop wrote them), so that it lists only the effects kept.

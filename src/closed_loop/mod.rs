@@ -51,6 +51,14 @@ use crate::linalg::dense::{chol_solve, cholesky};
 use crate::material::ConstitutiveModel;
 use libm::erfc;
 
+/// How far (nats) above the `-log p` it must reach a refit may stay before its search gives up
+/// (after [`crate::inference::lm::GIVE_UP_RATIO`] Newton decrements): an alternative law against
+/// the current fit ([`alternative::refit_law`]), the final model without an accepted effect
+/// against the threshold ([`conclude`]). A margin for the two models' priors, coordinates and
+/// noise terms, which differ by tens of nats, far below the hundreds of thousands a model that
+/// cannot take the data's shape stays above.
+pub const GIVE_UP_MARGIN_NATS: f64 = 1000.0;
+
 /// Settings of the loop.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClosedLoopParams {

@@ -117,14 +117,9 @@ struct ModelPlant<'m, 'a> {
     fm: &'m ForwardModel<'a>,
     p: Vec<f64>,
     drive: usize,
-    cache: std::sync::Mutex<Vec<Grid>>,
+    /// Accelerances `[channel][line]` by grid (Hz); the simulation asks for two.
+    cache: crate::common::Recent<Vec<f64>, Vec<Vec<C64>>, 4>,
 }
-
-/// Grids a [`ModelPlant`] keeps (the simulation asks for two).
-const PLANT_GRIDS_KEPT: usize = 4;
-
-/// A frequency grid (Hz) and the plant's accelerance on it, `[channel][line]`.
-type Grid = (Vec<f64>, Vec<Vec<C64>>);
 
 impl Plant for ModelPlant<'_, '_> {
     fn n_channels(&self) -> usize {
@@ -134,19 +129,8 @@ impl Plant for ModelPlant<'_, '_> {
         self.drive
     }
     fn accelerance(&self, freq_hz: &[f64]) -> Result<Vec<Vec<C64>>, ExperimentError> {
-        if let Ok(c) = self.cache.lock() {
-            if let Some((_, v)) = c.iter().find(|(f, _)| f.as_slice() == freq_hz) {
-                return Ok(v.clone());
-            }
-        }
-        let out = self.evaluate(freq_hz)?;
-        if let Ok(mut c) = self.cache.lock() {
-            if c.len() >= PLANT_GRIDS_KEPT {
-                c.remove(0);
-            }
-            c.push((freq_hz.to_vec(), out.clone()));
-        }
-        Ok(out)
+        self.cache
+            .get_or_try(freq_hz.to_vec(), || self.evaluate(freq_hz))
     }
 }
 
@@ -284,7 +268,7 @@ pub fn calibrate(
                 fm,
                 p: phys[..np].to_vec(),
                 drive,
-                cache: std::sync::Mutex::new(Vec::new()),
+                cache: Default::default(),
             };
             let Some(coh_data) = &lik.data.coherence else {
                 return Err(NullError::Data(

@@ -205,33 +205,13 @@ pub struct TermRom {
     pub(crate) memo: SweepMemo,
 }
 
-/// A sweep's arguments and result.
-type MemoEntry = (
-    (Vec<f64>, Vec<C64>, Vec<TermCoef>, bool),
-    (Sweep, Vec<Vec<C64>>),
-);
-
-/// The last few sweeps of a [`TermRom`], returned again when asked with the same arguments.
-/// The closed loop's score tests sweep the same model once per candidate (every candidate
-/// that is not a term of its own leaves the sweep's arguments as they are), and a sweep with
-/// terms costs a dense LU per line. A copy of the ROM starts empty.
-#[derive(Default)]
-pub(crate) struct SweepMemo(std::sync::Mutex<Vec<MemoEntry>>);
-
-/// Sweeps a [`SweepMemo`] keeps (the data's lines and the measurement model's grid).
-const MEMO_SWEEPS: usize = 4;
-
-impl Clone for SweepMemo {
-    fn clone(&self) -> Self {
-        SweepMemo::default()
-    }
-}
-
-impl std::fmt::Debug for SweepMemo {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("SweepMemo")
-    }
-}
+/// The last four sweeps of a [`TermRom`] (the data's lines and the measurement model's grid),
+/// keyed by their arguments (lines, moduli, terms, derivatives). The closed loop's score tests
+/// sweep the same model once per candidate (every candidate that is not a term of its own
+/// leaves the sweep's arguments as they are), and a sweep with terms costs a dense LU per line.
+/// A copy of the ROM starts empty.
+pub(crate) type SweepMemo =
+    crate::common::Recent<(Vec<f64>, Vec<C64>, Vec<TermCoef>, bool), (Sweep, Vec<Vec<C64>>), 4>;
 
 /// Pseudo-inverse of a symmetric positive semi-definite matrix (eigenvalues below 1e-6 of
 /// the largest dropped: the forces `y` it acts on carry relative errors near 1e-10, which
@@ -554,27 +534,12 @@ impl TermRom {
     ) -> Result<(Sweep, Vec<Vec<C64>>), FrfError> {
         crate::frf::check_line_lengths(omega, modulus)?;
         self.check(terms)?;
-        let same = |k: &(Vec<f64>, Vec<C64>, Vec<TermCoef>, bool)| {
-            k.3 == derivs && k.0 == omega && k.1 == modulus && k.2 == terms
-        };
-        if let Ok(m) = self.memo.0.lock() {
-            if let Some((_, out)) = m.iter().find(|(k, _)| same(k)) {
-                return Ok(out.clone());
-            }
-        }
-        let out = self.sweep_lines(omega, modulus, terms, derivs)?;
-        if let Ok(mut m) = self.memo.0.lock() {
-            if m.len() >= MEMO_SWEEPS {
-                m.remove(0);
-            }
-            m.push((
-                (omega.to_vec(), modulus.to_vec(), terms.to_vec(), derivs),
-                out.clone(),
-            ));
-        }
-        Ok(out)
+        let key = (omega.to_vec(), modulus.to_vec(), terms.to_vec(), derivs);
+        self.memo
+            .get_or_try(key, || self.sweep_lines(omega, modulus, terms, derivs))
     }
 
+    /// [`TermRom::sweep_terms_impl`] without the memo: every line solved, in parallel.
     fn sweep_lines(
         &self,
         omega: &[f64],
