@@ -579,6 +579,22 @@ impl Effects {
         Ok(())
     }
 
+    /// The engine inputs whose columns a sweep with these effects reads: the excitation
+    /// `input` and every point a mass, sensor mass or resonator loads.
+    pub(crate) fn inputs_needed(&self, input: usize) -> Vec<usize> {
+        let mut out = vec![input];
+        for t in &self.terms {
+            match t.effect {
+                Effect::PointMass { point, .. } | Effect::Resonator { point, .. } => {
+                    out.push(point)
+                }
+                Effect::SensorMass { points, .. } => out.extend(points),
+                _ => {}
+            }
+        }
+        out
+    }
+
     /// Structural part: the engine's receptances transformed by the beam factor and the point
     /// masses at `values` (one per term), read as accelerance at `outputs` driven at `input`.
     #[allow(clippy::too_many_arguments)]
@@ -592,6 +608,9 @@ impl Effects {
         derivs: bool,
         values: &[f64],
     ) -> Result<StructuralColumns, super::ForwardError> {
+        // Only the columns the effects read: the excitation's and the loaded points'.
+        let fewer = crate::frf::narrowed(engine, &self.inputs_needed(input));
+        let engine: &dyn FrfEngine = fewer.as_deref().unwrap_or(engine);
         let mut out =
             self.structural_values(engine, input, outputs, omega, modulus, derivs, values)?;
         if derivs {

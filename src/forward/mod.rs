@@ -467,9 +467,11 @@ impl<'a> Observation<'a> {
         modulus: &[C64],
         derivs: bool,
     ) -> Result<Columns, ForwardError> {
-        let sw = self.engine.sweep(omega, modulus, derivs)?;
-        let jpos = self
-            .engine
+        // The excitation's column alone.
+        let fewer = crate::frf::narrowed(self.engine, &[self.input]);
+        let engine: &dyn FrfEngine = fewer.as_deref().unwrap_or(self.engine);
+        let sw = engine.sweep(omega, modulus, derivs)?;
+        let jpos = engine
             .inputs()
             .iter()
             .position(|&j| j == self.input)

@@ -140,6 +140,15 @@ pub trait FrfEngine: Send + Sync {
         }
     }
 
+    /// The same engine computing only the input columns `inputs` (a subset of
+    /// [`FrfEngine::inputs`]), with the same values bit for bit, when that costs less than the
+    /// whole sweep (the ROM's prepared pencils: the cost is proportional to the columns); `None`
+    /// when this engine cannot, and callers use it whole. A likelihood needs the excitation's
+    /// column, plus the columns of the points that carry masses.
+    fn with_fewer_inputs(&self, _inputs: &[usize]) -> Option<Box<dyn FrfEngine + '_>> {
+        None
+    }
+
     /// Names of the extra structural terms G_k this engine can add to its dynamic stiffness
     /// ([`FrfEngine::sweep_terms`]); none by default.
     fn term_names(&self) -> Vec<String> {
@@ -162,6 +171,24 @@ pub trait FrfEngine: Send + Sync {
                 .into(),
         ))
     }
+}
+
+/// `engine` restricted to the inputs of `needed` ([`FrfEngine::with_fewer_inputs`]) when it has
+/// other inputs too and can sweep fewer; `None` to use it whole.
+pub fn narrowed<'a>(
+    engine: &'a dyn FrfEngine,
+    needed: &[usize],
+) -> Option<Box<dyn FrfEngine + 'a>> {
+    let inputs: Vec<usize> = engine
+        .inputs()
+        .iter()
+        .copied()
+        .filter(|j| needed.contains(j))
+        .collect();
+    if inputs.is_empty() || inputs.len() == engine.inputs().len() {
+        return None;
+    }
+    engine.with_fewer_inputs(&inputs)
 }
 
 /// Coefficient of an extra structural term G_k (index into [`FrfEngine::term_names`]):

@@ -20,7 +20,7 @@ use sha2::{Digest, Sha256};
 use std::path::Path;
 
 /// Bump when the file layout or the ROM algorithm changes (old files are then ignored).
-const FORMAT: u32 = 1;
+const FORMAT: u32 = 2;
 
 fn hash_sp(h: &mut Sha256, tag: &str, a: Option<&SpMat>) {
     h.update(tag.as_bytes());
@@ -76,6 +76,17 @@ pub fn key(model: &StructuralModel, inputs: &[usize], params: &RomParams) -> Str
         params.n_cert_lines,
     ] {
         h.update((n as u64).to_le_bytes());
+    }
+    match params.reference {
+        crate::rom::Reference::SparseLu => h.update(b"reference LU"),
+        crate::rom::Reference::Iterative {
+            residual_tol,
+            max_iter,
+        } => {
+            h.update(b"reference GMRES");
+            f(&mut h, residual_tol);
+            h.update((max_iter as u64).to_le_bytes());
+        }
     }
     h.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }

@@ -226,11 +226,14 @@ pub const FLOOR_FACTOR: f64 = 30.0;
 /// error is then at the reduced solve's rounding level, which more basis only raises.
 const STALLED_LEVELS: usize = 2;
 
-/// The certificate's measure: per validation point (m, l) and FRF k, e = |H_rom - H_full| /
-/// max_l |H_full|, scaled by tolerance / allowance with allowance = max(tolerance,
-/// FLOOR_FACTOR floor[m][l]); the largest. It is <= tolerance exactly when every point is
-/// within its allowance, and equals the plain relative error where the floor is below the
-/// tolerance. Also returns the points (m, l) over their allowance.
+/// The certificate's measure: per validation point (m, l) and FRF k, the error |H_rom - H_full|
+/// over its allowance max(allowance x scale_k, FLOOR_FACTOR floor[m][l] max_k' |H_full|),
+/// times the tolerance, with allowance = max(tolerance, FLOOR_FACTOR floor[m][l]) and scale_k
+/// from [`frf_scales`]; the largest. The second term is the full model's absolute rounding at
+/// the point (its floor is relative to the largest response), which bounds how well an FRF
+/// that vanishes by symmetry can be resolved. The measure is <= tolerance exactly when every
+/// point is within its allowance, and equals the plain relative error where the floor is below
+/// the tolerance. Also returns the points (m, l) over their allowance.
 struct Judged {
     score: f64,
     over: Vec<(usize, usize)>,
@@ -262,17 +265,31 @@ fn judge(
         let peaks = frf_scales(want, rom.inputs.len());
         for (l, w) in want.iter().enumerate() {
             let allowance = tol.max(FLOOR_FACTOR * floor[m][l]);
-            let mut worst = 0.0f64;
+            // The floor is the refinement step relative to the largest |x| of the point's
+            // solves, so it bounds every FRF's rounding in absolute terms by floor x the
+            // line's largest response: an FRF that vanishes by symmetry is resolved no better.
+            let line_floor =
+                FLOOR_FACTOR * floor[m][l] * w.iter().map(|v| v.norm()).fold(0.0, f64::max);
+            let (mut worst, mut scaled, mut by_floor) = (0.0f64, 0.0f64, allowance > tol);
             for k in 0..blk {
                 let d = (sw.h[l * blk + k] - w[k]).norm();
                 let rel = if peaks[k] > 0.0 { d / peaks[k] } else { d };
-                worst = worst.max(if rel.is_nan() { f64::INFINITY } else { rel });
+                let rel = if rel.is_nan() { f64::INFINITY } else { rel };
+                worst = worst.max(rel);
+                let own = allowance * peaks[k];
+                by_floor |= line_floor > own && d > tol * peaks[k];
+                scaled = scaled.max(if d == 0.0 {
+                    0.0
+                } else if d.is_nan() {
+                    f64::INFINITY
+                } else {
+                    tol * d / own.max(line_floor)
+                });
             }
-            if allowance > tol {
+            if by_floor {
                 j.floor_points += 1;
                 j.floor_error = j.floor_error.max(worst);
             }
-            let scaled = worst * tol / allowance;
             j.score = j.score.max(scaled);
             if !(scaled <= tol) {
                 j.over.push((m, l));

@@ -2,22 +2,31 @@
 //! frequency grid, after which a sweep for any E*(w) costs O(N_f n_terms n_out n_in).
 //!
 //! On line w, with A(w) = -w^2 M_r + K_r + j w C_r + j D_r and the centre e0 of the declared
-//! modulus box, F = A + e0 S_r and F^-1 S_r = X diag(nu) X^-1. With d = E* - e0,
+//! modulus box, F = A + e0 S_r. S_r is positive semi-definite with a large null space (the
+//! basis's directions without adhesive strain): S_r = W W^T over its range (n_r x r). With
+//! Y = F^-1 W, T = W^T Y = Q diag(lambda) Q^-1 (r x r) and d = E* - e0, Woodbury gives
 //!
-//!   A + E* S_r = F (I + d F^-1 S_r)  =>  (A + E* S_r)^-1 = X diag(1 / (1 + d nu_k)) X^-1 F^-1,
+//!   (A + E* S_r)^-1 = F^-1 - Y Q diag(d / (1 + d lambda_k)) Q^-1 Y^T,
 //!
-//! so, with L = B^T X, Ls = (V^T S B)^T X and R = X^-1 F^-1 B_in,
+//! and d / (1 + d lambda) = (1 - 1 / (1 + d lambda)) / lambda, so with b_k = L_k P_k,
+//! L = B^T Y Q, P = Q^-1 W^T F^-1 B_in, a_k = b_k / lambda_k, nu_k = lambda_k (the nonzero
+//! eigenvalues of F^-1 S_r) and H0 = B^T F^-1 B_in,
 //!
-//!   H_ij     =  sum_k a_k,ij / (1 + d nu_k),            a_k,ij = L_ik R_kj,
+//!   H_ij      =  H0_ij - sum_k a_k,ij + sum_k a_k,ij / (1 + d nu_k),
 //!   dH_ij/dE' = -sum_k a_k,ij nu_k / (1 + d nu_k)^2,
-//!   sh_ij    =  sum_k s_k,ij / (1 + d nu_k),            s_k,ij = Ls_ik R_kj.
+//!   sh_ij     =  the same with (V^T S B)^T in place of B^T.
+//!
+//! Decomposing the r x r T rather than the n_r x n_r F^-1 S_r keeps S_r's null space out of
+//! the eigensolver, where it is an ill-conditioned cluster at zero (a basis holding the x and
+//! z directions of the points has dozens of such directions).
 //!
 //! Terms whose pole E = e0 - 1/nu_k lies far from the box (rho_k = |nu_k| r < rho_max, r the
-//! box's half diagonal) are summed once into Taylor moments m_p = sum_far a_k nu_k^p, so that
+//! box's half diagonal) are summed once into Taylor moments, m_0 = H0 - sum_near a_k and
+//! m_p = sum_far b_k nu_k^(p-1) for p >= 1 (no division by a far term's small nu_k), so that
 //! their contribution is sum_p m_p (-d)^p, with the order P chosen per line so that the
 //! truncation bound sum_far |a_k| rho^(P+1) / (1 - rho) stays below `series_tol` times the
 //! line's |H(e0)|. The split between explicit terms and moments minimises the per-line cost.
-//! Where X is ill-conditioned (1-norm condition estimate above `cond_max`) the line falls
+//! Where Q is ill-conditioned (1-norm condition estimate above `cond_max`) the line falls
 //! back to a dense LU of the reduced system; such lines are counted.
 
 use super::dense::DenseLu;
@@ -32,7 +41,7 @@ use rayon::prelude::*;
 /// Settings of the pencil decomposition.
 #[derive(Clone, Debug)]
 pub struct PencilParams {
-    /// Lines whose eigenvector matrix has a 1-norm condition estimate above this fall back
+    /// Lines whose eigenvector matrix Q has a 1-norm condition estimate above this fall back
     /// to dense LU. Default 1e8.
     pub cond_max: f64,
     /// Truncation tolerance of the far-pole Taylor series, relative to max |H(e0)| of the
@@ -113,9 +122,9 @@ impl Line {
 
 /// Sum of the explicit terms for one line, lane-parallel over terms (fixed summation order:
 /// lanes accumulate terms k = lane mod LANES, then lanes are added 0..LANES), so the result
-/// does not depend on the instruction set used. acc: 6 blk rows of LANES (h, dh, sh; re, im).
+/// does not depend on the instruction set used. acc: 6 rows of LANES per entry of `qs` (the block indices computed) (h, dh, sh; re, im).
 #[inline(always)]
-fn near_kernel(line: &Line, blk: usize, d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
+fn near_kernel(line: &Line, qs: &[usize], d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
     // Fixed-size arrays (no slices, no aliasing between accumulators) so that every `t` loop
     // compiles to whole-register vector instructions; the arithmetic and its order are the
     // same per lane as a scalar loop would do.
@@ -141,9 +150,10 @@ fn near_kernel(line: &Line, blk: usize, d: C64, with_d: bool, acc: &mut [[f64; L
             vr[t] = nr[t] * w2r - ni[t] * w2i;
             vi[t] = nr[t] * w2i + ni[t] * w2r;
         }
-        for q in 0..blk {
+        for (qq, &q) in qs.iter().enumerate() {
             let o = q * n_pad + c;
             let (ar, ai) = (lanes(&line.a_re, o), lanes(&line.a_im, o));
+            let q = qq;
             let (mut hr, mut hi) = (acc[6 * q], acc[6 * q + 1]);
             for t in 0..LANES {
                 hr[t] += ar[t] * wr[t] - ai[t] * wi[t];
@@ -174,29 +184,29 @@ fn near_kernel(line: &Line, blk: usize, d: C64, with_d: bool, acc: &mut [[f64; L
 #[target_feature(enable = "avx512f,avx512vl,avx512dq")]
 unsafe fn near_kernel_avx512(
     line: &Line,
-    blk: usize,
+    qs: &[usize],
     d: C64,
     with_d: bool,
     acc: &mut [[f64; LANES]],
 ) {
-    near_kernel(line, blk, d, with_d, acc)
+    near_kernel(line, qs, d, with_d, acc)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn near_kernel_avx2(
     line: &Line,
-    blk: usize,
+    qs: &[usize],
     d: C64,
     with_d: bool,
     acc: &mut [[f64; LANES]],
 ) {
-    near_kernel(line, blk, d, with_d, acc)
+    near_kernel(line, qs, d, with_d, acc)
 }
 
 /// Dispatch to the widest available instruction set (no FMA contraction is allowed in
 /// Rust, so every path rounds identically).
-fn near_terms(line: &Line, blk: usize, d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
+fn near_terms(line: &Line, qs: &[usize], d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f")
@@ -204,16 +214,16 @@ fn near_terms(line: &Line, blk: usize, d: C64, with_d: bool, acc: &mut [[f64; LA
             && std::arch::is_x86_feature_detected!("avx512dq")
         {
             // SAFETY: the required CPU features were detected at run time.
-            unsafe { near_kernel_avx512(line, blk, d, with_d, acc) };
+            unsafe { near_kernel_avx512(line, qs, d, with_d, acc) };
             return;
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: as above.
-            unsafe { near_kernel_avx2(line, blk, d, with_d, acc) };
+            unsafe { near_kernel_avx2(line, qs, d, with_d, acc) };
             return;
         }
     }
-    near_kernel(line, blk, d, with_d, acc)
+    near_kernel(line, qs, d, with_d, acc)
 }
 
 /// A reduced model prepared for a fixed list of frequency lines.
@@ -226,11 +236,30 @@ pub struct PencilSweep {
 }
 
 /// Dense complex n x n (row-major) times matrix helpers.
-fn cplx_from_real_col(m: &Mat<f64>, j: usize) -> Vec<C64> {
-    (0..m.nrows()).map(|i| C64::new(m[(i, j)], 0.0)).collect()
-}
+/// Eigenvalues of S_r at or below this fraction of its largest are its null space (the basis's
+/// directions without adhesive strain): dropping them changes S_r by at most this fraction.
+const S_RANK_RTOL: f64 = 1e-13;
 
 impl ReducedModel {
+    /// W (n_r x r, complex storage of a real matrix) with S_r = W W^T to [`S_RANK_RTOL`]: the
+    /// eigenvectors of S_r above it scaled by the square roots of their eigenvalues.
+    /// None when the eigensolver fails (every line then falls back to dense LU).
+    fn s_range(&self) -> Option<Mat<C64>> {
+        let n = self.n_r;
+        let eig = self.s_r.self_adjoint_eigen(faer::Side::Lower).ok()?;
+        let smax = (0..n).map(|i| eig.S()[i]).fold(0.0f64, f64::max);
+        if !(smax.is_finite() && smax > 0.0) {
+            return None;
+        }
+        let kept: Vec<usize> = (0..n)
+            .filter(|&i| eig.S()[i] > S_RANK_RTOL * smax)
+            .collect();
+        Some(Mat::<C64>::from_fn(n, kept.len(), |i, c| {
+            let k = kept[c];
+            C64::new(eig.U()[(i, k)] * eig.S()[k].sqrt(), 0.0)
+        }))
+    }
+
     /// Decompose the reduced pencil on every line of `omega_rad_s` (in parallel; each line
     /// with sequential kernels, so the result is independent of the thread count).
     pub fn prepare(&self, omega_rad_s: &[f64]) -> Result<PencilSweep, RomError> {
@@ -250,9 +279,17 @@ impl ReducedModel {
         }
         let e0 = self.range.centre();
         let radius = self.range.radius();
+        let w = self.s_range();
         let lines: Vec<Line> = omega_rad_s
             .par_iter()
-            .map(|&w| self.prepare_line(w, e0, radius, params))
+            .map(|&om| match &w {
+                Some(w) => self.prepare_line(om, e0, radius, w, params),
+                None => Line {
+                    fallback: true,
+                    cond: f64::INFINITY,
+                    ..Default::default()
+                },
+            })
             .collect();
         Ok(PencilSweep {
             rom: self.clone(),
@@ -262,7 +299,14 @@ impl ReducedModel {
         })
     }
 
-    fn prepare_line(&self, omega: f64, e0: C64, radius: f64, p: &PencilParams) -> Line {
+    fn prepare_line(
+        &self,
+        omega: f64,
+        e0: C64,
+        radius: f64,
+        w: &Mat<C64>,
+        p: &PencilParams,
+    ) -> Line {
         let fallback = Line {
             fallback: true,
             cond: f64::INFINITY,
@@ -275,20 +319,35 @@ impl ReducedModel {
         let Some(flu) = DenseLu::factor_symmetric(n, self.z_r(omega, e0)) else {
             return fallback;
         };
-        // G = F^-1 S_r
-        let mut g = Mat::<C64>::zeros(n, n);
-        for j in 0..n {
-            let mut c = cplx_from_real_col(&self.s_r, j);
-            flu.solve(&mut c);
-            for (i, v) in c.into_iter().enumerate() {
-                g[(i, j)] = v;
+        // With S_r = W W^T (its range only, `s_range`) and T = W^T F^-1 W = Q diag(lambda) Q^-1,
+        // Woodbury gives (F + d W W^T)^-1 = F^-1 - Y Q diag(d / (1 + d lambda)) Q^-1 Y^T with
+        // Y = F^-1 W, and d / (1 + d lambda) = (1 - 1 / (1 + d lambda)) / lambda: the nonzero
+        // eigenvalues nu = lambda of F^-1 S_r with their residues, plus one constant term
+        // (nu = 0) for S_r's null space, which an eigensolver of the n x n F^-1 S_r resolves
+        // only as an ill-conditioned cluster at zero.
+        let r = w.ncols();
+        let solve_cols = |m: &Mat<C64>| -> Mat<C64> {
+            let mut out = Mat::<C64>::zeros(n, m.ncols());
+            for j in 0..m.ncols() {
+                let mut c: Vec<C64> = (0..n).map(|i| m[(i, j)]).collect();
+                flu.solve(&mut c);
+                for (i, v) in c.into_iter().enumerate() {
+                    out[(i, j)] = v;
+                }
             }
-        }
-        let mut nu = faer::diag::Diag::<C64>::zeros(n);
-        let mut x = Mat::<C64>::zeros(n, n);
-        {
+            out
+        };
+        let y = solve_cols(w);
+        let t = {
+            let t = w.transpose() * &y;
+            // complex symmetric up to rounding
+            Mat::<C64>::from_fn(r, r, |i, j| 0.5 * (t[(i, j)] + t[(j, i)]))
+        };
+        let mut lam = faer::diag::Diag::<C64>::zeros(r);
+        let mut q = Mat::<C64>::zeros(r, r);
+        if r > 0 {
             let req = evd_scratch::<C64>(
-                n,
+                r,
                 ComputeEigenvectors::No,
                 ComputeEigenvectors::Yes,
                 Par::Seq,
@@ -296,10 +355,10 @@ impl ReducedModel {
             );
             let mut mem = faer::dyn_stack::MemBuffer::new(req);
             if evd_cplx(
-                g.as_ref(),
-                nu.as_mut(),
+                t.as_ref(),
+                lam.as_mut(),
                 None,
-                Some(x.as_mut()),
+                Some(q.as_mut()),
                 Par::Seq,
                 faer::dyn_stack::MemStack::new(&mut mem),
                 Default::default(),
@@ -309,87 +368,103 @@ impl ReducedModel {
                 return fallback;
             }
         }
-        // unit columns, then X^-1 and a 1-norm condition estimate
-        let mut xr = vec![Z0; n * n];
-        for k in 0..n {
-            let nrm = (0..n).map(|i| x[(i, k)].norm_sqr()).sum::<f64>().sqrt();
+        // unit columns, then Q^-1 and a 1-norm condition estimate
+        let mut qr = vec![Z0; r * r];
+        for k in 0..r {
+            let nrm = (0..r).map(|i| q[(i, k)].norm_sqr()).sum::<f64>().sqrt();
             if !(nrm > 0.0 && nrm.is_finite()) {
                 return fallback;
             }
-            for i in 0..n {
-                x[(i, k)] /= nrm;
-                xr[i * n + k] = x[(i, k)];
+            for i in 0..r {
+                q[(i, k)] /= nrm;
+                qr[i * r + k] = q[(i, k)];
             }
         }
-        let Some(xlu) = DenseLu::factor(n, xr) else {
-            return fallback;
-        };
-        let mut xinv = vec![Z0; n * n]; // row-major
-        for j in 0..n {
-            let mut e = vec![Z0; n];
-            e[j] = C64::new(1.0, 0.0);
-            xlu.solve(&mut e);
-            for i in 0..n {
-                xinv[i * n + j] = e[i];
+        let mut qinv = Mat::<C64>::zeros(r, r);
+        let mut cond = 1.0;
+        if r > 0 {
+            let Some(qlu) = DenseLu::factor(r, qr) else {
+                return fallback;
+            };
+            for j in 0..r {
+                let mut e = vec![Z0; r];
+                e[j] = C64::new(1.0, 0.0);
+                qlu.solve(&mut e);
+                for i in 0..r {
+                    qinv[(i, j)] = e[i];
+                }
             }
+            let norm1 = |m: &Mat<C64>| {
+                (0..r)
+                    .map(|j| (0..r).map(|i| m[(i, j)].norm()).sum::<f64>())
+                    .fold(0.0, f64::max)
+            };
+            cond = norm1(&q) * norm1(&qinv);
         }
-        let norm1 = |get: &dyn Fn(usize, usize) -> C64| {
-            (0..n)
-                .map(|j| (0..n).map(|i| get(i, j).norm()).sum::<f64>())
-                .fold(0.0, f64::max)
-        };
-        let cond = norm1(&|i, j| x[(i, j)]) * norm1(&|i, j| xinv[i * n + j]);
         if !(cond <= p.cond_max) {
             return Line { cond, ..fallback };
         }
-        // R = X^-1 F^-1 B_in (n x ni)
-        let mut r = vec![Z0; n * ni];
-        for (jj, &j) in self.inputs.iter().enumerate() {
-            let mut y = cplx_from_real_col(&self.b_r, j);
-            flu.solve(&mut y);
-            for k in 0..n {
-                r[k * ni + jj] = (0..n).map(|a| xinv[k * n + a] * y[a]).sum();
-            }
+        let lam: Vec<C64> = (0..r).map(|k| lam.column_vector()[k]).collect();
+        if lam
+            .iter()
+            .any(|l| !(l.norm() > 0.0 && l.re.is_finite() && l.im.is_finite()))
+        {
+            return fallback;
         }
-        // residues
-        let mut a = vec![Z0; n * blk];
-        let mut s = vec![Z0; n * blk];
+        let cplx = |m: &Mat<f64>, cols: &[usize]| {
+            Mat::<C64>::from_fn(m.nrows(), cols.len(), |i, j| C64::new(m[(i, cols[j])], 0.0))
+        };
+        let all: Vec<usize> = (0..no).collect();
+        let (b_out, sb_out) = (cplx(&self.b_r, &all), cplx(&self.sb_r, &all));
+        let z_in = solve_cols(&cplx(&self.b_r, &self.inputs)); // F^-1 B_in, n x ni
+        let yq = &y * &q; // the eigenvectors of F^-1 S_r, n x r
+        let l_h = b_out.transpose() * &yq; // no x r
+        let l_s = sb_out.transpose() * &yq;
+        let pr = &qinv * (w.transpose() * &z_in); // r x ni
+        let c_h = b_out.transpose() * &z_in; // H at e0, no x ni
+        let c_s = sb_out.transpose() * &z_in;
+        // Term k: b_k = L_k P_k (no x ni); its residue in H is a_k = b_k / nu_k, nu_k = lambda_k.
+        // H(d) = [H(e0) - sum_k a_k] + sum_k a_k / (1 + d nu_k); a far term enters the series
+        // as sum_{p>=1} b_k nu_k^(p-1) (-d)^p, without the division (a pole far from the box
+        // has a small nu_k and a large a_k that would cancel against the constant).
+        let n = r;
+        let nu = lam;
+        let mut b = vec![Z0; n * blk];
+        let mut bs = vec![Z0; n * blk];
         for k in 0..n {
             for i in 0..no {
-                let l: C64 = (0..n).map(|q| x[(q, k)] * self.b_r[(q, i)]).sum();
-                let ls: C64 = (0..n).map(|q| x[(q, k)] * self.sb_r[(q, i)]).sum();
+                let (lh, ls) = (l_h[(i, k)], l_s[(i, k)]);
                 for jj in 0..ni {
-                    a[k * blk + i * ni + jj] = l * r[k * ni + jj];
-                    s[k * blk + i * ni + jj] = ls * r[k * ni + jj];
+                    b[k * blk + i * ni + jj] = lh * pr[(k, jj)];
+                    bs[k * blk + i * ni + jj] = ls * pr[(k, jj)];
                 }
             }
         }
-        let nu: Vec<C64> = (0..n).map(|k| nu.column_vector()[k]).collect();
-        // scale of this line
-        let mut h0 = vec![Z0; 2 * blk];
-        for k in 0..n {
-            for q in 0..blk {
-                h0[q] += a[k * blk + q];
-                h0[blk + q] += s[k * blk + q];
-            }
-        }
-        let scale_h = h0[..blk].iter().map(|v| v.norm()).fold(0.0, f64::max);
-        let scale_s = h0[blk..].iter().map(|v| v.norm()).fold(0.0, f64::max);
+        // scale of this line: H and sh at e0
+        let max_abs = |m: &Mat<C64>| {
+            (0..m.ncols())
+                .flat_map(|j| (0..m.nrows()).map(move |i| (i, j)))
+                .map(|(i, j)| m[(i, j)].norm())
+                .fold(0.0, f64::max)
+        };
+        let (scale_h, scale_s) = (max_abs(&c_h), max_abs(&c_s));
         // order terms by |nu| descending (stable: ties by index)
         let mut order: Vec<usize> = (0..n).collect();
         order.sort_by(|&i, &j| nu[j].norm().total_cmp(&nu[i].norm()).then(i.cmp(&j)));
+        // |a_k| = |b_k| / |nu_k|, largest over the block
         let amax = |v: &[C64], k: usize| {
             v[k * blk..(k + 1) * blk]
                 .iter()
                 .map(|z| z.norm())
                 .fold(0.0, f64::max)
+                / nu[k].norm()
         };
         // suffix sums of residue sizes in sorted order
         let mut suf_a = vec![0.0; n + 1];
         let mut suf_s = vec![0.0; n + 1];
         for t in (0..n).rev() {
-            suf_a[t] = suf_a[t + 1] + amax(&a, order[t]);
-            suf_s[t] = suf_s[t + 1] + amax(&s, order[t]);
+            suf_a[t] = suf_a[t + 1] + amax(&b, order[t]);
+            suf_s[t] = suf_s[t + 1] + amax(&bs, order[t]);
         }
         let mut best = (n, 0usize, usize::MAX); // (n_near, order P+1 count, cost)
         best.2 = 3 * n;
@@ -429,24 +504,38 @@ impl ReducedModel {
             }
         }
         let (n_near, count, _) = best;
+        // the constant needs m_0 even when every term is explicit
+        let count = count.max(1);
         let mut line = Line {
             fallback: false,
             cond,
             ..Default::default()
         };
-        for &k in &order[..n_near] {
-            line.nu.push(nu[k]);
-            line.a.extend_from_slice(&a[k * blk..(k + 1) * blk]);
-            line.s.extend_from_slice(&s[k * blk..(k + 1) * blk]);
-        }
         line.mh = vec![Z0; count * blk];
         line.ms = vec![Z0; count * blk];
+        for i in 0..no {
+            for jj in 0..ni {
+                line.mh[i * ni + jj] = c_h[(i, jj)];
+                line.ms[i * ni + jj] = c_s[(i, jj)];
+            }
+        }
+        for &k in &order[..n_near] {
+            let inv = nu[k].inv();
+            line.nu.push(nu[k]);
+            for q in 0..blk {
+                let (ak, sk) = (b[k * blk + q] * inv, bs[k * blk + q] * inv);
+                line.a.push(ak);
+                line.s.push(sk);
+                line.mh[q] -= ak;
+                line.ms[q] -= sk;
+            }
+        }
         for &k in &order[n_near..] {
             let mut pw = C64::new(1.0, 0.0);
-            for pp in 0..count {
+            for pp in 1..count {
                 for q in 0..blk {
-                    line.mh[pp * blk + q] += a[k * blk + q] * pw;
-                    line.ms[pp * blk + q] += s[k * blk + q] * pw;
+                    line.mh[pp * blk + q] += b[k * blk + q] * pw;
+                    line.ms[pp * blk + q] += bs[k * blk + q] * pw;
                 }
                 pw *= nu[k];
             }
@@ -461,7 +550,7 @@ impl PencilSweep {
     pub fn n_fallback_lines(&self) -> usize {
         self.lines.iter().filter(|l| l.fallback).count()
     }
-    /// Largest condition estimate of X over the non-fallback lines.
+    /// Largest condition estimate of Q (the eigenvectors of T) over the non-fallback lines.
     pub fn max_condition(&self) -> f64 {
         self.lines
             .iter()
@@ -508,22 +597,27 @@ impl PencilSweep {
 
     /// Evaluate one line into (h, dh, sh) slices of length blk.
     #[inline]
+    /// Line `l` at modulus `e` for the block entries `qs` (indices into the n_out x n_in
+    /// row-major block), into `h` (and `dh`) in the order of `qs`.
     fn eval_line(
         &self,
         l: usize,
         e: C64,
+        qs: &[usize],
         h: &mut [C64],
         mut dh: Option<(&mut [C64], &mut [C64])>,
         acc: &mut Vec<[f64; LANES]>,
     ) -> Result<(), FrfError> {
         let line = &self.lines[l];
-        let blk = h.len();
+        let blk = self.rom.n_out * self.rom.inputs.len();
         if line.fallback {
             let [hh, dd, ss] = self.rom.lu_line(self.omega[l], e, dh.is_some())?;
-            h.copy_from_slice(&hh);
-            if let Some((d, s)) = dh {
-                d.copy_from_slice(&dd);
-                s.copy_from_slice(&ss);
+            for (k, &q) in qs.iter().enumerate() {
+                h[k] = hh[q];
+                if let Some((d, s)) = dh.as_mut() {
+                    d[k] = dd[q];
+                    s[k] = ss[q];
+                }
             }
             return Ok(());
         }
@@ -532,10 +626,10 @@ impl PencilSweep {
         let count = line.mh.len() / blk.max(1);
         let with_d = dh.is_some();
         acc.clear();
-        acc.resize(6 * blk, [0.0; LANES]);
-        near_terms(line, blk, d, with_d, acc);
+        acc.resize(6 * qs.len(), [0.0; LANES]);
+        near_terms(line, qs, d, with_d, acc);
         let lanesum = |r: &[f64; LANES]| r.iter().fold(0.0, |a, b| a + b);
-        for q in 0..blk {
+        for (k, &q) in qs.iter().enumerate() {
             let (mut v, mut dv, mut vs) = (Z0, Z0, Z0);
             for pp in (0..count).rev() {
                 if with_d {
@@ -544,10 +638,10 @@ impl PencilSweep {
                 }
                 v = v * t + line.mh[pp * blk + q];
             }
-            h[q] = C64::new(lanesum(&acc[6 * q]), lanesum(&acc[6 * q + 1])) + v;
+            h[k] = C64::new(lanesum(&acc[6 * k]), lanesum(&acc[6 * k + 1])) + v;
             if let Some((dd, ss)) = dh.as_mut() {
-                dd[q] = C64::new(lanesum(&acc[6 * q + 2]), lanesum(&acc[6 * q + 3])) - dv;
-                ss[q] = C64::new(lanesum(&acc[6 * q + 4]), lanesum(&acc[6 * q + 5])) + vs;
+                dd[k] = C64::new(lanesum(&acc[6 * k + 2]), lanesum(&acc[6 * k + 3])) - dv;
+                ss[k] = C64::new(lanesum(&acc[6 * k + 4]), lanesum(&acc[6 * k + 5])) + vs;
             }
         }
         Ok(())
@@ -560,6 +654,21 @@ impl PencilSweep {
         with_derivatives: bool,
         out: &mut Sweep,
     ) -> Result<(), FrfError> {
+        let all: Vec<usize> = (0..self.rom.inputs.len()).collect();
+        self.sweep_columns_into(modulus_pa, &all, with_derivatives, out)
+    }
+
+    /// [`PencilSweep::sweep_moduli_into`] for the input columns `cols` only (positions in the
+    /// ROM's inputs): `out` has `cols.len()` inputs. A sweep's cost is proportional to the
+    /// columns computed, and the likelihood of a model without masses needs the excitation's
+    /// alone. Each value equals the full sweep's bit for bit.
+    pub fn sweep_columns_into(
+        &self,
+        modulus_pa: &[C64],
+        cols: &[usize],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
         let nl = self.omega.len();
         if modulus_pa.len() != nl {
             return Err(FrfError::Length {
@@ -569,8 +678,15 @@ impl PencilSweep {
             });
         }
         let no = self.rom.n_out;
-        let ni = self.rom.inputs.len();
+        let ni_all = self.rom.inputs.len();
+        if let Some(&c) = cols.iter().find(|&&c| c >= ni_all) {
+            return Err(FrfError::BadInput(c));
+        }
+        let ni = cols.len();
         let blk = no * ni;
+        let qs: Vec<usize> = (0..no)
+            .flat_map(|i| cols.iter().map(move |&c| i * ni_all + c))
+            .collect();
         if out.n_lines != nl
             || out.n_out != no
             || out.n_in != ni
@@ -593,7 +709,7 @@ impl PencilSweep {
             match dh {
                 None => {
                     for (i, hl) in h.chunks_mut(blk).enumerate() {
-                        self.eval_line(l0 + i, modulus_pa[l0 + i], hl, None, &mut acc)?;
+                        self.eval_line(l0 + i, modulus_pa[l0 + i], &qs, hl, None, &mut acc)?;
                     }
                 }
                 Some((d, s)) => {
@@ -603,7 +719,14 @@ impl PencilSweep {
                         .zip(s.chunks_mut(blk))
                         .enumerate()
                     {
-                        self.eval_line(l0 + i, modulus_pa[l0 + i], hl, Some((dl, sl)), &mut acc)?;
+                        self.eval_line(
+                            l0 + i,
+                            modulus_pa[l0 + i],
+                            &qs,
+                            hl,
+                            Some((dl, sl)),
+                            &mut acc,
+                        )?;
                     }
                 }
             }

@@ -165,6 +165,7 @@ pub fn build_engine(
                 // An uncertified ROM is used with a warning in the manifest and report (its
                 // measured error is stated) rather than failing the run.
                 allow_uncertified: true,
+                reference: crate::rom::Reference::suited(built.model.n_dof(), inputs.len()),
                 ..Default::default()
             };
             let key = crate::rom::cache::key(&built.model, &inputs, &params);
@@ -277,7 +278,14 @@ pub fn build_engine(
             ) + &match (&cache_file, from_cache) {
                 (Some(f), true) => format!(" (loaded from the ROM cache {})", f.display()),
                 _ => String::new(),
-            } + &grid_note;
+            } + &grid_note
+                + &match pencils[0].n_fallback_lines() {
+                    0 => String::new(),
+                    k => format!(
+                        "; {k} of {} lines solved by dense LU (ill-conditioned pencil)",
+                        pencils[0].omega_rad_s().len()
+                    ),
+                };
             Ok(Engines {
                 engine: Box::new(RomEngine { rom, pencils }),
                 note,

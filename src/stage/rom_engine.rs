@@ -12,9 +12,96 @@ pub(super) struct RomEngine {
     pub(super) pencils: Vec<crate::rom::PencilSweep>,
 }
 
+impl RomEngine {
+    fn pencil_for(&self, omega_rad_s: &[f64]) -> Option<&crate::rom::PencilSweep> {
+        self.pencils.iter().find(|p| {
+            omega_rad_s.len() == p.omega_rad_s().len()
+                && omega_rad_s
+                    .iter()
+                    .zip(p.omega_rad_s())
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+        })
+    }
+}
+
+/// A [`RomEngine`] computing a subset of its input columns ([`FrfEngine::with_fewer_inputs`]).
+struct RomColumns<'a> {
+    whole: &'a RomEngine,
+    inputs: Vec<usize>,
+    /// positions of `inputs` in the whole engine's inputs
+    cols: Vec<usize>,
+}
+
+impl FrfEngine for RomColumns<'_> {
+    fn n_out(&self) -> usize {
+        self.whole.n_out()
+    }
+    fn inputs(&self) -> &[usize] {
+        &self.inputs
+    }
+    fn sweep_into(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        if let Some(p) = self.whole.pencil_for(omega_rad_s) {
+            return p.sweep_columns_into(modulus_pa, &self.cols, with_derivatives, out);
+        }
+        // An unprepared grid: the whole LU sweep, then the columns.
+        let all = self
+            .whole
+            .rom
+            .sweep(omega_rad_s, modulus_pa, with_derivatives)?;
+        let (no, ni_all, ni) = (all.n_out, all.n_in, self.cols.len());
+        *out = Sweep::zeros(omega_rad_s.len(), no, ni, with_derivatives);
+        for l in 0..omega_rad_s.len() {
+            for i in 0..no {
+                for (k, &c) in self.cols.iter().enumerate() {
+                    let (to, from) = ((l * no + i) * ni + k, (l * no + i) * ni_all + c);
+                    out.h[to] = all.h[from];
+                    if with_derivatives {
+                        out.dh_de[to] = all.dh_de[from];
+                        out.sh[to] = all.sh[from];
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+    fn complex_modes(
+        &self,
+        modulus_pa: C64,
+        n_modes: usize,
+    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
+        self.whole.complex_modes(modulus_pa, n_modes)
+    }
+    fn complex_modes_with_masses(
+        &self,
+        modulus_pa: C64,
+        n_modes: usize,
+        masses: &[(usize, f64)],
+    ) -> Option<Result<Vec<crate::frf::EngineMode>, FrfError>> {
+        self.whole
+            .complex_modes_with_masses(modulus_pa, n_modes, masses)
+    }
+}
+
 impl FrfEngine for RomEngine {
     fn n_out(&self) -> usize {
         self.rom.n_out()
+    }
+    fn with_fewer_inputs(&self, inputs: &[usize]) -> Option<Box<dyn FrfEngine + '_>> {
+        let cols = inputs
+            .iter()
+            .map(|j| self.rom.inputs().iter().position(|k| k == j))
+            .collect::<Option<Vec<usize>>>()?;
+        Some(Box::new(RomColumns {
+            whole: self,
+            inputs: inputs.to_vec(),
+            cols,
+        }))
     }
     fn inputs(&self) -> &[usize] {
         self.rom.inputs()
@@ -26,14 +113,7 @@ impl FrfEngine for RomEngine {
         with_derivatives: bool,
         out: &mut Sweep,
     ) -> Result<(), FrfError> {
-        let same = |p: &crate::rom::PencilSweep| {
-            omega_rad_s.len() == p.omega_rad_s().len()
-                && omega_rad_s
-                    .iter()
-                    .zip(p.omega_rad_s())
-                    .all(|(a, b)| a.to_bits() == b.to_bits())
-        };
-        if let Some(p) = self.pencils.iter().find(|p| same(p)) {
+        if let Some(p) = self.pencil_for(omega_rad_s) {
             p.sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
         } else {
             self.rom
