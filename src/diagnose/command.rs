@@ -51,8 +51,11 @@ pub fn diagnose_into(
     // joint become model points (and engine inputs) for it. This triples the engine's inputs
     // and its reduced basis (about 30 s to build and certify on the paper's joint, cached).
     let asked = joint && wants_sensor_mass(study);
-    let every: Vec<u32> = study.structure.points.iter().map(|p| p.id).collect();
-    let mut outcome = loop_once(study, model, params, if asked { &every } else { &[] })?;
+    let mut outcome = loop_once(study, model, params, asked)?;
+    // Whether the latest pass had every point's three directions, and the sections that say
+    // why a pass was run again (appended to the final pass's report).
+    let mut three = asked;
+    let mut sections = String::new();
     // With the default candidates the loop runs on the measured directions first; when it
     // accepts a point mass, it runs again with every point's x, y and z directions, so that the
     // three-direction sensor mass competes with the measured-direction one. A study whose
@@ -80,8 +83,9 @@ pub fn diagnose_into(
             "{} accepted: a sensor's mass acts in x, y and z, so the loop runs again with every point's three directions",
             masses.join(", ")
         ));
-        outcome = loop_once(study, model, params, &every)?;
-        outcome.markdown += &format!(
+        outcome = loop_once(study, model, params, true)?;
+        three = true;
+        sections += &format!(
             "\n## Three directions\n\nA first pass on the measured directions accepted {}. A sensor's mass acts in x, y and z, so the loop ran again with every measured point's x, y and z directions in the model and the three-direction sensor masses (`mass3_ptN`) among the candidates: the results above are that second pass's.\n",
             masses.join(", ")
         );
@@ -106,23 +110,17 @@ pub fn diagnose_into(
             "{} unexplained: the loop runs again with base springs (two shapes) among the candidates",
             unexplained.join(", ")
         ));
-        let three = outcome.markdown.contains("\n## Three directions\n");
         let mut wider = study.clone();
         let mut settings = wider.closed_loop.clone().unwrap_or_default();
         settings.candidates = Some(with_structural_terms(three));
         wider.closed_loop = Some(settings);
-        let first = std::mem::take(&mut outcome.markdown);
-        outcome = loop_once(&wider, model, params, if three { &every } else { &[] })?;
-        if three {
-            if let Some(k) = first.find("\n## Three directions\n") {
-                outcome.markdown += &first[k..];
-            }
-        }
-        outcome.markdown += &format!(
+        outcome = loop_once(&wider, model, params, three)?;
+        sections += &format!(
             "\n## Base springs\n\nWith the default candidates the residual stayed above the null level at {}. Base springs (a compliant base under the adhesive, in two shapes) need matrices of their own (a term ROM), so the loop ran again with them among the candidates: the results above are that pass's.\n",
             unexplained.join(", ")
         );
     }
+    outcome.markdown += &sections;
     let mut dir = ResultsDir::create(parent, dir_name).map_err(RunError::Output)?;
     super::write_loop(&mut dir, &outcome, &study.name, figures)?;
     outcome.summary.output_dir = dir.path().to_path_buf();
@@ -145,17 +143,17 @@ fn with_structural_terms(sensor_mass: bool) -> Vec<String> {
     out
 }
 
-/// Set up the study's model, data and engines (with the x, y and z directions of the points
-/// `three_at`) and run the loop.
+/// Set up the study's model, data and engines (with every measured point's x, y and z
+/// directions when `all_directions`) and run the loop.
 fn loop_once(
     study: &Study,
     model: Option<&str>,
     params: &ClosedLoopParams,
-    three_at: &[u32],
+    all_directions: bool,
 ) -> Result<super::summary::LoopOutcome, RunError> {
     let mut with_loop = study.clone();
-    if !three_at.is_empty() {
-        with_loop.structure.points = with_all_directions(&with_loop.structure.points, three_at);
+    if all_directions {
+        with_loop.structure.points = with_all_directions(&with_loop.structure.points);
     }
     let study = &with_loop;
     let n_points = study.structure.points.len();
@@ -190,13 +188,12 @@ fn loop_once(
     super::loop_stage(&p, params, &inputs)
 }
 
-/// `points` with, for every point whose id is in `ids`, the two other axes' directions at the
-/// same position (same id, after the declared points so that a point's id still names its
-/// measured direction).
-fn with_all_directions(points: &[crate::study::Point], ids: &[u32]) -> Vec<crate::study::Point> {
+/// `points` with, for every point, the two other axes' directions at the same position (same
+/// id, after the declared points so that a point's id still names its measured direction).
+fn with_all_directions(points: &[crate::study::Point]) -> Vec<crate::study::Point> {
     use crate::common::{Axis, Direction};
     let mut out = points.to_vec();
-    for p in points.iter().filter(|p| ids.contains(&p.id)) {
+    for p in points {
         for axis in [Axis::X, Axis::Y, Axis::Z] {
             if !out.iter().any(|q| q.id == p.id && q.direction.axis == axis) {
                 out.push(crate::study::Point {

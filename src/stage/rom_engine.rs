@@ -49,26 +49,12 @@ impl FrfEngine for RomColumns<'_> {
         if let Some(p) = self.whole.pencil_for(omega_rad_s) {
             return p.sweep_columns_into(modulus_pa, &self.cols, with_derivatives, out);
         }
-        // An unprepared grid: the whole LU sweep, then the columns.
-        let all = self
-            .whole
+        // An unprepared grid: the reduced model's LU sweep of these columns.
+        self.whole
             .rom
-            .sweep(omega_rad_s, modulus_pa, with_derivatives)?;
-        let (no, ni_all, ni) = (all.n_out, all.n_in, self.cols.len());
-        *out = Sweep::zeros(omega_rad_s.len(), no, ni, with_derivatives);
-        for l in 0..omega_rad_s.len() {
-            for i in 0..no {
-                for (k, &c) in self.cols.iter().enumerate() {
-                    let (to, from) = ((l * no + i) * ni + k, (l * no + i) * ni_all + c);
-                    out.h[to] = all.h[from];
-                    if with_derivatives {
-                        out.dh_de[to] = all.dh_de[from];
-                        out.sh[to] = all.sh[from];
-                    }
-                }
-            }
-        }
-        Ok(())
+            .with_inputs(&self.inputs)
+            .map_err(FrfError::from)?
+            .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out)
     }
     fn complex_modes(
         &self,
