@@ -7,6 +7,7 @@
 //! stage's params from it ([`DiagnoseParams::of`]) and build the engine with the run's
 //! functions ([`crate::stage::setup::setup`]).
 
+use super::mesh;
 use super::of_study::{no_inference, wants_sensor_mass, StudyPosterior};
 use super::params::{DiagnoseParams, LoopInputs};
 use super::summary::DiagnoseSummary;
@@ -90,17 +91,83 @@ pub fn diagnose_into(
             masses.join(", ")
         );
     }
+    // The FE model's own discretisation error: a level left unexplained is tried on the mesh
+    // refined twice per direction (module `mesh`); when it gains the loop's evidence threshold
+    // at the starting fit, the loop runs again there and that pass is reported.
+    let mut current = study.clone();
+    let mut mesh_comparison = None;
+    let mesh_admitted = study
+        .closed_loop
+        .as_ref()
+        .is_none_or(|c| c.admits(mesh::DISCRETISATION, mesh::DISCRETISATION));
+    let allowance = study.closed_loop.as_ref().is_some_and(|c| c.mesh_allowance);
+    let unexplained = unexplained_levels(&outcome);
+    if (mesh_admitted || allowance) && (allowance || !unexplained.is_empty()) {
+        if let Some((structure, words)) = joint
+            .then(|| mesh::refined_twice(&study.structure))
+            .flatten()
+        {
+            params.progress.say(&format!(
+                "{}: the model on its mesh refined twice per direction ({words})",
+                if unexplained.is_empty() {
+                    "mesh allowance".to_string()
+                } else {
+                    format!("{} unexplained", unexplained.join(", "))
+                }
+            ));
+            let mut fine = study.clone();
+            fine.structure = structure;
+            // The starting fit only (no rounds): the same parameters on both meshes.
+            let start_only = ClosedLoopParams {
+                max_rounds: 0,
+                ..params.clone()
+            };
+            let cmp = match loop_once(&fine, model, &start_only, three) {
+                Ok(start) => {
+                    let mut cmp = mesh::compare(&outcome, &start, words, params.threshold_nats);
+                    // A mesh allowance alone compares the meshes; only a level left
+                    // unexplained lets the refined mesh replace the study's.
+                    cmp.for_residual = mesh_admitted && !unexplained.is_empty();
+                    cmp.accepted &= cmp.for_residual;
+                    params.progress.say(&format!(
+                        "refined mesh: evidence gain {:.1} nats at the starting fit (threshold {:.1}): {}",
+                        cmp.gain,
+                        cmp.threshold,
+                        if cmp.accepted {
+                            "the study's mesh was too coarse; the loop runs again on the refined mesh"
+                        } else {
+                            "the mesh does not explain the residual"
+                        }
+                    ));
+                    if cmp.accepted {
+                        let mut refined = loop_once(&fine, model, params, three)?;
+                        mesh::name_in(&mut refined, &cmp, mesh::element_size(&fine.structure));
+                        outcome = refined;
+                        current = fine;
+                    }
+                    cmp
+                }
+                // A refined mesh beyond the machine, or one its solver cannot resolve, leaves
+                // the study mesh's results, with the reason in the report.
+                Err(e) => mesh::MeshComparison {
+                    meshes: words,
+                    levels: Vec::new(),
+                    gain: f64::NAN,
+                    threshold: params.threshold_nats,
+                    accepted: false,
+                    failed: Some(e.to_string()),
+                    for_residual: mesh_admitted && !unexplained.is_empty(),
+                },
+            };
+            sections += &mesh::section(&cmp);
+            mesh_comparison = Some(cmp);
+        }
+    }
     // Base springs need a term ROM (about 80 s to build on the paper's joint, cached after).
     // With the default candidates they are tried when the residual stays unexplained without
     // them: the loop runs again with them among its candidates. (Adherend damping stays
     // opt-in: its term cannot be combined with the springs' free-base model.)
-    let unexplained: Vec<String> = outcome
-        .summary
-        .levels
-        .iter()
-        .filter(|l| l.status == "unexplained")
-        .map(|l| l.level.clone())
-        .collect();
+    let unexplained = unexplained_levels(&outcome);
     let defaults = study
         .closed_loop
         .as_ref()
@@ -110,7 +177,7 @@ pub fn diagnose_into(
             "{} unexplained: the loop runs again with base springs (two shapes) among the candidates",
             unexplained.join(", ")
         ));
-        let mut wider = study.clone();
+        let mut wider = current.clone();
         let mut settings = wider.closed_loop.clone().unwrap_or_default();
         settings.candidates = Some(with_structural_terms(three));
         wider.closed_loop = Some(settings);
@@ -120,12 +187,30 @@ pub fn diagnose_into(
             unexplained.join(", ")
         );
     }
+    if let Some(cmp) = mesh_comparison
+        .as_ref()
+        .filter(|c| allowance && c.failed.is_none())
+    {
+        sections += &mesh::apply_allowance(&mut outcome, cmp, mesh::order(&study.structure));
+    }
     outcome.markdown += &sections;
+    outcome.mesh = mesh_comparison;
     let mut dir = ResultsDir::create(parent, dir_name).map_err(RunError::Output)?;
     super::write_loop(&mut dir, &outcome, &study.name, figures)?;
     outcome.summary.output_dir = dir.path().to_path_buf();
     outcome.summary.seconds = t0.elapsed().as_secs_f64();
     Ok(outcome.summary)
+}
+
+/// The levels of `outcome` whose status is `unexplained`.
+fn unexplained_levels(outcome: &super::summary::LoopOutcome) -> Vec<String> {
+    outcome
+        .summary
+        .levels
+        .iter()
+        .filter(|l| l.status == "unexplained")
+        .map(|l| l.level.clone())
+        .collect()
 }
 
 /// The default candidates' types (`candidates = "all"`) plus base springs, and the

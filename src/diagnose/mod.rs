@@ -37,6 +37,7 @@ mod command;
 mod conclude;
 mod level_tables;
 mod markdown;
+pub mod mesh;
 mod of_study;
 mod params;
 pub mod prepared;

@@ -167,7 +167,13 @@ pub fn loop_stage(
         &summary,
         term_rom.as_ref().map(|(t, c)| (t.names.as_slice(), c)),
     );
+    let term_names = term_rom
+        .as_ref()
+        .map(|(t, _)| t.names.clone())
+        .unwrap_or_default();
     Ok(LoopOutcome {
+        term_names,
+        mesh: None,
         summary: DiagnoseSummary {
             study: p.study_name.clone(),
             model: name.clone(),

@@ -72,6 +72,27 @@ pub struct LoopOutcome {
     pub levels: Vec<LevelResult>,
     /// The loop's section of the report (markdown, its own level-1 heading).
     pub markdown: String,
+    /// The effects the term ROM carries (empty without one).
+    pub term_names: Vec<String>,
+    /// The discretisation candidate's comparison of two meshes, when it was tried.
+    pub mesh: Option<super::mesh::MeshComparison>,
+}
+
+impl LoopOutcome {
+    /// Make the markdown again from the levels and the summary (after a later pass changed a
+    /// level's status or its accepted effects).
+    pub(crate) fn remake_markdown(&mut self) {
+        self.markdown = super::markdown::markdown(
+            &self.summary.study,
+            &self.summary.model,
+            &self.levels,
+            &self.summary.levels,
+            self.summary
+                .term_rom
+                .as_ref()
+                .map(|(c, _)| (self.term_names.as_slice(), c)),
+        );
+    }
 }
 
 /// One level of the loop: name, lines (Hz), response ids, result, truth of the final law.

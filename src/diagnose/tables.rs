@@ -10,13 +10,17 @@ use crate::stage::RunError;
 
 /// The loop's tables: `residuals`, `candidates`, `closed_loop`, `verdict`, `signatures`.
 pub fn loop_tables(o: &LoopOutcome) -> Result<Vec<Table>, RunError> {
-    Ok(vec![
+    let mut tables = vec![
         residuals_table(&o.levels)?,
         candidates_table(&o.levels)?,
         closed_loop_table(&o.levels, &o.summary.levels)?,
         verdict_table(&o.levels, &o.summary.levels)?,
         signatures_table(&o.levels)?,
-    ])
+    ];
+    if let Some(m) = o.mesh.as_ref().filter(|m| m.failed.is_none()) {
+        tables.push(super::mesh::table(m)?);
+    }
+    Ok(tables)
 }
 
 /// Write the loop's tables, residual figures (when `figures`) and `closed_loop.md` into `dir`.

@@ -26,6 +26,8 @@
 //! p_threshold = 0.01      # only candidates whose score test has p below this are refitted
 //! top = 3                 # candidates refitted per round
 //! resonator_stiffness = 2e5  # N/m, the spring of the resonator candidates
+//! mesh_allowance = false  # true: the adhesive's intervals include the mesh's discretisation
+//!                         # error (parameters identified on the mesh and on it refined twice)
 //! ```
 
 use super::ctx::Ctx;
@@ -83,6 +85,7 @@ pub struct RawClosedLoop {
     pub top: Option<usize>,
     /// N/m, the spring of the resonator candidates.
     pub resonator_stiffness: Option<f64>,
+    pub mesh_allowance: Option<bool>,
 }
 
 /// Where a declared effect acts, by the study's ids (resolved to engine indices by the run's stages).
@@ -150,6 +153,9 @@ pub struct ClosedLoopSettings {
     pub top: usize,
     /// Spring of the resonator candidates (N/m).
     pub resonator_stiffness_n_m: f64,
+    /// The adhesive's intervals include the mesh's discretisation error, estimated from the
+    /// parameters identified on the study's mesh and on it refined twice per direction.
+    pub mesh_allowance: bool,
 }
 
 impl Default for ClosedLoopSettings {
@@ -162,6 +168,7 @@ impl Default for ClosedLoopSettings {
             p_threshold: 0.01,
             top: 3,
             resonator_stiffness_n_m: crate::forward::effects::DEFAULT_RESONATOR_STIFFNESS_N_M,
+            mesh_allowance: false,
         }
     }
 }
@@ -496,8 +503,10 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
                 };
                 // (An alternative law, the fractional Zener, and a sensor's mass in x, y and z
                 // are candidates of the loop too, not declarable effects.)
-                let known_type =
-                    EFFECT_TYPES.contains(&s) || s == "alternative_law" || s == "sensor_mass";
+                let known_type = EFFECT_TYPES.contains(&s)
+                    || s == "alternative_law"
+                    || s == "sensor_mass"
+                    || s == "discretisation";
                 let known_name = [
                     "mass_pt",
                     "mass3_pt",
@@ -514,7 +523,7 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
                 if !(known_type || known_name) {
                     return Err(ctx.err(
                         format!("closed_loop.candidates[{i}]"),
-                        format!("unknown candidate \"{s}\": use \"all\" or effect types ({}, sensor_mass, alternative_law) or names such as \"mass_pt4\", \"gain_ch3\", \"fractional_zener\"", EFFECT_TYPES.join(", ")),
+                        format!("unknown candidate \"{s}\": use \"all\" or effect types ({}, sensor_mass, alternative_law, discretisation) or names such as \"mass_pt4\", \"gain_ch3\", \"fractional_zener\"", EFFECT_TYPES.join(", ")),
                     ));
                 }
                 v.push(s.to_string());
@@ -572,5 +581,6 @@ pub(super) fn closed_loop(ctx: &Ctx, r: &RawClosedLoop) -> Result<ClosedLoopSett
         p_threshold: p,
         top,
         resonator_stiffness_n_m,
+        mesh_allowance: r.mesh_allowance.unwrap_or(d.mesh_allowance),
     })
 }
