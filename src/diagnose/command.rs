@@ -238,7 +238,8 @@ fn loop_once(
 ) -> Result<super::summary::LoopOutcome, RunError> {
     let mut with_loop = study.clone();
     if all_directions {
-        with_loop.structure.points = with_all_directions(&with_loop.structure.points);
+        with_loop.structure.points =
+            crate::study::build::points_in_all_directions(&with_loop.structure.points);
     }
     let study = &with_loop;
     let n_points = study.structure.points.len();
@@ -271,22 +272,4 @@ fn loop_once(
         posterior: &StudyPosterior(study),
     };
     super::loop_stage(&p, params, &inputs)
-}
-
-/// `points` with, for every point, the two other axes' directions at the same position (same
-/// id, after the declared points so that a point's id still names its measured direction).
-fn with_all_directions(points: &[crate::study::Point]) -> Vec<crate::study::Point> {
-    use crate::common::{Axis, Direction};
-    let mut out = points.to_vec();
-    for p in points {
-        for axis in [Axis::X, Axis::Y, Axis::Z] {
-            if !out.iter().any(|q| q.id == p.id && q.direction.axis == axis) {
-                out.push(crate::study::Point {
-                    direction: Direction::new(axis, 1),
-                    ..p.clone()
-                });
-            }
-        }
-    }
-    out
 }

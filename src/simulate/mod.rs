@@ -122,21 +122,6 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
     let file = ex.file.display().to_string();
     let mut notes = Vec::new();
     let built = crate::study::build::build_model(&ex.structure, &file)?;
-    let masses: Vec<(usize, f64)> = ex
-        .sensors
-        .iter()
-        .map(|(id, m)| {
-            (
-                built
-                    .model
-                    .points
-                    .iter()
-                    .position(|p| p.id == *id)
-                    .unwrap_or(usize::MAX),
-                *m,
-            )
-        })
-        .collect();
     let mesher = |what: &str| {
         crate::study::build::joint_spec(&ex.structure).ok_or_else(|| {
             SimulateError::Study(StudyError {
@@ -168,12 +153,8 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
             m
         }
     };
-    let mut model = if masses.is_empty() {
-        base
-    } else {
-        base.with_point_masses(&masses)
-            .map_err(|e| failed("sensor masses", e))?
-    };
+    let mut model =
+        crate::study::build::with_sensor_masses(&base, &ex.structure, &ex.sensors, &file)?;
     if let Some(((x0, x1), loss)) = ex.degraded_bond {
         let spec = mesher("degraded_bond")?;
         let region_of = if ex.base_springs.is_some() {
@@ -277,7 +258,7 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
         "description": ex.description,
         "mode": if ex.frequency_domain { "frequency" } else { "time" },
         "seed": ex.seed,
-        "sensor_masses": ex.sensors.iter().map(|(id, m)| json!({"point": id, "mass_kg": m})).collect::<Vec<_>>(),
+        "sensor_masses": ex.sensors.iter().map(|s| json!({"point": s.point, "mass_kg": s.mass_kg, "directions": if s.all_directions { "xyz" } else { "measured" }})).collect::<Vec<_>>(),
         "resonators": ex.resonators.iter().map(|(id, m, k)| json!({"point": id, "mass_kg": m, "stiffness_n_m": k})).collect::<Vec<_>>(),
         "degraded_bond": ex.degraded_bond.map(|((x0, x1), loss)| json!({"x_start_m": x0, "x_end_m": x1, "loss": loss})),
         "base_springs": ex.base_springs.map(|b| json!({"normal_n_m3": b.normal_n_m3, "tangential_n_m3": b.tangential_n_m3, "compliance_m3_n": 1.0 / b.normal_n_m3})),

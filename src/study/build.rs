@@ -175,3 +175,94 @@ pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> 
         dof_axes,
     })
 }
+
+/// `points` with, for every point, the two other axes' directions at the same position (same
+/// id, after the declared points so that a point's id still names its measured direction).
+pub fn points_in_all_directions(points: &[super::Point]) -> Vec<super::Point> {
+    use crate::common::{Axis, Direction};
+    let mut out = points.to_vec();
+    for p in points {
+        for axis in [Axis::X, Axis::Y, Axis::Z] {
+            if !out.iter().any(|q| q.id == p.id && q.direction.axis == axis) {
+                out.push(super::Point {
+                    direction: Direction::new(axis, 1),
+                    ..p.clone()
+                });
+            }
+        }
+    }
+    out
+}
+
+/// `model` (built from `structure`, or with the same DOF numbering) with the sensors' masses in
+/// its mass matrix: in the point's measured direction, or in x, y and z (located on the same
+/// mesh through the points' other two directions). `file` names the experiment in errors.
+pub fn with_sensor_masses(
+    model: &StructuralModel,
+    structure: &Structure,
+    sensors: &[super::experiment::Sensor],
+    file: &str,
+) -> Result<StructuralModel, StudyError> {
+    if sensors.is_empty() {
+        return Ok(model.clone());
+    }
+    let err = |message: String| StudyError {
+        file: file.to_string(),
+        key: "sensors".into(),
+        message,
+    };
+    let (located, points) = if sensors.iter().any(|s| s.all_directions) {
+        let mut all = structure.clone();
+        all.points = points_in_all_directions(&structure.points);
+        let built = build_model(&all, file)?;
+        if built.model.n_dof() != model.n_dof() {
+            return Err(err(format!(
+                "directions = \"xyz\" needs the structure's own DOFs ({} here against {}): it cannot be combined with base_springs",
+                model.n_dof(),
+                built.model.n_dof()
+            )));
+        }
+        let measured = |i: usize| {
+            let p = &built.model.points[i];
+            structure
+                .points
+                .iter()
+                .any(|q| q.id == p.id && q.direction.axis == p.direction.axis)
+        };
+        let located = StructuralModel {
+            points: built.model.points.clone(),
+            ..model.clone()
+        };
+        let idx: Vec<(usize, f64)> = sensors
+            .iter()
+            .flat_map(|s| {
+                located
+                    .points
+                    .iter()
+                    .enumerate()
+                    .filter(move |(i, p)| p.id == s.point && (s.all_directions || measured(*i)))
+                    .map(move |(i, _)| (i, s.mass_kg))
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        (located, idx)
+    } else {
+        let idx = sensors
+            .iter()
+            .map(|s| {
+                model
+                    .points
+                    .iter()
+                    .position(|p| p.id == s.point)
+                    .map(|i| (i, s.mass_kg))
+                    .ok_or_else(|| err(format!("point {} is not a point of the model", s.point)))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        (model.clone(), idx)
+    };
+    let mut out = located
+        .with_point_masses(&points)
+        .map_err(|e| err(format!("sensor masses: {e}")))?;
+    out.points = model.points.clone();
+    Ok(out)
+}

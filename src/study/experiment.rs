@@ -98,6 +98,18 @@ struct RawShaker {
 struct RawSensor {
     point: u32,
     mass: f64,
+    /// "measured" (default: the mass acts in the point's measured direction) or "xyz" (in x, y
+    /// and z, as a real accelerometer's inertia does).
+    directions: Option<String>,
+}
+
+/// A sensor's mass on the structure (undeclared in a study: a closed-loop test case).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sensor {
+    pub point: u32,
+    pub mass_kg: f64,
+    /// The mass acts in x, y and z (else in the point's measured direction only).
+    pub all_directions: bool,
 }
 
 /// A mass on a spring at a point, in the point's direction (the force is read at the
@@ -155,8 +167,8 @@ pub struct Experiment {
     pub structure: Structure,
     /// Chain settings common to all levels (force, seed and mode are set per level).
     pub chain: crate::experiment::spec::ChainParams,
-    /// Sensor masses (point id, kg).
-    pub sensors: Vec<(u32, f64)>,
+    /// Sensor masses.
+    pub sensors: Vec<Sensor>,
     /// Resonators: a mass (kg) on a spring (N/m) at a point, in its direction (point id, kg,
     /// N/m).
     pub resonators: Vec<(u32, f64, f64)>,
@@ -338,10 +350,21 @@ pub fn parse_experiment(text: &str, path: &Path) -> Result<Experiment, StudyErro
                 format!("point {} is not among structure.points {ids:?}", s.point),
             ));
         }
-        sensors.push((
-            s.point,
-            ctx.non_negative(&format!("sensors[{i}].mass"), s.mass, "kg")?,
-        ));
+        let all_directions = match s.directions.as_deref() {
+            None | Some("measured") => false,
+            Some("xyz") => true,
+            Some(other) => {
+                return Err(ctx.err(
+                    format!("sensors[{i}].directions"),
+                    format!("\"{other}\" is not a choice: \"measured\" (default, the point's measured direction) or \"xyz\" (x, y and z)"),
+                ))
+            }
+        };
+        sensors.push(Sensor {
+            point: s.point,
+            mass_kg: ctx.non_negative(&format!("sensors[{i}].mass"), s.mass, "kg")?,
+            all_directions,
+        });
     }
     let mut resonators = Vec::new();
     for (i, r) in raw.resonators.iter().enumerate() {

@@ -150,26 +150,12 @@ impl Setup {
         let ex = &spec.experiment;
         let file = ex.file.display().to_string();
         let built = crate::study::build::build_model(&ex.structure, &file)?;
-        let masses: Vec<(usize, f64)> = ex
-            .sensors
-            .iter()
-            .filter_map(|(id, m)| {
-                built
-                    .model
-                    .points
-                    .iter()
-                    .position(|p| p.id == *id)
-                    .map(|i| (i, *m))
-            })
-            .collect();
-        let model = if masses.is_empty() {
-            built.model.clone()
-        } else {
-            built
-                .model
-                .with_point_masses(&masses)
-                .map_err(|e| ValidateError::Setup(e.to_string()))?
-        };
+        let model = crate::study::build::with_sensor_masses(
+            &built.model,
+            &ex.structure,
+            &ex.sensors,
+            &file,
+        )?;
         let lv = &ex.levels[spec.level];
         let mut chain = ex.chain.clone();
         chain.mode = Mode::FrequencyDomain;

@@ -146,3 +146,58 @@ fn sensor_mass_jacobian_matches_finite_differences() {
     eprintln!("sensor-mass column: error {err:.2e} of {peak:.2e}");
     assert!(peak > 0.0 && err < 1e-5 * peak, "error {err:e} of {peak:e}");
 }
+
+/// The simulator's sensor (`[[sensors]]`, `rfmlab::study::build::with_sensor_masses`): with
+/// `directions = "xyz"` the mass matrix gains the sensor's mass in each of x, y and z at its
+/// point (`1_a^T dM 1_a = m` per axis `a`: the shape-function weights sum to one); with the
+/// default, in the measured direction (y) only. A directions value that is not a choice is
+/// refused with its key.
+#[test]
+fn simulated_sensor_adds_its_mass_in_the_directions_asked_for() {
+    use rfmlab::study::build::{build_model, with_sensor_masses};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("studies/data/closed_loop/cases/td_mass3_pt2.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let ex = rfmlab::study::experiment::parse_experiment(&text, &path).unwrap();
+    assert_eq!(ex.sensors.len(), 1);
+    assert!(ex.sensors[0].all_directions);
+    let built = build_model(&ex.structure, "case").unwrap();
+    let axes = built.dof_axes.clone().unwrap();
+    // 1_a^T (M' - M) 1_a for each axis a
+    let added = |m: &rfmlab::fe::StructuralModel| -> [f64; 3] {
+        let mut sums = [0.0; 3];
+        for (mm, sign) in [(&m.m, 1.0), (&built.model.m, -1.0)] {
+            let sym = mm.symbolic();
+            let (cp, ri) = (sym.col_ptr(), sym.row_idx());
+            for j in 0..mm.ncols() {
+                for p in cp[j]..cp[j + 1] {
+                    if axes[ri[p]] == axes[j] {
+                        sums[axes[j] as usize] += sign * mm.val()[p];
+                    }
+                }
+            }
+        }
+        sums
+    };
+    let xyz = with_sensor_masses(&built.model, &ex.structure, &ex.sensors, "case").unwrap();
+    assert_eq!(
+        xyz.points, built.model.points,
+        "the measured points are kept"
+    );
+    let s = added(&xyz);
+    for (a, v) in s.iter().enumerate() {
+        assert!(
+            (v - 0.012).abs() < 1e-12,
+            "axis {a}: {v:e} kg added, 0.012 expected"
+        );
+    }
+    let mut measured = ex.sensors.clone();
+    measured[0].all_directions = false;
+    let y = with_sensor_masses(&built.model, &ex.structure, &measured, "case").unwrap();
+    let s = added(&y);
+    assert!(s[0].abs() < 1e-12 && s[2].abs() < 1e-12, "{s:?}");
+    assert!((s[1] - 0.012).abs() < 1e-12, "{s:?}");
+    let bad = text.replace("directions = \"xyz\"", "directions = \"all\"");
+    let err = rfmlab::study::experiment::parse_experiment(&bad, &path).unwrap_err();
+    assert!(err.to_string().contains("sensors[0].directions"), "{err}");
+}
