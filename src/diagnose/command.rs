@@ -102,7 +102,7 @@ pub fn diagnose_into(
         .is_none_or(|c| c.admits(mesh::DISCRETISATION, mesh::DISCRETISATION));
     let allowance = study.closed_loop.as_ref().is_some_and(|c| c.mesh_allowance);
     let unexplained = unexplained_levels(&outcome);
-    if (mesh_admitted || allowance) && (allowance || !unexplained.is_empty()) {
+    if allowance || (mesh_admitted && !unexplained.is_empty()) {
         if let Some((structure, words)) = joint
             .then(|| mesh::refined_twice(&study.structure))
             .flatten()
