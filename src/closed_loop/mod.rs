@@ -88,6 +88,13 @@ pub struct ClosedLoopParams {
     /// far from noise: the acceptance limit is 1.2 and leakage-limited clean data read 0.6-0.7);
     /// null data never reach it. `f64::INFINITY` turns it off.
     pub profile_rank_above: f64,
+    /// Where the score is trusted (the residual's normalised chi-square at most
+    /// `profile_rank_above`), a candidate whose score-predicted evidence gain
+    /// ([`predicted_gain`]) is below `threshold_nats - predicted_gain_margin` is not refitted:
+    /// its refit could not pass (the compliant base's round-2 Maxwell branches, predicted
+    /// below 0 nats, crept through 150 Gauss-Newton iterations each to gains of -5 nats).
+    /// Default 3 nats; `f64::INFINITY` refits every candidate the p-value admits.
+    pub predicted_gain_margin: f64,
     /// Where the loop reports each step (the CLI shows it on its spinner). Default: nowhere.
     pub progress: Progress,
 }
@@ -143,6 +150,7 @@ impl Default for ClosedLoopParams {
             warm_refits: true,
             p_threshold: 0.01,
             profile_rank_above: 1.5,
+            predicted_gain_margin: 3.0,
             progress: Progress::default(),
         }
     }
@@ -216,6 +224,9 @@ pub struct Candidate {
     pub one_step: f64,
     pub one_step_sd: f64,
     pub rank: usize,
+    /// The evidence gain the score test predicts (nats, [`predicted_gain`]); NaN for a prior
+    /// that is not uniform.
+    pub predicted_gain: f64,
     /// Half the decrease of the weighted residual sum of squares at the candidate's profiled
     /// start (nats, a likelihood-ratio statistic over the prior), when the round ranked by the
     /// profile (`ClosedLoopParams::profile_rank_above`).
@@ -731,6 +742,7 @@ pub fn run_closed_loop_with_laws<'a>(
                 p_value: p,
                 one_step: est,
                 one_step_sd: sd,
+                predicted_gain: predicted_gain(c, t, sd),
                 rank: 0,
                 profile_gain: None,
                 refit: None,
@@ -744,10 +756,15 @@ pub fn run_closed_loop_with_laws<'a>(
         let np_now = post.likelihood.forward.n_params();
         let base_effects_now = post.likelihood.forward.effects.clone();
         let mut best: Option<(usize, MapResult)> = None;
-        // The refits in order: the top candidates by score with p below the threshold; then,
-        // when none passes and the residual is far from noise, the top by profile gain.
+        // The refits in order: the top candidates by score with p below the threshold (and,
+        // where the score is trusted, a predicted evidence gain within the margin of the
+        // threshold); then, when none passes and the residual is far from noise, the top by
+        // profile gain.
+        let trusted = residuals(post, &phys)?.chi2_normalised <= params.profile_rank_above;
+        let cut = params.threshold_nats - params.predicted_gain_margin;
         let mut queue: Vec<usize> = (0..params.top.min(scored.len()))
             .filter(|&ci| scored[ci].p_value < params.p_threshold)
+            .filter(|&ci| !(trusted && scored[ci].predicted_gain < cut))
             .collect();
         let mut profiles: Vec<Option<start::ProfileStart>> = vec![None; scored.len()];
         let mut profile_ranked = false;
@@ -1128,6 +1145,20 @@ fn refit_inputs(
         .find(|(n, _)| *n == c.effect.name())
         .map_or_else(|| phys_model.to_vec(), |(_, v)| v.clone());
     (lo, hi, one_step, gn)
+}
+
+/// The evidence gain (nats) the score test predicts for candidate `effect` with statistic `t`
+/// and one-step sd `sd` (`1 / sqrt(I*)`): the quadratic model's log-likelihood gain `t / 2` plus
+/// the Occam factor of one parameter with that posterior sd under its uniform prior on
+/// `[lo, hi]`, `ln(sqrt(2 pi) sd / (hi - lo))` (the Laplace evidence ratio of a linear-Gaussian
+/// model). NaN for a prior that is not uniform.
+pub fn predicted_gain(effect: &Effect, t: f64, sd: f64) -> f64 {
+    match effect.default_prior() {
+        Prior::Uniform { lo, hi } if hi > lo && sd > 0.0 => {
+            0.5 * t + ((2.0 * std::f64::consts::PI).sqrt() * sd / (hi - lo)).ln()
+        }
+        _ => f64::NAN,
+    }
 }
 
 /// The log-evidence gain (nats) of refit `r` over `current`, which has `extra` fewer

@@ -53,8 +53,8 @@ pub fn diagnose_into(
     // and its reduced basis (about 30 s to build and certify on the paper's joint, cached).
     let asked = joint && wants_sensor_mass(study);
     let mut outcome = loop_once(study, model, params, asked)?;
-    // Whether the latest pass had every point's three directions, and the sections that say
-    // why a pass was run again (appended to the final pass's report).
+    // Whether the later passes put every point's three directions in the model, and the
+    // sections that say why a pass was run again (appended to the final pass's report).
     let mut three = asked;
     let mut sections = String::new();
     // With the default candidates the loop runs on the measured directions first; when it
@@ -85,7 +85,13 @@ pub fn diagnose_into(
             masses.join(", ")
         ));
         outcome = loop_once(study, model, params, true)?;
-        three = true;
+        // The later passes keep the three directions only when a three-direction mass was
+        // accepted (a base-springs term ROM on 12 inputs costs far more than on 4).
+        three = outcome
+            .summary
+            .levels
+            .iter()
+            .any(|l| l.accepted.iter().any(|a| a.1 == "sensor_mass"));
         sections += &format!(
             "\n## Three directions\n\nA first pass on the measured directions accepted {}. A sensor's mass acts in x, y and z, so the loop ran again with every measured point's x, y and z directions in the model and the three-direction sensor masses (`mass3_ptN`) among the candidates: the results above are that second pass's.\n",
             masses.join(", ")
@@ -117,12 +123,14 @@ pub fn diagnose_into(
             ));
             let mut fine = study.clone();
             fine.structure = structure;
-            // The starting fit only (no rounds): the same parameters on both meshes.
+            // The starting fit only (no rounds): the same parameters on both meshes. It has no
+            // effects, so the measured directions suffice (a refined mesh with every point's
+            // three directions would need a 12-input basis on 8 times the DOFs).
             let start_only = ClosedLoopParams {
                 max_rounds: 0,
                 ..params.clone()
             };
-            let cmp = match loop_once(&fine, model, &start_only, three) {
+            let cmp = match loop_once(&fine, model, &start_only, false) {
                 Ok(start) => {
                     let mut cmp = mesh::compare(&outcome, &start, words, params.threshold_nats);
                     // A mesh allowance alone compares the meshes; only a level left

@@ -114,6 +114,12 @@ pub(crate) fn markdown(
                     ),
                     r.verdict.clone(),
                 ),
+                None if c.predicted_gain.is_finite() => (
+                    "".into(),
+                    "".into(),
+                    "".into(),
+                    format!("not refitted (predicted gain {:.1} nats)", c.predicted_gain),
+                ),
                 None => ("".into(), "".into(), "".into(), "not refitted".into()),
             };
             // Ranked by the profile (the residual far from noise): its gain beside the verdict.

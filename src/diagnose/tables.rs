@@ -139,6 +139,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
     let mut refit: [Vec<Option<f64>>; 4] = Default::default();
     let (mut acc, mut verdict, mut unit) = (Vec::new(), Vec::new(), Vec::new());
     let (mut r2, mut absorbed, mut profile) = (Vec::new(), Vec::new(), Vec::new());
+    let mut predicted = Vec::new();
     for (level, _, _, res, _) in results {
         for c in &res.candidates {
             c_level.push(level.clone());
@@ -158,6 +159,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
             refit[3].push(r.map(|r| r.sd));
             acc.push(r.is_some_and(|r| r.accepted));
             verdict.push(r.map_or("not refitted".to_string(), |r| r.verdict.clone()));
+            predicted.push(c.predicted_gain);
             profile.push(c.profile_gain);
             r2.push(c.confounding.r2);
             absorbed.push(
@@ -187,6 +189,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
             refit[3].push(None);
             acc.push(r.accepted);
             verdict.push(r.verdict.clone());
+            predicted.push(f64::NAN);
             profile.push(None);
             // A whole law is not a column beside the law's own: no confounding measure.
             r2.push(f64::NAN);
@@ -205,6 +208,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
         .and_then(|t| t.push_f64("p_value", "1", p))
         .and_then(|t| t.push_f64("one_step_size", "SI (see unit)", est))
         .and_then(|t| t.push_f64("one_step_sd", "SI (see unit)", est_sd))
+        .and_then(|t| t.push_f64("predicted_gain", "nat", predicted))
         .and_then(|t| t.push_opt_f64("evidence_gain", "nat", gain))
         .and_then(|t| t.push_opt_f64("log_evidence", "nat", logz))
         .and_then(|t| t.push_opt_f64("size", "SI (see unit)", size))
