@@ -30,8 +30,9 @@ pub struct Prepared {
     study: Study,
     levels: Vec<LevelData>,
     laws: Vec<Box<dyn ConstitutiveModel>>,
+    /// The likelihood's engine, with the term ROM of the declared effects that need matrices
+    /// of their own (degraded bonds, base springs, adherend damping) when the study has any.
     engine: Box<dyn FrfEngine>,
-    lik_engine: Option<Box<dyn FrfEngine>>,
     /// One line on the engine (ROM size and certificate, or the full model).
     pub engine_note: String,
 }
@@ -42,7 +43,7 @@ impl Prepared {
     pub fn new(study: &Study, rom_cache: Option<&Path>) -> Result<Prepared, RunError> {
         let crate::stage::setup::Setup {
             laws,
-            built: _,
+            built,
             levels,
             engines,
         } = crate::stage::setup::setup(
@@ -50,13 +51,44 @@ impl Prepared {
             crate::stage::engine::LikelihoodInputs::of(study),
             rom_cache,
         )?;
+        let mut engine_note = engines.note;
+        let engine = engines.likelihood.unwrap_or(engines.engine);
+        // Declared effects with matrices of their own: the term ROM over the likelihood's
+        // engine, as a run builds it (cached beside the ROM).
+        let declared = super::with_declared(&study.declared_effects, &[]);
+        let engine: Box<dyn FrfEngine> = if declared.is_empty() {
+            engine
+        } else {
+            let mut terms = super::TermParams::of(study);
+            if let Some(dir) = rom_cache {
+                terms.cache = dir.to_path_buf();
+            }
+            match super::terms::term_rom_for(
+                &terms,
+                &built,
+                engine.as_ref(),
+                &declared,
+                super::band_of(&levels),
+            )? {
+                Some((rom, c)) => {
+                    engine_note += &format!(
+                        "; term ROM of the declared effects: n_r {}, certificate {:.2e} of the peak",
+                        c.basis_size, c.max_rel_error
+                    );
+                    Box::new(
+                        crate::rom::WithTerms::owning(engine, rom)
+                            .map_err(|e| RunError::Engine(e.to_string()))?,
+                    )
+                }
+                None => engine,
+            }
+        };
         Ok(Prepared {
             study: study.clone(),
             levels,
             laws,
-            engine: engines.engine,
-            lik_engine: engines.likelihood,
-            engine_note: engines.note,
+            engine,
+            engine_note,
         })
     }
 
@@ -109,7 +141,7 @@ impl Prepared {
                 format!("no level named {level:?}; the study has {names:?}"),
             ));
         };
-        let engine = self.lik_engine.as_deref().unwrap_or(self.engine.as_ref());
+        let engine = self.engine.as_ref();
         let mut post = super::of_study::build_posterior(
             study,
             inf,
@@ -234,5 +266,51 @@ mod tests {
         // A misspelt model names the key.
         let e = prep.posterior("model9", "L1", None).err().unwrap();
         assert!(e.to_string().contains("models"), "{e}");
+    }
+
+    /// A declared effect with matrices of its own (the adherend's structural loss factor, free)
+    /// gets its term ROM: the posterior has the effect as a coordinate, and its density changes
+    /// with it (without the term ROM the engine could not evaluate it at all).
+    #[test]
+    fn prepared_posterior_of_a_declared_term_effect_has_its_term_rom() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.toml");
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies");
+        let text = std::fs::read_to_string(root.join("bayes.toml"))
+            .unwrap()
+            .replace("\"data/", &format!("\"{}/data/", root.display()))
+            .replace(
+                "models = [\"model3\", \"model4\", \"model5\"]",
+                "models = [\"model4\"]",
+            )
+            .replace(
+                "[measurements]",
+                "[[structure.effects]]\ntype = \"adherend_damping\"\nvalue = 0.001\nfree = true\n\n[measurements]",
+            );
+        std::fs::write(&path, text).unwrap();
+        let study = crate::study::load(&path).unwrap();
+        let prep = Prepared::new(&study, Some(dir.path())).unwrap();
+        assert!(
+            prep.engine_note.contains("term ROM"),
+            "{}",
+            prep.engine_note
+        );
+        let post = prep.posterior("model4", "L1", None).unwrap();
+        let names = post.names();
+        let k = names
+            .iter()
+            .position(|n| n == "adherend_damping")
+            .expect("the declared effect is a coordinate");
+        let truth = prep.levels()[0].truth.as_ref().unwrap().params.clone();
+        let mut p = truth.clone();
+        p.extend(std::iter::repeat_n(0.01, post.dim() - 4));
+        p[k] = 1e-4;
+        let a = post.log_likelihood(&post.unconstrained(&p), None).unwrap();
+        p[k] = 5e-3;
+        let b = post.log_likelihood(&post.unconstrained(&p), None).unwrap();
+        assert!(
+            a.is_finite() && b.is_finite() && (a - b).abs() > 1.0,
+            "{a} vs {b}"
+        );
     }
 }

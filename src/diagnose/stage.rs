@@ -167,6 +167,8 @@ pub fn loop_stage(
         &summary,
         term_rom.as_ref().map(|(t, c)| (t.names.as_slice(), c)),
     );
+    // (The wrapped engine borrows the term ROM, which the summary takes next.)
+    drop(wrapped);
     let term_names = term_rom
         .as_ref()
         .map(|(t, _)| t.names.clone())

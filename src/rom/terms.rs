@@ -609,14 +609,44 @@ impl FrfEngine for TermRom {
 
 /// An effect-free engine (the pencil sweep, the full model, ...) with a [`TermRom`] for sweeps
 /// with terms: plain sweeps and modes are the plain engine's (unchanged numbers), sweeps with
-/// terms the term ROM's. Both must have the same points and inputs.
+/// terms the term ROM's. Both must have the same points and inputs. It borrows both
+/// ([`WithTerms::new`]) or owns both ([`WithTerms::owning`], for a holder whose posteriors
+/// borrow one engine, such as [`crate::diagnose::prepared::Prepared`]).
 pub struct WithTerms<'a> {
-    pub plain: &'a dyn FrfEngine,
-    pub terms: &'a TermRom,
+    plain: Held<'a, dyn FrfEngine + 'a>,
+    terms: Held<'a, TermRom>,
+}
+
+/// A part of [`WithTerms`], borrowed or owned.
+enum Held<'a, T: ?Sized + 'a> {
+    Borrowed(&'a T),
+    Owned(Box<T>),
+}
+
+impl<T: ?Sized> std::ops::Deref for Held<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        match self {
+            Held::Borrowed(t) => t,
+            Held::Owned(t) => t,
+        }
+    }
 }
 
 impl<'a> WithTerms<'a> {
     pub fn new(plain: &'a dyn FrfEngine, terms: &'a TermRom) -> Result<Self, RomError> {
+        Self::checked(Held::Borrowed(plain), Held::Borrowed(terms))
+    }
+
+    /// [`WithTerms::new`] owning the engine and the term ROM.
+    pub fn owning(plain: Box<dyn FrfEngine + 'a>, terms: TermRom) -> Result<Self, RomError> {
+        Self::checked(Held::Owned(plain), Held::Owned(Box::new(terms)))
+    }
+
+    fn checked(
+        plain: Held<'a, dyn FrfEngine + 'a>,
+        terms: Held<'a, TermRom>,
+    ) -> Result<Self, RomError> {
         if plain.n_out() != terms.n_out() || plain.inputs() != terms.inputs() {
             return Err(RomError::Params(format!(
                 "the term ROM has {} points and inputs {:?}; the engine {} and {:?}",
