@@ -3,7 +3,8 @@
 //! nothing) on `studies/closed_loop_mass.toml` (the default rig, ROM engine, 12 g undeclared
 //! mass at point 4): median of a few runs of [`rfmlab::diagnose::diagnose_study`],
 //! the loop alone (`loop_seconds`) and the whole command (engine build included). The old path
-//! (every refit a full multistart search) runs side by side when RFMLAB_BENCH_OLD=1.
+//! (every refit a full multistart search) runs side by side when RFMLAB_BENCH_OLD=1, and the
+//! loop without the score-predicted gate on refits when RFMLAB_BENCH_NO_GATE=1.
 //! Run with `cargo bench --bench closed_loop`; RFMLAB_BENCH_RUNS sets the runs (default 3).
 //! RFMLAB_BENCH_STUDY names another study (relative to the package), e.g.
 //! `studies/closed_loop_virtual_springs.toml`: the independent compliant base with base springs
@@ -47,20 +48,32 @@ fn main() {
     let mut study = rfmlab::study::load(&file).expect("study");
     let tmp = std::env::temp_dir().join(format!("rfmlab-bench-closed-loop-{}", std::process::id()));
     study.output_dir = tmp.join("out");
-    let mut paths = vec![("warm refits (default)", true)];
+    let d = ClosedLoopParams::default();
+    let mut paths = vec![("warm refits (default)", d.clone())];
+    if std::env::var("RFMLAB_BENCH_NO_GATE").is_ok_and(|v| v == "1") {
+        paths.push((
+            "no score-predicted gate",
+            ClosedLoopParams {
+                predicted_gain_margin: f64::INFINITY,
+                ..d.clone()
+            },
+        ));
+    }
     if std::env::var("RFMLAB_BENCH_OLD").is_ok_and(|v| v == "1") {
-        paths.push(("multistart refits (old)", false));
+        paths.push((
+            "multistart refits (old)",
+            ClosedLoopParams {
+                warm_refits: false,
+                ..d.clone()
+            },
+        ));
     }
     println!(
         "closed loop, {} ({} thread(s)), {runs} run(s):",
         file.display(),
         rayon::current_num_threads()
     );
-    for (label, warm) in paths {
-        let params = ClosedLoopParams {
-            warm_refits: warm,
-            ..ClosedLoopParams::default()
-        };
+    for (label, params) in paths {
         let (mut loop_s, mut total_s) = (Vec::new(), Vec::new());
         let mut per_level: Vec<(String, Vec<f64>)> = Vec::new();
         let mut conclusion = String::new();

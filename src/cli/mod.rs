@@ -117,7 +117,8 @@ Docs: docs/outputs.md (section rfmlab validate), docs/validation.md, docs/study-
 
 /// `rfmlab diagnose --help`.
 const DIAGNOSE_HELP: &str = "Writes results/<name>.diagnose/: closed_loop.md, residuals_<level>.png and parquet tables
-  residuals, candidates, closed_loop, verdict, signatures; closed_loop.md's first line is the status per level.
+  residuals, candidates, closed_loop, verdict, signatures, and mesh when a refined mesh was compared;
+  closed_loop.md's first line is the status per level.
 Docs: docs/closed-loop.md (what each status means and what to do next), docs/outputs.md (closed-loop tables).";
 
 /// Parse arguments, run, print the error chain, return the exit code.

