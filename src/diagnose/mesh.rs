@@ -11,7 +11,7 @@
 //! adhesive's parameters on both meshes. Otherwise the study mesh's results stand and the report
 //! says how much the refinement changed.
 
-use super::summary::LoopOutcome;
+use super::summary::{DiagnoseLevel, LevelResult, LoopOutcome};
 use crate::closed_loop::verdict::Status;
 use crate::output::Table;
 use crate::stage::RunError;
@@ -148,13 +148,7 @@ pub(crate) fn compare(
 /// mesh's loop): first in each level's list, with the refined element size as its size; a
 /// level that needed nothing else is `explained` now.
 pub(crate) fn name_in(outcome: &mut LoopOutcome, cmp: &MeshComparison, refined_size_m: f64) {
-    for ((l, r), m) in outcome
-        .summary
-        .levels
-        .iter_mut()
-        .zip(outcome.levels.iter_mut())
-        .zip(&cmp.levels)
-    {
+    for ((l, r), m) in per_level(outcome, cmp) {
         l.accepted.insert(
             0,
             (
@@ -182,6 +176,19 @@ pub(crate) fn name_in(outcome: &mut LoopOutcome, cmp: &MeshComparison, refined_s
         }
     }
     outcome.remake_markdown();
+}
+
+/// Every level of `outcome`: its summary, its result and its comparison in `cmp`.
+fn per_level<'a>(
+    outcome: &'a mut LoopOutcome,
+    cmp: &'a MeshComparison,
+) -> impl Iterator<Item = ((&'a mut DiagnoseLevel, &'a mut LevelResult), &'a MeshLevel)> {
+    outcome
+        .summary
+        .levels
+        .iter_mut()
+        .zip(outcome.levels.iter_mut())
+        .zip(&cmp.levels)
 }
 
 /// The refined mesh's element size (m), or NaN for a mesh given by divisions.
@@ -353,13 +360,7 @@ pub(crate) fn apply_allowance(outcome: &mut LoopOutcome, cmp: &MeshComparison, p
         "\n### Mesh allowance\n\n`mesh_allowance = true`: the adhesive's parameters carry the discretisation error of the mesh they were identified on ({}), estimated from their starting fits on both meshes (difference d, Richardson order {p}): b = |d| x {factor:.3}. Their sds above are sqrt(sd^2 + b^2).\n\n| level | parameter | value | posterior sd | discretisation b | sd with the allowance |\n|---|---|---|---|---|---|\n",
         if cmp.accepted { "the refined mesh" } else { "the study's mesh" }
     );
-    for ((l, r), m) in outcome
-        .summary
-        .levels
-        .iter_mut()
-        .zip(outcome.levels.iter_mut())
-        .zip(&cmp.levels)
-    {
+    for ((l, r), m) in per_level(outcome, cmp) {
         for (name, a, _, b, _) in &m.law {
             let bias = factor * (b - a).abs();
             let fit = &mut r.3.after;

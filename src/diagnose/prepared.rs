@@ -201,13 +201,10 @@ mod tests {
     use super::*;
     use crate::inference::Posterior;
 
-    /// The prepared posterior of the default data is the run's: its log likelihood at the
-    /// truth beats the one at a parameter set 10 % off, and its gradient matches central
-    /// differences (the binding relies on both).
-    #[test]
-    fn prepared_posterior_prefers_the_truth_and_has_a_consistent_gradient() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("s.toml");
+    /// studies/bayes.toml with Model 4 only and `effects` (TOML) before `[measurements]`,
+    /// written into `dir`.
+    fn bayes_model4(dir: &Path, effects: &str) -> Study {
+        let path = dir.join("s.toml");
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies");
         let text = std::fs::read_to_string(root.join("bayes.toml"))
             .unwrap()
@@ -215,9 +212,19 @@ mod tests {
             .replace(
                 "models = [\"model3\", \"model4\", \"model5\"]",
                 "models = [\"model4\"]",
-            );
+            )
+            .replace("[measurements]", &format!("{effects}[measurements]"));
         std::fs::write(&path, text).unwrap();
-        let study = crate::study::load(&path).unwrap();
+        crate::study::load(&path).unwrap()
+    }
+
+    /// The prepared posterior of the default data is the run's: its log likelihood at the
+    /// truth beats the one at a parameter set 10 % off, and its gradient matches central
+    /// differences (the binding relies on both).
+    #[test]
+    fn prepared_posterior_prefers_the_truth_and_has_a_consistent_gradient() {
+        let dir = tempfile::tempdir().unwrap();
+        let study = bayes_model4(dir.path(), "");
         let prep = Prepared::new(&study, None).unwrap();
         let post = prep.posterior("model4", "L1", None).unwrap();
         assert_eq!(post.n_law(), 4);
@@ -274,21 +281,10 @@ mod tests {
     #[test]
     fn prepared_posterior_of_a_declared_term_effect_has_its_term_rom() {
         let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("s.toml");
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies");
-        let text = std::fs::read_to_string(root.join("bayes.toml"))
-            .unwrap()
-            .replace("\"data/", &format!("\"{}/data/", root.display()))
-            .replace(
-                "models = [\"model3\", \"model4\", \"model5\"]",
-                "models = [\"model4\"]",
-            )
-            .replace(
-                "[measurements]",
-                "[[structure.effects]]\ntype = \"adherend_damping\"\nvalue = 0.001\nfree = true\n\n[measurements]",
-            );
-        std::fs::write(&path, text).unwrap();
-        let study = crate::study::load(&path).unwrap();
+        let study = bayes_model4(
+            dir.path(),
+            "[[structure.effects]]\ntype = \"adherend_damping\"\nvalue = 0.001\nfree = true\n\n",
+        );
         let prep = Prepared::new(&study, Some(dir.path())).unwrap();
         assert!(
             prep.engine_note.contains("term ROM"),
