@@ -760,7 +760,11 @@ pub fn run_closed_loop_with_laws<'a>(
         // where the score is trusted, a predicted evidence gain within the margin of the
         // threshold); then, when none passes and the residual is far from noise, the top by
         // profile gain.
-        let trusted = residuals(post, &phys)?.chi2_normalised <= params.profile_rank_above;
+        // The current model's residual (post holds it until the first refit): whether the score
+        // is trusted here, and the profile ranking's reference below.
+        let now = residuals(post, &phys)?;
+        let (wrss_now, chi2_now) = (now.chi2, now.chi2_normalised);
+        let trusted = chi2_now <= params.profile_rank_above;
         let cut = params.threshold_nats - params.predicted_gain_margin;
         let mut queue: Vec<usize> = (0..params.top.min(scored.len()))
             .filter(|&ci| scored[ci].p_value < params.p_threshold)
@@ -932,8 +936,6 @@ pub fn run_closed_loop_with_laws<'a>(
             // the candidates not yet refitted are ranked by their profile over the prior.
             profile_ranked = true;
             install(post, &law_priors, &noise_priors, base_effects_now.clone())?;
-            let now = residuals(post, &phys)?;
-            let (wrss_now, chi2_now) = (now.chi2, now.chi2_normalised);
             if !(chi2_now > params.profile_rank_above) {
                 break;
             }

@@ -108,7 +108,10 @@ pub fn diagnose_into(
         .is_none_or(|c| c.admits(mesh::DISCRETISATION, mesh::DISCRETISATION));
     let allowance = study.closed_loop.as_ref().is_some_and(|c| c.mesh_allowance);
     let unexplained = unexplained_levels(&outcome);
-    if allowance || (mesh_admitted && !unexplained.is_empty()) {
+    // Only a level left unexplained lets the refined mesh replace the study's; a mesh allowance
+    // alone compares the meshes.
+    let for_residual = mesh_admitted && !unexplained.is_empty();
+    if allowance || for_residual {
         if let Some((structure, words)) = joint
             .then(|| mesh::refined_twice(&study.structure))
             .flatten()
@@ -132,11 +135,8 @@ pub fn diagnose_into(
             };
             let cmp = match loop_once(&fine, model, &start_only, false) {
                 Ok(start) => {
-                    let mut cmp = mesh::compare(&outcome, &start, words, params.threshold_nats);
-                    // A mesh allowance alone compares the meshes; only a level left
-                    // unexplained lets the refined mesh replace the study's.
-                    cmp.for_residual = mesh_admitted && !unexplained.is_empty();
-                    cmp.accepted &= cmp.for_residual;
+                    let cmp =
+                        mesh::compare(&outcome, &start, words, params.threshold_nats, for_residual);
                     params.progress.say(&format!(
                         "refined mesh: evidence gain {:.1} nats at the starting fit (threshold {:.1}): {}",
                         cmp.gain,
@@ -157,15 +157,9 @@ pub fn diagnose_into(
                 }
                 // A refined mesh beyond the machine, or one its solver cannot resolve, leaves
                 // the study mesh's results, with the reason in the report.
-                Err(e) => mesh::MeshComparison {
-                    meshes: words,
-                    levels: Vec::new(),
-                    gain: f64::NAN,
-                    threshold: params.threshold_nats,
-                    accepted: false,
-                    failed: Some(e.to_string()),
-                    for_residual: mesh_admitted && !unexplained.is_empty(),
-                },
+                Err(e) => {
+                    mesh::not_evaluated(words, params.threshold_nats, for_residual, e.to_string())
+                }
             };
             sections += &mesh::section(&cmp);
             mesh_comparison = Some(cmp);

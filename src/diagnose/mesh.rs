@@ -96,12 +96,14 @@ pub struct MeshComparison {
 }
 
 /// Compare the starting fits of `coarse` and of `refined` (the same levels, the loop run on
-/// the refined mesh, or only its start).
+/// the refined mesh, or only its start). The refined mesh is accepted when it was tried for the
+/// residual (`for_residual`) and gains at least `threshold`.
 pub(crate) fn compare(
     coarse: &LoopOutcome,
     refined: &LoopOutcome,
     meshes: String,
     threshold: f64,
+    for_residual: bool,
 ) -> MeshComparison {
     let levels: Vec<MeshLevel> = coarse
         .levels
@@ -137,10 +139,29 @@ pub(crate) fn compare(
         meshes,
         gain,
         threshold,
-        accepted: gain.is_finite() && gain >= threshold,
+        accepted: for_residual && gain.is_finite() && gain >= threshold,
         levels,
         failed: None,
-        for_residual: true,
+        for_residual,
+    }
+}
+
+/// A comparison that could not be made: the refined mesh failed with `why` (beyond the machine,
+/// or a solver that cannot resolve it).
+pub(crate) fn not_evaluated(
+    meshes: String,
+    threshold: f64,
+    for_residual: bool,
+    why: String,
+) -> MeshComparison {
+    MeshComparison {
+        meshes,
+        levels: Vec::new(),
+        gain: f64::NAN,
+        threshold,
+        accepted: false,
+        failed: Some(why),
+        for_residual,
     }
 }
 

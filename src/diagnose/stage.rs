@@ -160,20 +160,13 @@ pub fn loop_stage(
             truth,
         ));
     }
-    let markdown = super::markdown::markdown(
-        &p.study_name,
-        name,
-        &results,
-        &summary,
-        term_rom.as_ref().map(|(t, c)| (t.names.as_slice(), c)),
-    );
     // (The wrapped engine borrows the term ROM, which the summary takes next.)
     drop(wrapped);
     let term_names = term_rom
         .as_ref()
         .map(|(t, _)| t.names.clone())
         .unwrap_or_default();
-    Ok(LoopOutcome {
+    let mut outcome = LoopOutcome {
         term_names,
         mesh: None,
         summary: DiagnoseSummary {
@@ -185,8 +178,10 @@ pub fn loop_stage(
             term_rom: term_rom.map(|(_, c)| c).zip(term_range),
         },
         levels: results,
-        markdown,
-    })
+        markdown: String::new(),
+    };
+    outcome.remake_markdown();
+    Ok(outcome)
 }
 
 /// Correlated channels (`inference.noise.channel_correlation`): the starting model's MAP, then

@@ -79,7 +79,7 @@ pub struct LoopOutcome {
 }
 
 impl LoopOutcome {
-    /// Make the markdown again from the levels and the summary (after a later pass changed a
+    /// Make the markdown from the levels and the summary (again, after a later pass changed a
     /// level's status or its accepted effects).
     pub(crate) fn remake_markdown(&mut self) {
         self.markdown = super::markdown::markdown(

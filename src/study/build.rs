@@ -211,7 +211,9 @@ pub fn with_sensor_masses(
         key: "sensors".into(),
         message,
     };
-    let (located, points) = if sensors.iter().any(|s| s.all_directions) {
+    // The model with every point's three directions located on the same mesh when a sensor
+    // acts in x, y and z (the DOFs do not depend on the points); else the model itself.
+    let located = if sensors.iter().any(|s| s.all_directions) {
         let mut all = structure.clone();
         all.points = points_in_all_directions(&structure.points);
         let built = build_model(&all, file)?;
@@ -222,44 +224,41 @@ pub fn with_sensor_masses(
                 built.model.n_dof()
             )));
         }
-        let measured = |i: usize| {
-            let p = &built.model.points[i];
-            structure
-                .points
-                .iter()
-                .any(|q| q.id == p.id && q.direction.axis == p.direction.axis)
-        };
-        let located = StructuralModel {
-            points: built.model.points.clone(),
+        StructuralModel {
+            points: built.model.points,
             ..model.clone()
-        };
-        let idx: Vec<(usize, f64)> = sensors
-            .iter()
-            .flat_map(|s| {
-                located
-                    .points
-                    .iter()
-                    .enumerate()
-                    .filter(move |(i, p)| p.id == s.point && (s.all_directions || measured(*i)))
-                    .map(move |(i, _)| (i, s.mass_kg))
-                    .collect::<Vec<_>>()
-            })
-            .collect();
-        (located, idx)
+        }
     } else {
-        let idx = sensors
-            .iter()
-            .map(|s| {
-                model
-                    .points
-                    .iter()
-                    .position(|p| p.id == s.point)
-                    .map(|i| (i, s.mass_kg))
-                    .ok_or_else(|| err(format!("point {} is not a point of the model", s.point)))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        (model.clone(), idx)
+        model.clone()
     };
+    // Each sensor's mass at all three directions of its point, or at its (first) measured one.
+    let measured = |p: &crate::fe::ObservationPoint| {
+        structure
+            .points
+            .iter()
+            .any(|q| q.id == p.id && q.direction.axis == p.direction.axis)
+    };
+    let mut points = Vec::new();
+    for s in sensors {
+        let mut at = located
+            .points
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| p.id == s.point && (s.all_directions || measured(p)))
+            .map(|(i, _)| (i, s.mass_kg))
+            .peekable();
+        if at.peek().is_none() {
+            return Err(err(format!(
+                "point {} is not a point of the model",
+                s.point
+            )));
+        }
+        if s.all_directions {
+            points.extend(at);
+        } else {
+            points.extend(at.take(1));
+        }
+    }
     let mut out = located
         .with_point_masses(&points)
         .map_err(|e| err(format!("sensor masses: {e}")))?;
