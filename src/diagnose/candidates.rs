@@ -46,13 +46,15 @@ pub fn bond_candidates(joint: Option<&JointSpec>, width_m: f64) -> Vec<Effect> {
     ]
 }
 
-/// The candidates with matrices of their own that `[closed_loop] candidates` asks for (by
-/// type, e.g. "degraded_bond", or by name): a degraded-bond strip at each end of the block, the
-/// adherend damping and, on the mesher's joint, base springs. Opt-in: each evaluation with a
-/// bond is a dense LU of the term ROM per line (on the paper's 5 mm joint with both strips, 219
-/// unknowns after the compression: 1-2 s per forward evaluation on 2000 fine lines, against
-/// milliseconds on the pencil), and the term ROM is built, certified and compressed per run
-/// (about 3 min there), so the default candidate set ("all") leaves them out.
+/// The candidates with matrices of their own: on the mesher's joint, base springs (two shapes)
+/// with the default candidates; a degraded-bond strip at each end of the block and the
+/// adherend damping when `[closed_loop] candidates` asks for them (by type, e.g.
+/// "degraded_bond", or by name). Those two stay opt-in: each evaluation with a bond is a dense
+/// LU of the term ROM per line (on the paper's 5 mm joint with both strips, 219 unknowns after
+/// the compression: 1-2 s per forward evaluation on 2000 fine lines, against milliseconds on
+/// the pencil), and the adherend damping's term cannot share the springs' free-base model. The
+/// springs' term ROM (156 vectors on the paper's joint) is built and certified once (about
+/// 100 s) and cached.
 pub(crate) fn opt_in_term_candidates(
     joint: Option<&JointSpec>,
     settings: Option<&ClosedLoopSettings>,
@@ -65,8 +67,14 @@ pub(crate) fn opt_in_term_candidates(
             },
         ));
     }
+    // Base springs are among the default candidates (no list, or `"all"`); the others only
+    // when a list names them.
+    let defaults = settings.is_none_or(|c| c.candidates.is_none());
     all.into_iter()
-        .filter(|e| settings.is_some_and(|c| c.names(|n| n == e.kind() || n == e.name())))
+        .filter(|e| {
+            (defaults && matches!(e, Effect::BaseSprings { .. }))
+                || settings.is_some_and(|c| c.names(|n| n == e.kind() || n == e.name()))
+        })
         .collect()
 }
 

@@ -52,6 +52,10 @@ pub fn diagnose_into(
     // joint become model points (and engine inputs) for it. This triples the engine's inputs
     // and its reduced basis (about 30 s to build and certify on the paper's joint, cached).
     let asked = joint && wants_sensor_mass(study);
+    let defaults = study
+        .closed_loop
+        .as_ref()
+        .is_none_or(|c| c.candidates.is_none());
     let mut outcome = loop_once(study, model, params, asked)?;
     // Whether the later passes put every point's three directions in the model, and the
     // sections that say why a pass was run again (appended to the final pass's report).
@@ -79,28 +83,70 @@ pub fn diagnose_into(
     // Every point's three directions, not only the accepted masses' points: with the x and z
     // directions of one point only, the basis certified no better than 1.4e-6 after 527
     // vectors (250 s); with all twelve directions, 127 vectors certify at 8.3e-7 (30 s).
-    if joint && !asked && admitted && !masses.is_empty() {
+    // Base springs accepted with the mass: the second pass would need their term ROM on every
+    // point's three directions (12 inputs), so it is not run; the measured-direction mass
+    // stands for the sensor's (the report says so).
+    let springs: Vec<String> = outcome
+        .summary
+        .levels
+        .iter()
+        .flat_map(|l| {
+            l.accepted
+                .iter()
+                .filter(|a| a.1 == "base_springs")
+                .map(move |a| format!("{} at {}", a.0, l.level))
+        })
+        .collect();
+    if joint && !asked && admitted && !masses.is_empty() && !springs.is_empty() {
+        sections += &format!(
+            "\n## Three directions\n\nThe loop accepted {} together with {}. A sensor's mass acts in x, y and z, but a pass with every point's three directions would need the springs' reduced model on twelve inputs, so it was not run: the mass acts in the measured direction only. Ask for `\"sensor_mass\"` in `[closed_loop] candidates` (without base springs) to test the three-direction mass.\n",
+            masses.join(", "),
+            springs.join(", ")
+        );
+    }
+    if joint && !asked && admitted && !masses.is_empty() && springs.is_empty() {
         params.progress.say(&format!(
             "{} accepted: a sensor's mass acts in x, y and z, so the loop runs again with every point's three directions",
             masses.join(", ")
         ));
-        outcome = loop_once(study, model, params, true)?;
-        // The later passes keep the three directions only when a three-direction mass was
-        // accepted (a base-springs term ROM on 12 inputs costs far more than on 4).
-        three = outcome
-            .summary
-            .levels
-            .iter()
-            .any(|l| l.accepted.iter().any(|a| a.1 == "sensor_mass"));
+        // The second pass leaves base springs out (their term ROM on every point's three
+        // directions would have 12 inputs: far costlier than on the measured 4). The two
+        // passes model the same data, so the one with the larger evidence (summed over the
+        // levels) is kept.
+        let second = loop_once(&without_springs(study, defaults), model, params, true)?;
+        let gain = final_evidence(&second) - final_evidence(&outcome);
+        let keep_second = !(gain < 0.0);
+        params.progress.say(&format!(
+            "three directions: evidence {gain:+.1} nats against the first pass: {}",
+            if keep_second {
+                "the second pass is kept"
+            } else {
+                "the first pass is kept"
+            }
+        ));
         sections += &format!(
-            "\n## Three directions\n\nA first pass on the measured directions accepted {}. A sensor's mass acts in x, y and z, so the loop ran again with every measured point's x, y and z directions in the model and the three-direction sensor masses (`mass3_ptN`) among the candidates: the results above are that second pass's.\n",
-            masses.join(", ")
+            "\n## Three directions\n\nA first pass on the measured directions accepted {}. A sensor's mass acts in x, y and z, so the loop ran again with every measured point's x, y and z directions in the model and the three-direction sensor masses (`mass3_ptN`) among the candidates (base springs left out: their reduced model on twelve inputs costs too much). The two passes explain the same data; the second's final model has {gain:+.1} nats of evidence against the first's (summed over the levels), so {}.\n",
+            masses.join(", "),
+            if keep_second {
+                "the results above are the second pass's"
+            } else {
+                "the results above are the first pass's"
+            }
         );
+        if keep_second {
+            outcome = second;
+            // The later passes keep the three directions only when a three-direction mass
+            // was accepted.
+            three = outcome
+                .summary
+                .levels
+                .iter()
+                .any(|l| l.accepted.iter().any(|a| a.1 == "sensor_mass"));
+        }
     }
     // The FE model's own discretisation error: a level left unexplained is tried on the mesh
     // refined twice per direction (module `mesh`); when it gains the loop's evidence threshold
     // at the starting fit, the loop runs again there and that pass is reported.
-    let mut current = study.clone();
     let mut mesh_comparison = None;
     let mesh_admitted = study
         .closed_loop
@@ -148,10 +194,22 @@ pub fn diagnose_into(
                         }
                     ));
                     if cmp.accepted {
-                        let mut refined = loop_once(&fine, model, params, three)?;
+                        // On the refined mesh the candidates with matrices of their own are
+                        // kept only when the study mesh's pass accepted one (a term ROM on 8
+                        // times the DOFs).
+                        let accepted_terms = outcome
+                            .summary
+                            .levels
+                            .iter()
+                            .any(|l| l.accepted.iter().any(|a| a.1 == "base_springs"));
+                        let rerun = if accepted_terms && !three {
+                            fine.clone()
+                        } else {
+                            without_springs(&fine, defaults)
+                        };
+                        let mut refined = loop_once(&rerun, model, params, three)?;
                         mesh::name_in(&mut refined, &cmp, mesh::element_size(&fine.structure));
                         outcome = refined;
-                        current = fine;
                     }
                     cmp
                 }
@@ -164,30 +222,6 @@ pub fn diagnose_into(
             sections += &mesh::section(&cmp);
             mesh_comparison = Some(cmp);
         }
-    }
-    // Base springs need a term ROM (about 80 s to build on the paper's joint, cached after).
-    // With the default candidates they are tried when the residual stays unexplained without
-    // them: the loop runs again with them among its candidates. (Adherend damping stays
-    // opt-in: its term cannot be combined with the springs' free-base model.)
-    let unexplained = unexplained_levels(&outcome);
-    let defaults = study
-        .closed_loop
-        .as_ref()
-        .is_none_or(|c| c.candidates.is_none());
-    if joint && defaults && !unexplained.is_empty() {
-        params.progress.say(&format!(
-            "{} unexplained: the loop runs again with base springs (two shapes) among the candidates",
-            unexplained.join(", ")
-        ));
-        let mut wider = current.clone();
-        let mut settings = wider.closed_loop.clone().unwrap_or_default();
-        settings.candidates = Some(with_structural_terms(three));
-        wider.closed_loop = Some(settings);
-        outcome = loop_once(&wider, model, params, three)?;
-        sections += &format!(
-            "\n## Base springs\n\nWith the default candidates the residual stayed above the null level at {}. Base springs (a compliant base under the adhesive, in two shapes) need matrices of their own (a term ROM), so the loop ran again with them among the candidates: the results above are that pass's.\n",
-            unexplained.join(", ")
-        );
     }
     if let Some(cmp) = mesh_comparison
         .as_ref()
@@ -204,6 +238,12 @@ pub fn diagnose_into(
     Ok(outcome.summary)
 }
 
+/// The final models' log evidence of `outcome`, summed over its levels (NaN when one is not
+/// finite).
+fn final_evidence(outcome: &super::summary::LoopOutcome) -> f64 {
+    outcome.levels.iter().map(|l| l.3.after.log_evidence).sum()
+}
+
 /// The levels of `outcome` whose status is `unexplained`.
 fn unexplained_levels(outcome: &super::summary::LoopOutcome) -> Vec<String> {
     outcome
@@ -215,17 +255,22 @@ fn unexplained_levels(outcome: &super::summary::LoopOutcome) -> Vec<String> {
         .collect()
 }
 
-/// The default candidates' types (`candidates = "all"`) plus base springs, and the
-/// three-direction sensor mass when `sensor_mass`.
-fn with_structural_terms(sensor_mass: bool) -> Vec<String> {
-    let mut out: Vec<String> = crate::study::effects::EFFECT_TYPES
-        .iter()
-        .filter(|t| !matches!(**t, "degraded_bond" | "adherend_damping"))
-        .map(|t| t.to_string())
-        .collect();
-    out.push(crate::closed_loop::alternative::ALTERNATIVE_LAW.to_string());
-    if sensor_mass {
-        out.push("sensor_mass".to_string());
+/// `study` with the default candidates less base springs (and the three-direction sensor
+/// mass) when `defaults`; as it is otherwise.
+fn without_springs(study: &Study, defaults: bool) -> Study {
+    let mut out = study.clone();
+    if defaults {
+        let mut types: Vec<String> = crate::study::effects::EFFECT_TYPES
+            .iter()
+            .filter(|t| !matches!(**t, "degraded_bond" | "adherend_damping" | "base_springs"))
+            .map(|t| t.to_string())
+            .collect();
+        types.push(crate::closed_loop::alternative::ALTERNATIVE_LAW.to_string());
+        types.push("sensor_mass".to_string());
+        types.push(mesh::DISCRETISATION.to_string());
+        let mut settings = out.closed_loop.clone().unwrap_or_default();
+        settings.candidates = Some(types);
+        out.closed_loop = Some(settings);
     }
     out
 }

@@ -140,8 +140,15 @@ pub(crate) fn markdown(
         for c in &res.law_candidates {
             let _ = writeln!(
                 s,
-                "| {} | - | {} (alternative law) | - | - | {:.1} | - | - | {} |",
-                c.round, c.law, c.refit.evidence_gain, c.refit.verdict
+                "| {} | - | {} (alternative law) | - | - | {} | - | - | {} |",
+                c.round,
+                c.law,
+                if c.refit.evidence_gain.is_finite() {
+                    format!("{:.1}", c.refit.evidence_gain)
+                } else {
+                    String::new()
+                },
+                c.refit.verdict
             );
         }
         for (e, _, _) in &res.accepted {

@@ -106,9 +106,18 @@ pub fn input_error(
     })
 }
 
+/// The environment variable that names one ROM cache folder for every study (studies of the
+/// same joint then share their certified ROMs and term ROMs; a ROM's key holds every setting
+/// it depends on).
+pub const ROM_CACHE_ENV: &str = "RFMLAB_ROM_CACHE";
+
 /// The folder of cached ROMs of a study whose results go to `output_dir` (`.rom-cache/`
-/// beside it): where `rfmlab run` keeps its certified ROM and `rfmlab diagnose` its term ROM.
+/// beside it, or the folder `RFMLAB_ROM_CACHE` names): where `rfmlab run` keeps its certified
+/// ROM and `rfmlab diagnose` its term ROM.
 pub fn rom_cache_dir(output_dir: &std::path::Path) -> std::path::PathBuf {
+    if let Some(dir) = std::env::var_os(ROM_CACHE_ENV).filter(|d| !d.is_empty()) {
+        return std::path::PathBuf::from(dir);
+    }
     output_dir
         .parent()
         .unwrap_or(std::path::Path::new("."))
