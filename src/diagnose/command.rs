@@ -179,7 +179,9 @@ pub fn diagnose_into(
                 max_rounds: 0,
                 ..params.clone()
             };
-            let cmp = match loop_once(&fine, model, &start_only, false) {
+            // No candidates are tried there, so none with matrices of their own is built (a
+            // term ROM on the refined mesh's 8 times the DOFs).
+            let cmp = match loop_once(&without_springs(&fine, true), model, &start_only, false) {
                 Ok(start) => {
                     let cmp =
                         mesh::compare(&outcome, &start, words, params.threshold_nats, for_residual);
@@ -255,8 +257,8 @@ fn unexplained_levels(outcome: &super::summary::LoopOutcome) -> Vec<String> {
         .collect()
 }
 
-/// `study` with the default candidates less base springs (and the three-direction sensor
-/// mass) when `defaults`; as it is otherwise.
+/// `study` with the default candidates less base springs (the three-direction sensor mass and
+/// the refined mesh kept) when `defaults`; as it is otherwise.
 fn without_springs(study: &Study, defaults: bool) -> Study {
     let mut out = study.clone();
     if defaults {

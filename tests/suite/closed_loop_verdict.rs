@@ -239,11 +239,10 @@ fn explained_wrongly(l: &DiagnoseLevel, expected: &[&str]) -> bool {
 }
 
 /// The independent compliant base (equal normal and tangential springs) with the default
-/// candidates: the first pass ends `unexplained`, so the loop runs again with base springs and
-/// adherend damping among the candidates; both spring shapes are tried, the equal springs are
+/// candidates, base springs among them: both spring shapes are tried, the equal springs are
 /// accepted and sized within their interval of the truth, and the level ends `confounded` with
-/// every adhesive parameter's truth inside the reported range. Minutes in a debug build (the
-/// two-shape term ROM and the loop on it): `cargo test --release --test suite -- --ignored
+/// every adhesive parameter's truth inside the reported range. Minutes (the two-shape term ROM,
+/// built once and cached, and the loop on it): `cargo test --release --test suite -- --ignored
 /// independent_compliant_base_with_base_springs`.
 #[test]
 #[ignore]
@@ -281,8 +280,7 @@ fn independent_compliant_base_with_base_springs_is_confounded_around_the_truth()
     }
 }
 
-/// Without base springs among the candidates (a list that leaves them out: with the default
-/// candidates the loop would run again with them) the loop cannot explain the independent
+/// Without base springs among the candidates (a list that leaves them out) the loop cannot explain the independent
 /// compliant base's residual: it must say so (`unexplained`, with the excess over the null
 /// level, where it is and a warning on the adhesive's parameters) rather than end `explained`
 /// or `nothing_missing`.
