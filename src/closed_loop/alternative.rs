@@ -20,7 +20,7 @@
 //! the alternative then pays the same prior width per parameter as the study's model does for
 //! its initial values.
 
-use super::{install, ClosedLoopError, LawCandidate, Refit};
+use super::{install, ClosedLoopError, LawCandidate};
 use crate::common::C64;
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::{find_map, MapParams, MapResult};
@@ -353,23 +353,7 @@ pub fn refit_law<'a>(
     let n_old = old.n_params();
     let phys = &current.map_physical;
     let effects = post.likelihood.forward.effects.clone();
-    let mut row = LawCandidate {
-        round: 0,
-        law: alt.name().to_string(),
-        start: Vec::new(),
-        start_rel_rms: f64::NAN,
-        params: Vec::new(),
-        sd: Vec::new(),
-        refit: Refit {
-            log_evidence: f64::NAN,
-            evidence_gain: f64::NAN,
-            size: f64::NAN,
-            sd: f64::NAN,
-            accepted: false,
-            verdict: String::new(),
-        },
-        search: String::new(),
-    };
+    let mut row = LawCandidate::not_refitted(0, alt.name(), String::new());
     let omega = post.likelihood.forward.obs.omega_rad_s.clone();
     let n_model = post.likelihood.forward.n_params();
     let starts =

@@ -291,6 +291,29 @@ pub struct LawCandidate {
     pub search: String,
 }
 
+impl LawCandidate {
+    /// A row for `law` in `round` without a refit (yet): NaN evidence, no parameters.
+    pub fn not_refitted(round: usize, law: &str, verdict: String) -> Self {
+        LawCandidate {
+            round,
+            law: law.to_string(),
+            start: Vec::new(),
+            start_rel_rms: f64::NAN,
+            params: Vec::new(),
+            sd: Vec::new(),
+            refit: Refit {
+                log_evidence: f64::NAN,
+                evidence_gain: f64::NAN,
+                size: f64::NAN,
+                sd: f64::NAN,
+                accepted: false,
+                verdict,
+            },
+            search: String::new(),
+        }
+    }
+}
+
 /// What the loop found.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ClosedLoopResult {
@@ -1017,23 +1040,7 @@ pub fn run_closed_loop_with_laws<'a>(
                         last.round + 1
                     );
                     say(format!("round {}: {}: {verdict}", round + 1, alt.name()));
-                    law_table.push(LawCandidate {
-                        round,
-                        law: alt.name().to_string(),
-                        start: Vec::new(),
-                        start_rel_rms: f64::NAN,
-                        params: Vec::new(),
-                        sd: Vec::new(),
-                        refit: Refit {
-                            log_evidence: f64::NAN,
-                            evidence_gain: f64::NAN,
-                            size: f64::NAN,
-                            sd: f64::NAN,
-                            accepted: false,
-                            verdict,
-                        },
-                        search: String::new(),
-                    });
+                    law_table.push(LawCandidate::not_refitted(round, alt.name(), verdict));
                     continue;
                 }
             }

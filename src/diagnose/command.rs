@@ -69,34 +69,14 @@ pub fn diagnose_into(
         .closed_loop
         .as_ref()
         .is_none_or(|c| c.admits("sensor_mass", "sensor_mass"));
-    let masses: Vec<String> = outcome
-        .summary
-        .levels
-        .iter()
-        .flat_map(|l| {
-            l.accepted
-                .iter()
-                .filter(|a| a.1 == "point_mass")
-                .map(move |a| format!("{} at {}", a.0, l.level))
-        })
-        .collect();
+    let masses = accepted_of(&outcome, "point_mass");
     // Every point's three directions, not only the accepted masses' points: with the x and z
     // directions of one point only, the basis certified no better than 1.4e-6 after 527
     // vectors (250 s); with all twelve directions, 127 vectors certify at 8.3e-7 (30 s).
     // Base springs accepted with the mass: the second pass would need their term ROM on every
     // point's three directions (12 inputs), so it is not run; the measured-direction mass
     // stands for the sensor's (the report says so).
-    let springs: Vec<String> = outcome
-        .summary
-        .levels
-        .iter()
-        .flat_map(|l| {
-            l.accepted
-                .iter()
-                .filter(|a| a.1 == "base_springs")
-                .map(move |a| format!("{} at {}", a.0, l.level))
-        })
-        .collect();
+    let springs = accepted_of(&outcome, "base_springs");
     if joint && !asked && admitted && !masses.is_empty() && !springs.is_empty() {
         sections += &format!(
             "\n## Three directions\n\nThe loop accepted {} together with {}. A sensor's mass acts in x, y and z, but a pass with every point's three directions would need the springs' reduced model on twelve inputs, so it was not run: the mass acts in the measured direction only. Ask for `\"sensor_mass\"` in `[closed_loop] candidates` (without base springs) to test the three-direction mass.\n",
@@ -199,11 +179,7 @@ pub fn diagnose_into(
                         // On the refined mesh the candidates with matrices of their own are
                         // kept only when the study mesh's pass accepted one (a term ROM on 8
                         // times the DOFs).
-                        let accepted_terms = outcome
-                            .summary
-                            .levels
-                            .iter()
-                            .any(|l| l.accepted.iter().any(|a| a.1 == "base_springs"));
+                        let accepted_terms = !accepted_of(&outcome, "base_springs").is_empty();
                         let rerun = if accepted_terms && !three {
                             fine.clone()
                         } else {
@@ -238,6 +214,21 @@ pub fn diagnose_into(
     outcome.summary.output_dir = dir.path().to_path_buf();
     outcome.summary.seconds = t0.elapsed().as_secs_f64();
     Ok(outcome.summary)
+}
+
+/// The effects of type `kind` accepted in `outcome`, as "name at level".
+fn accepted_of(outcome: &super::summary::LoopOutcome, kind: &str) -> Vec<String> {
+    outcome
+        .summary
+        .levels
+        .iter()
+        .flat_map(|l| {
+            l.accepted
+                .iter()
+                .filter(|a| a.1 == kind)
+                .map(move |a| format!("{} at {}", a.0, l.level))
+        })
+        .collect()
 }
 
 /// The final models' log evidence of `outcome`, summed over its levels (NaN when one is not
