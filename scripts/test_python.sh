@@ -9,6 +9,9 @@ if [ ! -x .venv/bin/maturin ]; then
   exit 2
 fi
 export RFMLAB_SHARED="${RFMLAB_SHARED:-$(cd .. && pwd)/shared}"
+# The ROM cache `cargo test` fills (.cargo/config.toml): the tour reuses the base springs' term
+# ROM instead of building it again.
+export RFMLAB_ROM_CACHE="${RFMLAB_ROM_CACHE:-$PWD/target/rom-cache}"
 
 echo "== python package (maturin develop into .venv)"
 VIRTUAL_ENV="$PWD/.venv" PATH="$PWD/.venv/bin:$PATH" .venv/bin/maturin develop --profile dev
