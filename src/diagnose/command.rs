@@ -83,8 +83,7 @@ pub fn diagnose_into(
             masses.join(", "),
             springs.join(", ")
         );
-    }
-    if joint && !asked && admitted && !masses.is_empty() && springs.is_empty() {
+    } else if joint && !asked && admitted && !masses.is_empty() {
         params.progress.say(&format!(
             "{} accepted: a sensor's mass acts in x, y and z, so the loop runs again with every point's three directions",
             masses.join(", ")
@@ -117,11 +116,7 @@ pub fn diagnose_into(
             outcome = second;
             // The later passes keep the three directions only when a three-direction mass
             // was accepted.
-            three = outcome
-                .summary
-                .levels
-                .iter()
-                .any(|l| l.accepted.iter().any(|a| a.1 == "sensor_mass"));
+            three = !accepted_of(&outcome, "sensor_mass").is_empty();
         }
     }
     // The FE model's own discretisation error: a level left unexplained is tried on the mesh
@@ -178,9 +173,8 @@ pub fn diagnose_into(
                     if cmp.accepted {
                         // On the refined mesh the candidates with matrices of their own are
                         // kept only when the study mesh's pass accepted one (a term ROM on 8
-                        // times the DOFs).
-                        let accepted_terms = !accepted_of(&outcome, "base_springs").is_empty();
-                        let rerun = if accepted_terms && !three {
+                        // times the DOFs; a kept three-direction pass has none).
+                        let rerun = if !accepted_of(&outcome, "base_springs").is_empty() {
                             fine.clone()
                         } else {
                             without_springs(&fine, defaults)
