@@ -11,7 +11,7 @@ use super::mesh;
 use super::of_study::{no_inference, wants_sensor_mass, StudyPosterior};
 use super::params::{DiagnoseParams, LoopInputs};
 use super::summary::DiagnoseSummary;
-use crate::closed_loop::ClosedLoopParams;
+use crate::closed_loop::{ClosedLoopParams, StartingFit};
 use crate::output::ResultsDir;
 use crate::stage::RunError;
 use crate::study::Study;
@@ -56,7 +56,7 @@ pub fn diagnose_into(
         .closed_loop
         .as_ref()
         .is_none_or(|c| c.candidates.is_none());
-    let mut outcome = loop_once(study, model, params, asked)?;
+    let mut outcome = loop_once(study, model, params, asked, &[])?;
     // Whether the later passes put every point's three directions in the model, and the
     // sections that say why a pass was run again (appended to the final pass's report).
     let mut three = asked;
@@ -92,7 +92,15 @@ pub fn diagnose_into(
         // directions would have 12 inputs: far costlier than on the measured 4). The two
         // passes model the same data, so the one with the larger evidence (summed over the
         // levels) is kept.
-        let second = loop_once(&without_springs(study, defaults), model, params, true)?;
+        // Its starting MAP searches from the first pass's starting fit (the same model on
+        // another basis), not from space-filling starts again.
+        let second = loop_once(
+            &without_springs(study, defaults),
+            model,
+            params,
+            true,
+            &starting_fits(&outcome),
+        )?;
         let gain = final_evidence(&second) - final_evidence(&outcome);
         let keep_second = !(gain < 0.0);
         params.progress.say(&format!(
@@ -156,7 +164,15 @@ pub fn diagnose_into(
             };
             // No candidates are tried there, so none with matrices of their own is built (a
             // term ROM on the refined mesh's 8 times the DOFs).
-            let cmp = match loop_once(&without_springs(&fine, true), model, &start_only, false) {
+            // Its MAP searches from the study mesh's starting fit (the same parameters, a
+            // little off), and the rerun's from the refined mesh's.
+            let cmp = match loop_once(
+                &without_springs(&fine, true),
+                model,
+                &start_only,
+                false,
+                &starting_fits(&outcome),
+            ) {
                 Ok(start) => {
                     let cmp =
                         mesh::compare(&outcome, &start, words, params.threshold_nats, for_residual);
@@ -179,7 +195,8 @@ pub fn diagnose_into(
                         } else {
                             without_springs(&fine, defaults)
                         };
-                        let mut refined = loop_once(&rerun, model, params, three)?;
+                        let mut refined =
+                            loop_once(&rerun, model, params, three, &starting_fits(&start))?;
                         mesh::name_in(&mut refined, &cmp, mesh::element_size(&fine.structure));
                         outcome = refined;
                     }
@@ -269,6 +286,7 @@ fn loop_once(
     model: Option<&str>,
     params: &ClosedLoopParams,
     all_directions: bool,
+    starting_fits: &[StartingFit],
 ) -> Result<super::summary::LoopOutcome, RunError> {
     let mut with_loop = study.clone();
     if all_directions {
@@ -304,6 +322,20 @@ fn loop_once(
         laws: &laws,
         engine,
         posterior: &StudyPosterior(study),
+        starting_fits,
     };
     super::loop_stage(&p, params, &inputs)
+}
+
+/// The starting fit of every level of `outcome` (see [`LoopInputs::starting_fits`]).
+fn starting_fits(outcome: &super::summary::LoopOutcome) -> Vec<StartingFit> {
+    outcome
+        .levels
+        .iter()
+        .map(|l| StartingFit {
+            level: l.0.clone(),
+            names: l.3.before.names.clone(),
+            values: l.3.before.values.clone(),
+        })
+        .collect()
 }

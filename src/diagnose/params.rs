@@ -106,6 +106,9 @@ pub struct LoopInputs<'a> {
     /// The likelihood's engine, with every measured point an input (the point-mass candidates).
     pub engine: &'a dyn FrfEngine,
     pub posterior: &'a dyn LevelPosterior,
+    /// Fits of the starting model from an earlier pass (the measured directions' pass before
+    /// the three-direction one): a level with one starts its loop from it.
+    pub starting_fits: &'a [crate::closed_loop::StartingFit],
 }
 
 pub(crate) use crate::stage::input_error as key_error;

@@ -34,6 +34,7 @@ pub fn loop_stage(
         laws,
         engine,
         posterior,
+        starting_fits,
     } = *inputs;
     let name = &p.model;
     let law = &laws[p.model_index];
@@ -92,17 +93,45 @@ pub fn loop_stage(
     let mut results = Vec::new();
     for level in levels.iter().filter(|l| p.levels.contains(&l.name)) {
         let mut post = posterior.posterior(engine, level, law.as_ref(), name)?;
-        let x0 = crate::bayes::posterior::initial_x(&post, &p.initial);
+        // An earlier pass's fit of the same starting model, else the study's initial values.
+        let fit = starting_fits
+            .iter()
+            .find(|f| f.level == level.name && f.names == post.names);
+        let x0 = match fit {
+            Some(f) => post.unconstrained(&f.values),
+            None => crate::bayes::posterior::initial_x(&post, &p.initial),
+        };
         let candidates = level_candidates(level, engine, built, &bonds, p.settings.as_ref());
         let t_loop = std::time::Instant::now();
         params
             .progress
             .say(&format!("{}: {} candidates", level.name, candidates.len()));
+        // With the channels' correlation, its estimate's MAP is the loop's start; from an
+        // earlier pass's fit, that MAP searches from the fit alone.
         let x0 = match p.channel_correlation {
             Some((kind, window)) => {
-                set_correlation(&mut post, &x0, &params.map, kind, window, level)?
+                let map = crate::inference::map::MapParams {
+                    n_starts: if fit.is_some() {
+                        0
+                    } else {
+                        params.map.n_starts
+                    },
+                    ..params.map.clone()
+                };
+                set_correlation(&mut post, &x0, &map, kind, window, level)?
             }
             None => x0,
+        };
+        // A start that is a fit already is searched from alone.
+        let warm;
+        let params = if fit.is_some() || p.channel_correlation.is_some() {
+            warm = ClosedLoopParams {
+                start_is_fit: true,
+                ..params.clone()
+            };
+            &warm
+        } else {
+            params
         };
         let res = run_closed_loop_with_laws(&mut post, &x0, &candidates, &alt_laws, params)
             .map_err(|e| RunError::Analysis {

@@ -297,6 +297,7 @@ pub(super) fn closed_loop(
         laws: &run.laws,
         engine: run.likelihood(),
         posterior: &posterior,
+        starting_fits: &[],
     };
     let outcome = crate::diagnose::loop_stage(&stage, &params, &inputs)?;
     progress(Event::Finish);
