@@ -46,6 +46,12 @@ pub fn bond_candidates(joint: Option<&JointSpec>, width_m: f64) -> Vec<Effect> {
     ]
 }
 
+/// Whether `settings` leave the loop's default candidates (no `[closed_loop]` section, no
+/// `candidates` list, or `"all"`).
+pub(crate) fn default_candidates(settings: Option<&ClosedLoopSettings>) -> bool {
+    settings.is_none_or(|c| c.candidates.is_none())
+}
+
 /// The candidates with matrices of their own: on the mesher's joint, base springs (two shapes)
 /// with the default candidates; a degraded-bond strip at each end of the block and the
 /// adherend damping when `[closed_loop] candidates` asks for them (by type, e.g.
@@ -67,9 +73,8 @@ pub(crate) fn opt_in_term_candidates(
             },
         ));
     }
-    // Base springs are among the default candidates (no list, or `"all"`); the others only
-    // when a list names them.
-    let defaults = settings.is_none_or(|c| c.candidates.is_none());
+    // Base springs are among the default candidates; the others only when a list names them.
+    let defaults = default_candidates(settings);
     all.into_iter()
         .filter(|e| {
             (defaults && matches!(e, Effect::BaseSprings { .. }))

@@ -52,10 +52,7 @@ pub fn diagnose_into(
     // joint become model points (and engine inputs) for it. This triples the engine's inputs
     // and its reduced basis (about 30 s to build and certify on the paper's joint, cached).
     let asked = joint && wants_sensor_mass(study);
-    let defaults = study
-        .closed_loop
-        .as_ref()
-        .is_none_or(|c| c.candidates.is_none());
+    let defaults = super::candidates::default_candidates(study.closed_loop.as_ref());
     let mut outcome = loop_once(study, model, params, asked, &[])?;
     // Whether the later passes put every point's three directions in the model, and the
     // sections that say why a pass was run again (appended to the final pass's report).
