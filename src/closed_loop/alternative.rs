@@ -410,8 +410,7 @@ pub fn refit_law<'a>(
     // The law must beat the current fit: a search that stays far above it (a law that cannot
     // take the data's shape, whose Gauss-Newton steps creep at a large residual) gives up.
     let law_map = MapParams {
-        give_up_above: -(current.laplace.log_likelihood + current.laplace.log_prior)
-            + super::GIVE_UP_MARGIN_NATS,
+        give_up_above: -current.laplace.log_posterior() + super::GIVE_UP_MARGIN_NATS,
         ..refit_map.clone()
     };
     let fit = super::search_on_linearised_bias(post, &p0, &law_map, |post| {
@@ -439,13 +438,11 @@ pub fn refit_law<'a>(
     let gain = super::evidence_gain(&r, current, n_new as i64 - n_old as i64, n_data);
     row.refit.log_evidence = r.laplace.log_evidence;
     row.refit.evidence_gain = gain;
-    let gave_up = r.starts[r.best].stop_reason.starts_with("given up");
+    let gave_up = r.gave_up();
     row.refit.verdict = if gave_up {
         format!(
             "cannot reach the current fit: its search gave up {:.0} nats short (evidence gain {gain:.0} nats where it stopped)",
-            -(r.laplace.log_likelihood + r.laplace.log_prior)
-                + current.laplace.log_likelihood
-                + current.laplace.log_prior
+            current.laplace.log_posterior() - r.laplace.log_posterior()
         )
     } else if !r.laplace.positive_definite {
         "Laplace Hessian not positive definite".to_string()

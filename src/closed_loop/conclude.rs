@@ -215,7 +215,7 @@ pub fn conclude(
                     after.log_evidence - r.laplace.log_evidence
                 } else {
                     after.log_posterior
-                        - (r.laplace.log_likelihood + r.laplace.log_prior)
+                        - r.laplace.log_posterior()
                         - 0.5 * (2.0 * n_data as f64).ln()
                 }
             }

@@ -55,9 +55,9 @@ use libm::erfc;
 /// (after [`crate::inference::lm::GIVE_UP_RATIO`] Newton decrements): an alternative law against
 /// the current fit ([`alternative::refit_law`]), the final model without an accepted effect
 /// against the threshold ([`conclude`]), an effect's refit against a passing refit of the same
-/// round. A margin for the two models' priors, coordinates and
-/// noise terms, which differ by tens of nats, far below the hundreds of thousands a model that
-/// cannot take the data's shape stays above.
+/// round. A margin for the two models' priors, coordinates and noise terms, which differ by
+/// tens of nats, far below the hundreds of thousands a model that cannot take the data's shape
+/// stays above.
 pub const GIVE_UP_MARGIN_NATS: f64 = 1000.0;
 
 /// The margin of a refit racing a passing refit of the same kind of effect (see
@@ -690,7 +690,7 @@ pub(crate) fn fit_of(post: &FrfPosterior<'_>, r: &MapResult) -> Result<Fit, Forw
         values: r.map_physical.clone(),
         sd: r.laplace.sd_physical(),
         log_evidence: r.laplace.log_evidence,
-        log_posterior: r.laplace.log_likelihood + r.laplace.log_prior,
+        log_posterior: r.laplace.log_posterior(),
         positive_definite: r.laplace.positive_definite,
         cov: r.laplace.cov_physical.clone(),
         residuals: residuals(post, &r.map_physical)?,
@@ -918,7 +918,7 @@ pub fn run_closed_loop_with_laws<'a>(
                     };
                     (
                         scored[*bi].effect.name(),
-                        -(b.laplace.log_likelihood + b.laplace.log_prior),
+                        -b.laplace.log_posterior(),
                         margin,
                     )
                 });
@@ -931,9 +931,7 @@ pub fn run_closed_loop_with_laws<'a>(
                     // definite (stopped short of the mode), the full multistart search from the
                     // same start. A warm refit that gave up is not searched further.
                     let warm = find_map(post, Some(&x_start), &race_map, none);
-                    let gave_up = warm
-                        .as_ref()
-                        .is_ok_and(|r| r.starts[r.best].stop_reason.starts_with("given up"));
+                    let gave_up = warm.as_ref().is_ok_and(|r| r.gave_up());
                     // A warm refit that ends with a parameter at an edge of its prior has a
                     // Hessian that is not positive definite because of the edge, not because it
                     // stopped short: the multistart search would end there too (the
@@ -1001,11 +999,10 @@ pub fn run_closed_loop_with_laws<'a>(
                 // parameter, (1/2) ln(2 N).
                 let gain = evidence_gain(&r, &current, 1, post.likelihood.data.values.len());
                 let at_edge = size < lo + 0.02 * span || size > hi - 0.02 * span;
-                let gave_up = r.starts[r.best].stop_reason.starts_with("given up");
-                let verdict = if let (true, Some((name, f, _))) = (gave_up, &to_beat) {
+                let verdict = if let (true, Some((name, f, _))) = (r.gave_up(), &to_beat) {
                     format!(
                         "cannot beat {name}'s refit: its search gave up {:.0} nats short",
-                        -(r.laplace.log_likelihood + r.laplace.log_prior) - f
+                        -r.laplace.log_posterior() - f
                     )
                 } else if !r.laplace.positive_definite && law_candidate {
                     "Laplace Hessian not positive definite after the warm refit (law candidate: no multistart search)".to_string()
@@ -1305,8 +1302,9 @@ pub(crate) fn evidence_gain(r: &MapResult, current: &MapResult, extra: i64, n_da
     if r.laplace.positive_definite && current.laplace.positive_definite {
         r.laplace.log_evidence - current.laplace.log_evidence
     } else {
-        let lp = |l: &crate::inference::map::Laplace| l.log_likelihood + l.log_prior;
-        lp(&r.laplace) - lp(&current.laplace) - 0.5 * extra as f64 * (2.0 * n_data as f64).ln()
+        r.laplace.log_posterior()
+            - current.laplace.log_posterior()
+            - 0.5 * extra as f64 * (2.0 * n_data as f64).ln()
     }
 }
 

@@ -90,6 +90,14 @@ pub struct StartResult {
     pub stop_reason: String,
 }
 
+impl StartResult {
+    /// Whether its search gave up above [`MapParams::give_up_above`] (the stop reason
+    /// [`super::lm::levenberg_marquardt`] gives).
+    pub fn gave_up(&self) -> bool {
+        self.stop_reason.starts_with("given up")
+    }
+}
+
 /// The Laplace approximation at the mode of the density in unconstrained coordinates.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Laplace {
@@ -110,6 +118,10 @@ pub struct Laplace {
 impl Laplace {
     pub fn dim(&self) -> usize {
         self.x.len()
+    }
+    /// Log likelihood plus log prior at the MAP (the search's `-objective`).
+    pub fn log_posterior(&self) -> f64 {
+        self.log_likelihood + self.log_prior
     }
     /// Physical standard deviations.
     pub fn sd_physical(&self) -> Vec<f64> {
@@ -135,6 +147,13 @@ pub struct MapResult {
     pub polish_steps: usize,
     /// Density evaluations (with gradient) spent.
     pub evaluations: usize,
+}
+
+impl MapResult {
+    /// Whether the best start's search gave up ([`StartResult::gave_up`]).
+    pub fn gave_up(&self) -> bool {
+        self.starts[self.best].gave_up()
+    }
 }
 
 /// Errors of the search.
@@ -635,7 +654,7 @@ pub fn find_map(
     let gn_converged = params.search == SearchMethod::GaussNewton
         && results[best].stop_reason.starts_with("converged");
     // A search that gave up is not polished: its end point is only where it stopped.
-    let given_up = results[best].stop_reason.starts_with("given up");
+    let given_up = results[best].gave_up();
     let (x, polish_steps) = if gn_converged || given_up {
         (results[best].end_x.clone(), 0)
     } else {

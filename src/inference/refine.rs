@@ -131,7 +131,7 @@ pub fn relinearise_model_to_map(
             .forward
             .linearise_model_measurement(&map.map_physical[..np])?;
         let again = polish(post, map, params)?;
-        if again.starts[again.best].stop_reason.starts_with("given up") {
+        if again.gave_up() {
             adopt(map, again);
             break;
         }
