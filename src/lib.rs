@@ -34,6 +34,7 @@
 //! | [`iem`] | inverse eigensensitivity method (paper eq. 20) |
 //! | [`stats`] | priors of parameters and effects, the chi-square tail and the normal quantile |
 //! | [`common`] | shared small types: complex scalar, directions, units |
+//! | [`fs_atomic`] | atomic file replacement (unique temporary sibling, fsync, rename) for every writer |
 //!
 //! The numerical modules (from `closed_loop` down, except `plot` and `output`) never import
 //! `study`, `output`, `plot` or the CLI. Below the pipeline, every stage takes its `*Params` and typed inputs, never the
@@ -88,6 +89,7 @@ pub mod experiment;
 pub mod fe;
 pub mod forward;
 pub mod frf;
+pub mod fs_atomic;
 pub mod identify;
 pub mod iem;
 pub mod inference;

@@ -53,7 +53,48 @@ pub struct PosteriorResult {
     pub basins: Option<super::basins::BasinStudy>,
 }
 
+/// The support of a prior (physical values; ends may be infinite).
+fn support(prior: &Prior) -> (f64, f64) {
+    match *prior {
+        Prior::LogUniform { lo, hi }
+        | Prior::Uniform { lo, hi }
+        | Prior::TruncatedNormal { lo, hi, .. } => (lo, hi),
+        Prior::LogNormal { .. } => (0.0, f64::INFINITY),
+    }
+}
+
+/// Whether the MAP of `p` is a result ([`crate::rfm::status`]): every value finite, none on
+/// the edge of its prior's support, a modulus (Pa) inside its physical range, and a search
+/// that did not give up.
+pub fn map_status(p: &PosteriorResult) -> crate::rfm::FitStatus {
+    use crate::rfm::status::{parameter_flags, ParamCheck};
+    let values = &p.map.map_physical;
+    let checks: Vec<ParamCheck<'_>> = values
+        .iter()
+        .enumerate()
+        .map(|(k, &value)| ParamCheck {
+            name: p.names.get(k).map(String::as_str).unwrap_or("?"),
+            unit: p.units.get(k).map(String::as_str).unwrap_or(""),
+            value,
+            range: p
+                .priors
+                .get(k)
+                .map(support)
+                .unwrap_or((f64::NEG_INFINITY, f64::INFINITY)),
+        })
+        .collect();
+    let mut reasons = parameter_flags(&checks);
+    if p.map.gave_up() {
+        reasons.push(crate::rfm::FlagReason::Diverged);
+    }
+    crate::rfm::FitStatus::from_reasons(reasons)
+}
+
 impl PosteriorResult {
+    /// [`map_status`] of this posterior.
+    pub fn map_status(&self) -> crate::rfm::FitStatus {
+        map_status(self)
+    }
     /// The draws the figures show: NUTS's when it ran, else the first sampler's.
     pub fn figure_sampler(&self) -> Option<&SamplerResult> {
         self.samplers

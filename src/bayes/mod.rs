@@ -35,7 +35,7 @@ pub mod sample;
 
 pub use basins::basins_of_level;
 pub use context::{At, Checkpoints, PosteriorInputs, RunContext};
-pub use infer::{infer_level, PosteriorResult};
+pub use infer::{infer_level, map_status, PosteriorResult};
 pub use params::{stages_at, InferenceParams, SamplerParams};
 
 use crate::stage::RunError;

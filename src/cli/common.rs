@@ -16,12 +16,42 @@ pub struct Global {
 #[error("{0}")]
 pub struct InputError(pub String);
 
-/// 2 when any error in the chain is an input error (study file, data file, arguments), else 1.
+/// The command wrote its results, but some fits in them are not results (exit code 3): the
+/// message lists them with their reasons.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct FlaggedFits(pub String);
+
+/// `Err(FlaggedFits)` naming every fit of `flagged`, `Ok` when there is none.
+pub fn flagged_exit(flagged: &[rfmlab::pipeline::FlaggedFit]) -> anyhow::Result<()> {
+    if flagged.is_empty() {
+        return Ok(());
+    }
+    let mut m = format!(
+        "{} (results written; see the warning at the top of report.md and the status columns):",
+        if flagged.len() == 1 {
+            "1 fit is not a result".to_string()
+        } else {
+            format!("{} fits are not results", flagged.len())
+        }
+    );
+    for f in flagged {
+        m.push_str(&format!("\n  {f}"));
+    }
+    Err(anyhow::Error::new(FlaggedFits(m)))
+}
+
+/// 3 when the results were written with flagged fits ([`FlaggedFits`]); 2 when any error in
+/// the chain is an input error (study file, data file, arguments); else 1.
 pub fn exit_code(e: &anyhow::Error) -> i32 {
+    if e.is::<FlaggedFits>() {
+        return 3;
+    }
     for cause in e.chain() {
         if cause.is::<InputError>()
             || cause.is::<rfmlab::study::StudyError>()
             || cause.is::<rfmlab::data::DataError>()
+            || refused_output(cause)
         {
             return 2;
         }
@@ -126,3 +156,41 @@ pub fn print_json(v: &serde_json::Value) -> anyhow::Result<()> {
 
 /// The default modulus for structure-only commands: the paper's IEM value for Level 1, mode 1.
 pub const DEFAULT_MODULUS: C64 = C64::new(6.974e6, 1.4827e6);
+
+/// Whether `cause` is the output contract's refusal or an unwritable output path (exit code 2),
+/// directly or inside the error of the library call that wrote.
+fn refused_output(cause: &(dyn std::error::Error + 'static)) -> bool {
+    use rfmlab::output::OutputError;
+    if let Some(o) = cause.downcast_ref::<OutputError>() {
+        return o.is_input();
+    }
+    if let Some(rfmlab::stage::RunError::Output(o)) = cause.downcast_ref() {
+        return o.is_input();
+    }
+    if let Some(rfmlab::validate::ValidateError::Output(o)) = cause.downcast_ref() {
+        return o.is_input();
+    }
+    if let Some(rfmlab::report::material::MaterialRunError::Output(o)) = cause.downcast_ref() {
+        return o.is_input();
+    }
+    false
+}
+
+/// The output contract's pre-flight of a results folder ([`rfmlab::output::claim_folder`]),
+/// run before anything is computed: a refusal is an input error (exit code 2).
+pub fn claim_folder(dir: &Path, force: bool) -> anyhow::Result<rfmlab::output::Replace> {
+    let replace = rfmlab::output::Replace::forced(force);
+    rfmlab::output::claim_folder(dir, replace).map_err(|e| InputError(e.to_string()))?;
+    Ok(replace)
+}
+
+/// The output contract's pre-flight of an output file ([`rfmlab::output::claim_file`]; `ours`
+/// recognises a file rfmlab wrote): a refusal is an input error (exit code 2).
+pub fn claim_file(path: &Path, force: bool, ours: impl Fn(&Path) -> bool) -> anyhow::Result<()> {
+    rfmlab::output::claim_file(path, rfmlab::output::Replace::forced(force), ours)
+        .map_err(|e| InputError(e.to_string()))?;
+    Ok(())
+}
+
+/// The help of `--force`, the same on every command that writes.
+pub const FORCE_HELP: &str = "Replace the output even if rfmlab did not write it (a folder with other files, or a file): it is replaced as a whole. Without it, rfmlab replaces only a folder holding its own manifest.json, an empty folder or a new path (docs/outputs.md, Output contract)";

@@ -1,4 +1,4 @@
-//! `rfmlab frf STUDY.toml ... --out FILE.parquet` and `rfmlab export-mm STUDY.toml --dir DIR`.
+//! `rfmlab frf STUDY.toml ... -o FILE.parquet` and `rfmlab export-mm STUDY.toml -o DIR`.
 
 use super::common::{
     build_model, load_study, parse_modulus, parse_pair, print_json, progress, Global, InputError,
@@ -28,10 +28,13 @@ pub struct FrfArgs {
     /// Also write dH'/dE' (sensitivity, (m/s^2)/N/Pa).
     #[arg(long)]
     pub derivatives: bool,
-    /// Parquet file to write (columns in docs/outputs.md); default: none, the peaks are
+    /// Parquet file to write (columns in docs/outputs.md), replaced when rfmlab wrote it; a
+    /// file rfmlab did not write is refused unless --force; default: none, the peaks are
     /// printed only.
     #[arg(short = 'o', long = "output", alias = "out", value_name = "FILE")]
     pub out: Option<PathBuf>,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    pub force: bool,
     /// Print JSON for scripts (summary: peaks per channel).
     #[arg(long)]
     pub json: bool,
@@ -41,10 +44,17 @@ pub struct FrfArgs {
 pub struct ExportMmArgs {
     /// Study file (its [structure] section is used).
     pub study: PathBuf,
-    /// Folder to write M.mtx, K_b.mtx, S.mtx (C_b.mtx, D_b.mtx) and dofmap.csv into
-    /// (default: `results/<study name>.matrices`, relative to the current directory).
+    /// Folder of M.mtx, K_b.mtx, S.mtx (C_b.mtx, D_b.mtx), dofmap.csv and manifest.json,
+    /// replaced as a whole when rfmlab wrote it (default: `results/<study name>.matrices`,
+    /// relative to the current directory); a folder with other files, or a file, is refused
+    /// unless --force.
     #[arg(short = 'o', long = "output", alias = "dir", value_name = "DIR")]
     pub dir: Option<PathBuf>,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    pub force: bool,
+    /// Print a JSON summary (folder, files, DOFs) on stdout.
+    #[arg(long)]
+    pub json: bool,
 }
 
 pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
@@ -63,6 +73,10 @@ pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
     let f0 = if f0 == 0.0 { a.step } else { f0 };
     let n_f = ((f1 - f0) / a.step + 1e-9).floor() + 1.0;
     let study = load_study(&a.study)?;
+    // The output contract before anything is computed.
+    if let Some(out) = &a.out {
+        super::common::claim_file(out, a.force, rfmlab::output::contract::is_rfmlab_table)?;
+    }
     // the size first: lines x channels of results, and the model's own cost
     let (n_points, model_cost) = match rfmlab::study::build::joint_spec(&study.structure) {
         Some(spec) => (
@@ -202,16 +216,41 @@ pub fn run(a: &FrfArgs, g: &Global) -> anyhow::Result<()> {
 
 pub fn run_export(a: &ExportMmArgs, g: &Global) -> anyhow::Result<()> {
     let study = load_study(&a.study)?;
-    let b = build_model(g, &study)?;
     let dir = a.dir.clone().unwrap_or_else(|| {
         std::path::Path::new("results").join(format!("{}.matrices", study.name))
     });
-    std::fs::create_dir_all(&dir)
-        .map_err(|e| InputError(format!("cannot create {}: {e}", dir.display())))?;
-    rfmlab::fe::matrix_market::export_model(&b.model, &dir)?;
+    // The output contract before the model is built.
+    let replace = super::common::claim_folder(&dir, a.force)?;
+    let b = build_model(g, &study)?;
+    // Filled as a temporary sibling and swapped in whole, with a manifest marking it as rfmlab's.
+    let files = rfmlab::output::replace_dir_as(&dir, replace, |tmp| -> anyhow::Result<_> {
+        rfmlab::fe::matrix_market::export_model(&b.model, tmp)?;
+        let mut files: Vec<String> = std::fs::read_dir(tmp)?
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        files.sort();
+        let mut manifest = rfmlab::output::Manifest::new(&study.file, None);
+        for f in &files {
+            manifest.add_file(f.clone(), rfmlab::output::sha256_file(tmp.join(f)).ok());
+        }
+        manifest.add_note(format!("Matrix Market export: {}", b.model.description));
+        manifest.write(tmp.join(rfmlab::output::contract::MANIFEST))?;
+        files.push(rfmlab::output::contract::MANIFEST.to_string());
+        Ok(files)
+    })?;
+    if a.json {
+        return print_json(&json!({
+            "study": study.file.display().to_string(),
+            "output_dir": dir.display().to_string(),
+            "n_dof": b.model.n_dof(),
+            "files": files,
+        }));
+    }
     if !g.quiet {
         println!(
-            "wrote M.mtx, K_b.mtx, S.mtx and dofmap.csv ({} free DOFs) to {}",
+            "wrote {} ({} free DOFs) to {}",
+            files.join(", "),
             b.model.n_dof(),
             dir.display()
         );

@@ -8,10 +8,16 @@ use std::path::PathBuf;
 pub struct MaterialArgs {
     /// The material study file (TOML with a [material_data] section).
     pub study: PathBuf,
-    /// Results folder (default: the study's `output_dir`, else `results/<name>`, relative to
-    /// the current directory).
+    /// Results folder, replaced as a whole when rfmlab wrote it (default: the study's
+    /// `output_dir`, else `results/<name>`, relative to the current directory); a folder with
+    /// other files, or a file, is refused unless --force.
     #[arg(short = 'o', long = "output", value_name = "DIR")]
     pub output: Option<PathBuf>,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    pub force: bool,
+    /// Do not draw figures.
+    #[arg(long)]
+    pub no_figures: bool,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
@@ -22,8 +28,11 @@ pub fn run(a: &MaterialArgs, g: &Global) -> anyhow::Result<()> {
     if let Some(o) = &a.output {
         study.output_dir = o.clone();
     }
+    study.figures &= !a.no_figures;
+    // The output contract before anything is computed.
+    let replace = super::common::claim_folder(&study.output_dir, a.force)?;
     let sp = super::common::spinner(g, "material loop");
-    let summary = rfmlab::report::material::run_material(&study)?;
+    let summary = rfmlab::report::material::run_material_as(&study, replace)?;
     sp.finish_and_clear();
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;

@@ -1,7 +1,10 @@
 //! The command-line interface. `anyhow` lives here only; the library returns typed errors.
 //!
 //! Exit codes: 0 success, 1 a run that failed for a reason other than its input,
-//! 2 bad input (study file, data file, arguments): the message names the file, key and fix.
+//! 2 bad input (study file, data file, arguments, an output path the output contract refuses or
+//! that cannot be written): the message names the file, key or path and the fix,
+//! 3 results written but some fits are not results (flagged: outside the certified modulus
+//! box, at a range's edge, at the iteration limit, unphysical or not finite).
 
 use clap::{Parser, Subcommand};
 
@@ -50,7 +53,7 @@ enum Command {
     Convergence(convergence::ConvergenceArgs),
     /// Export the structure's M, K_b, S as Matrix Market files with a DOF map.
     #[command(
-        after_help = "Writes: DIR/M.mtx, DIR/K_b.mtx, DIR/S.mtx (DIR/C_b.mtx, DIR/D_b.mtx with damping) and DIR/dofmap.csv.\nDocs: docs/data.md (the Matrix Market files), docs/study-files.md ([structure.import])."
+        after_help = "Writes: DIR/M.mtx, DIR/K_b.mtx, DIR/S.mtx (DIR/C_b.mtx, DIR/D_b.mtx with damping), DIR/dofmap.csv and DIR/manifest.json.\nDocs: docs/data.md (the Matrix Market files), docs/study-files.md ([structure.import]), docs/outputs.md (Output contract)."
     )]
     ExportMm(frf::ExportMmArgs),
     /// Build and certify the reduced-order model of a study's structure.
@@ -75,7 +78,7 @@ enum Command {
     Run(run::RunArgs),
     /// Validate a study file (and its data) without running it.
     #[command(
-        after_help = "Prints OK with the model size, levels and models (--json for scripts); writes nothing. Errors name the file, the key and the fix (exit code 2).\nDocs: docs/study-files.md (every key with units and defaults)."
+        after_help = "Prints OK with the model size, levels and models (--json for scripts); writes nothing. Errors name the file, the key and the fix (exit code 2); -o DIR checks that `rfmlab run -o DIR` may write there.\nDocs: docs/study-files.md (every key with units and defaults), docs/outputs.md (Output contract)."
     )]
     Check(run::CheckArgs),
     /// Fit relaxation laws to measured E'(w), E''(w) (a DMA master curve): evidence loop, residual tests, Kramers-Kronig check.
@@ -116,13 +119,27 @@ const VALIDATE_HELP: &str = "Writes DIR/ (or the file's output_dir): summary.md,
 Docs: docs/outputs.md (section rfmlab validate), docs/validation.md, docs/study-files.md (validation files).";
 
 /// `rfmlab diagnose --help`.
-const DIAGNOSE_HELP: &str = "Writes results/<name>.diagnose/: closed_loop.md, residuals_<level>.png and parquet tables
+const DIAGNOSE_HELP: &str = "Writes results/<name>.diagnose/: closed_loop.md, manifest.json, residuals_<level>.png and parquet tables
   residuals, candidates, closed_loop, verdict, signatures, and mesh when a refined mesh was compared;
   closed_loop.md's first line is the status per level.
 Docs: docs/closed-loop.md (what each status means and what to do next), docs/outputs.md (closed-loop tables).";
 
+/// Restore the default action of SIGPIPE (the Rust runtime ignores it, so that a write to a
+/// closed pipe fails and `println!` panics): a command whose reader went away, as in
+/// `rfmlab inspect F | head`, then ends quietly as other command-line tools do (status 141
+/// in the shell).
+fn default_sigpipe() {
+    #[cfg(unix)]
+    // SAFETY: called once at the start of main, before any thread is spawned; SIG_DFL is a
+    // valid disposition of SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 /// Parse arguments, run, print the error chain, return the exit code.
 pub fn run() -> i32 {
+    default_sigpipe();
     let cli = match Cli::try_parse() {
         Ok(c) => c,
         Err(e) => {
@@ -152,6 +169,10 @@ pub fn run() -> i32 {
     };
     match result {
         Ok(()) => 0,
+        Err(e) if e.is::<common::FlaggedFits>() => {
+            eprintln!("warning: {e}");
+            common::exit_code(&e)
+        }
         Err(e) => {
             eprintln!("error: {e}");
             for cause in e.chain().skip(1) {

@@ -2,7 +2,7 @@
 //! [--cert-moduli n] [--cert-lines n] [--inputs all|excitation] [--json]`:
 //! build and certify the reduced-order model of a study's structure.
 
-use super::common::{build_model, load_study, parse_pair, print_json, spinner, Global};
+use super::common::{build_model, load_study, parse_pair, print_json, spinner, Global, InputError};
 use rfmlab::rom::{build_rom, ModulusRange, RomParams};
 use std::path::PathBuf;
 
@@ -44,7 +44,33 @@ pub enum Inputs {
     Excitation,
 }
 
+/// The flags' ranges, checked before anything is built.
+fn check_flags(a: &RomArgs) -> Result<(), InputError> {
+    if !(a.tolerance.is_finite() && a.tolerance > 0.0 && a.tolerance < 1.0) {
+        return Err(InputError(format!(
+            "--tolerance {}: the certificate's tolerance is a relative error between 0 and 1 (exclusive), e.g. --tolerance 1e-6 (the default)",
+            a.tolerance
+        )));
+    }
+    if a.cert_lines < 2 {
+        return Err(InputError(format!(
+            "--cert-lines {}: the certificate needs at least 2 validation lines (the band's ends); give 2 or more (default {})",
+            a.cert_lines,
+            RomParams::default().n_cert_lines
+        )));
+    }
+    if a.cert_moduli < 2 {
+        return Err(InputError(format!(
+            "--cert-moduli {}: the certificate needs at least 2 moduli per axis (the box's corners); give 2 or more (default {})",
+            a.cert_moduli,
+            RomParams::default().n_cert_moduli_per_axis
+        )));
+    }
+    Ok(())
+}
+
 pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
+    check_flags(a)?;
     let band = parse_pair("--band", &a.band)?;
     let storage = parse_pair("--storage", &a.storage)?;
     let loss = parse_pair("--loss", &a.loss)?;

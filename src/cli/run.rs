@@ -10,10 +10,13 @@ use std::sync::{Arc, Mutex};
 pub struct RunArgs {
     /// The study file (TOML).
     pub study: PathBuf,
-    /// Results folder, replaced as a whole (default: the study's `output_dir`, else
-    /// `results/<study name>`, relative to the current directory).
+    /// Results folder, replaced as a whole when rfmlab wrote it (default: the study's
+    /// `output_dir`, else `results/<study name>`, relative to the current directory); a folder
+    /// with other files, or a file, is refused unless --force.
     #[arg(short = 'o', long = "output", value_name = "DIR")]
     pub output: Option<PathBuf>,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    pub force: bool,
     /// Print a JSON summary (identified parameters, FRACs, files) on stdout.
     #[arg(long)]
     pub json: bool,
@@ -21,7 +24,8 @@ pub struct RunArgs {
     #[arg(long)]
     pub no_figures: bool,
     /// Build and certify the ROM even if a certified ROM of the same model, points, band,
-    /// range and tolerance is in the cache (`.rom-cache/` beside the study's output folder).
+    /// range and tolerance is in the cache (`.rom-cache/` beside the results folder, or the
+    /// folder RFMLAB_ROM_CACHE names).
     #[arg(long)]
     pub no_cache: bool,
 }
@@ -30,6 +34,13 @@ pub struct RunArgs {
 pub struct CheckArgs {
     /// The study file (TOML).
     pub study: PathBuf,
+    /// The results folder `rfmlab run` would write (default: the study's `output_dir`): checked
+    /// to be writable and replaceable under the output contract; nothing is written.
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: Option<PathBuf>,
+    /// Check the folder as `rfmlab run --force` would use it.
+    #[arg(long)]
+    pub force: bool,
     /// Print a JSON summary on stdout.
     #[arg(long)]
     pub json: bool,
@@ -45,7 +56,12 @@ fn wrap(e: RunError) -> anyhow::Error {
 }
 
 pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
-    let study = super::common::load_study(&a.study)?;
+    let mut study = super::common::load_study(&a.study)?;
+    if let Some(o) = &a.output {
+        study.output_dir = o.clone();
+    }
+    // The output contract before anything is computed.
+    let replace = super::common::claim_folder(&study.output_dir, a.force)?;
     let mut plan = study.plan().map_err(wrap)?;
     plan.figures &= !a.no_figures;
     if let Some(o) = &a.output {
@@ -83,11 +99,16 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
         Executor::new().observer(move |e| on_event(e))
     };
     if !a.no_cache {
-        ex = ex.rom_cache(rfmlab::stage::rom_cache_dir(&study.output_dir));
+        // Beside the results folder (-o included), or where RFMLAB_ROM_CACHE says.
+        ex = ex.rom_cache(rfmlab::stage::rom_cache_dir(&plan.output_dir));
     }
     let results = pipeline::run(&plan, &mut ex).map_err(wrap)?;
-    let written =
-        rfmlab::report::write_with(&results, &plan.output_dir, &|e| on_event(&e)).map_err(wrap)?;
+    // The pre-flight's warnings bear on the results: shown even with --quiet.
+    for w in results.preflight_warnings() {
+        eprintln!("warning: {w}");
+    }
+    let written = rfmlab::report::write_as(&results, &plan.output_dir, replace, &|e| on_event(&e))
+        .map_err(wrap)?;
     let files = written.files;
     if let Some(pb) = bar.lock().unwrap_or_else(|e| e.into_inner()).take() {
         pb.finish_and_clear();
@@ -97,6 +118,7 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
         output_dir: plan.output_dir.clone(),
         files,
         models: results.model_summaries(),
+        flagged: results.flagged(),
         seconds: results.seconds() + written.seconds,
     };
     if a.json {
@@ -105,12 +127,17 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
         for m in &summary.models {
             let fr: Vec<String> = m.frac.iter().map(|f| format!("{f:.4}")).collect();
             eprintln!(
-                "{} {}: {} iterations, {}; FRAC {}",
+                "{} {}: {} iterations, {}; FRAC {}{}",
                 m.level,
                 m.model,
                 m.iterations,
                 m.stop_reason,
-                fr.join(" ")
+                fr.join(" "),
+                if m.status_reason.is_empty() {
+                    String::new()
+                } else {
+                    format!("; FLAGGED: {}", m.status_reason)
+                }
             );
         }
         eprintln!(
@@ -119,11 +146,15 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
             summary.seconds
         );
     }
-    Ok(())
+    super::common::flagged_exit(&summary.flagged)
 }
 
 pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
-    let study = super::common::load_study(&a.study)?;
+    let mut study = super::common::load_study(&a.study)?;
+    if let Some(o) = &a.output {
+        study.output_dir = o.clone();
+    }
+    super::common::claim_folder(&study.output_dir, a.force)?;
     let summary = rfmlab::pipeline::check_study(&study).map_err(wrap)?;
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;
@@ -167,9 +198,10 @@ pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
                 );
             }
         }
-        for w in &pf.warnings {
-            eprintln!("warning: {w}");
-        }
+    }
+    // The warnings bear on what a run would give: shown even with --quiet or --json.
+    for w in &summary.preflight.warnings {
+        eprintln!("warning: {w}");
     }
     Ok(())
 }

@@ -11,9 +11,13 @@ use std::path::PathBuf;
 pub struct SimulateArgs {
     /// Experiment file (truth, structure and measurement chain).
     pub experiment: PathBuf,
-    /// Write here instead of the file's `experiment.output`.
-    #[arg(long)]
+    /// The data file to write instead of the file's `experiment.output`: one file per level,
+    /// `<stem>_<level>.uff`, and `<stem>.truth.json` beside it. A file there that rfmlab
+    /// did not write, or a folder at this path, is refused unless --force.
+    #[arg(short = 'o', long = "output", alias = "out", value_name = "FILE")]
     pub out: Option<PathBuf>,
+    #[arg(long, help = super::common::FORCE_HELP)]
+    pub force: bool,
     /// Print a JSON summary for scripts.
     #[arg(long)]
     pub json: bool,
@@ -22,6 +26,15 @@ pub struct SimulateArgs {
 pub fn run(a: &SimulateArgs, g: &Global) -> anyhow::Result<()> {
     let ex = load_experiment(&a.experiment)?;
     let out = a.out.clone().unwrap_or_else(|| ex.output.clone());
+    // The output contract before anything is computed: `out` itself (a folder there, or a
+    // file rfmlab did not write) and every file the experiment writes.
+    let ours = rfmlab::simulate::is_simulated_file;
+    super::common::claim_file(&out, a.force, ours)?;
+    let names: Vec<&str> = ex.levels.iter().map(|l| l.name.as_str()).collect();
+    let (data, sidecar) = rfmlab::simulate::planned_files(&out, &names);
+    for p in data.iter().chain([&sidecar]) {
+        super::common::claim_file(p, a.force, ours)?;
+    }
     // The bar stands at 0 while the model and the FRF engine are built.
     let pb = progress(g, ex.levels.len() as u64, "simulating levels");
     let sim = rfmlab::simulate::simulate(&ex, &|| pb.inc(1)).map_err(|e| match e {

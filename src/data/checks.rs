@@ -4,7 +4,98 @@
 //! [`DataError`] naming the file and dataset (from the channel's source) and what to do.
 
 use crate::common::Direction;
+use crate::data::uff58::{Ordinate, Uff58Dataset};
 use crate::data::{DataError, FrfLevel};
+
+/// A coherence may exceed 1 by rounding in the file by this much.
+pub const COHERENCE_SLACK: f64 = 1e-6;
+
+/// Check the header and values of one UFF58 dataset holding an FRF or a coherence (`file`
+/// names the file): at least one point, a positive and finite line spacing on an even grid,
+/// finite abscissa and values, a coherence within [0, 1]. Errors name the file, the dataset
+/// and the line (record 7 for the header, the dataset's first line for values).
+pub fn check_dataset(file: &str, d: &Uff58Dataset, coherence: bool) -> Result<(), DataError> {
+    let record7 = d.line + 8;
+    let err = |line: usize, m: String| Err(DataError::at(file, Some(d.index), Some(line), m));
+    if d.num_pts == 0 {
+        return err(
+            record7,
+            "record 7 says the dataset holds 0 points: give the number of frequency lines it holds, or remove the dataset".into(),
+        );
+    }
+    if d.even && !(d.x0.is_finite() && d.dx.is_finite() && d.dx > 0.0) {
+        return err(
+            record7,
+            format!(
+                "record 7: the first line {} Hz and line spacing {} Hz must be finite numbers with a spacing above 0 (frequency lines increase); fix the header",
+                d.x0, d.dx
+            ),
+        );
+    }
+    if d.even && d.x0 < 0.0 {
+        return err(
+            record7,
+            format!(
+                "record 7: the first line is at {} Hz, below 0 Hz: frequencies of an FRF are 0 Hz or above; fix the header's starting frequency",
+                d.x0
+            ),
+        );
+    }
+    let at = |k: usize| {
+        d.x.get(k)
+            .map_or(String::new(), |f| format!(" (at {f} Hz)"))
+    };
+    // record 12, the values, starts 13 lines below the dataset's "-1"
+    let values_line = d.line + 13;
+    if let Some(k) = d.x.iter().position(|x| !x.is_finite()) {
+        return err(
+            values_line,
+            format!(
+                "abscissa value {} is {}: every frequency must be a finite number",
+                k + 1,
+                d.x[k]
+            ),
+        );
+    }
+    if let Some(k) = d.x.iter().position(|x| *x < 0.0) {
+        return err(
+            values_line,
+            format!(
+                "abscissa value {} is {} Hz, below 0 Hz: frequencies of an FRF are 0 Hz or above",
+                k + 1,
+                d.x[k]
+            ),
+        );
+    }
+    let bad = match &d.values {
+        Ordinate::Real(v) => v.iter().position(|x| !x.is_finite()),
+        Ordinate::Complex(v) => v
+            .iter()
+            .position(|z| !(z.re.is_finite() && z.im.is_finite())),
+    };
+    if let Some(k) = bad {
+        return err(
+            values_line,
+            format!("value {} of the values starting at this line{} is not a finite number (NaN or Inf): fix or drop that frequency line", k + 1, at(k)),
+        );
+    }
+    if coherence {
+        let re: Vec<f64> = match &d.values {
+            Ordinate::Real(v) => v.clone(),
+            Ordinate::Complex(v) => v.iter().map(|z| z.re).collect(),
+        };
+        if let Some(k) = re
+            .iter()
+            .position(|g| !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(g))
+        {
+            return err(
+                values_line,
+                format!("coherence value {} of the values starting at this line{} is {}: a coherence lies within [0, 1]; fix the file", k + 1, at(k), re[k]),
+            );
+        }
+    }
+    Ok(())
+}
 
 fn where_of(level: &FrfLevel, ch: Option<usize>) -> (String, Option<usize>) {
     let c = ch
@@ -90,6 +181,18 @@ pub fn check_level(
                 return fail(
                     Some(i),
                     format!("{name}: coherence is not finite at {} Hz", f[k]),
+                );
+            }
+            if let Some(k) = coh
+                .iter()
+                .position(|g| !(-COHERENCE_SLACK..=1.0 + COHERENCE_SLACK).contains(g))
+            {
+                return fail(
+                    Some(i),
+                    format!(
+                        "{name}: coherence is {} at {} Hz; a coherence lies within [0, 1]: fix the data",
+                        coh[k], f[k]
+                    ),
                 );
             }
         }

@@ -115,6 +115,8 @@ pub fn read_csv(path: impl AsRef<Path>, opts: &CsvOptions) -> Result<FrfSet, Dat
 
 /// [`read_csv`] on text; `label` names the file in errors.
 pub fn parse_csv(text: &str, label: &str, opts: &CsvOptions) -> Result<FrfSet, DataError> {
+    // a UTF-8 byte-order mark (spreadsheets write one) is not part of the first line
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let err = |line: usize, m: String| DataError::at(label, None, Some(line), m);
     let mut meta: BTreeMap<String, LevelMeta> = BTreeMap::new();
     let mut header: Option<(usize, Vec<String>)> = None;
@@ -142,8 +144,20 @@ pub fn parse_csv(text: &str, label: &str, opts: &CsvOptions) -> Result<FrfSet, D
                         )
                     })?);
                 }
-                m.force_rms_n = kv.get("force_rms_n").and_then(|v| v.parse().ok());
-                m.n_averages = kv.get("n_averages").and_then(|v| v.parse().ok());
+                m.force_rms_n = match kv.get("force_rms_n") {
+                    None => None,
+                    Some(v) => match v.parse::<f64>() {
+                        Ok(f) if f.is_finite() && f > 0.0 => Some(f),
+                        _ => return Err(err(ln, format!("force_rms_n={v}: the RMS force of a level is a positive number in N; fix it or remove the token"))),
+                    },
+                };
+                m.n_averages = match kv.get("n_averages") {
+                    None => None,
+                    Some(v) => match v.parse::<u32>() {
+                        Ok(n) if n > 0 => Some(n),
+                        _ => return Err(err(ln, format!("n_averages={v}: the number of averages is a whole number of at least 1; fix it or remove the token"))),
+                    },
+                };
             }
             continue;
         }

@@ -85,6 +85,11 @@ pub fn inspect_file(path: impl AsRef<Path>) -> Result<Vec<InspectRow>, DataError
     let f = read_uff(path)?;
     let opts = UffImportOptions::default();
     for d in &f.datasets {
+        match role(d, &opts) {
+            Role::Frf => crate::data::checks::check_dataset(&label, d, false)?,
+            Role::Coherence => crate::data::checks::check_dataset(&label, d, true)?,
+            Role::Other => {}
+        }
         let kind = match role(d, &opts) {
             Role::Frf => "FRF".to_string(),
             Role::Coherence => "coherence".to_string(),

@@ -20,7 +20,6 @@
 //! functions); 58b files whose floating-point format is not IEEE 754 (DEC VMS, IBM 370:
 //! none exist in the test corpus) are an error.
 
-use std::io::Write;
 use std::path::Path;
 
 use crate::common::C64;
@@ -384,7 +383,9 @@ impl<'a> Cursor<'a> {
 /// with the header's byte count is noted. Never panics; a malformed dataset 58 is an error
 /// naming the file, the dataset index and the line.
 pub fn parse_uff(bytes: &[u8], file_label: &str) -> Result<UffFile, DataError> {
-    let bytes: &[u8] = bytes;
+    // a UTF-8 byte-order mark (Windows editors) would hide the first delimiter, and with it
+    // the first dataset
+    let bytes: &[u8] = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
     let mut out = UffFile {
         label: file_label.to_string(),
         ..Default::default()
@@ -1315,32 +1316,17 @@ pub fn write_uff(
     atomic_write(path, &bytes)
 }
 
-/// Write bytes to a temporary file beside `path`, then rename it over `path`.
+/// Write bytes to `path` atomically ([`crate::fs_atomic`]: a uniquely named temporary file
+/// beside it, fsynced, then renamed over it).
 pub(crate) fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), DataError> {
-    let label = path.display().to_string();
-    let e = |m: String| DataError::at(&label, None, None, m);
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let fname = path
-        .file_name()
-        .map(|s| s.to_string_lossy().to_string())
-        .unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{fname}.tmp{}", std::process::id()));
-    let res = (|| -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if let Err(err) = res {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e(format!(
-            "cannot write the file: {err}; check that the folder exists and is writable"
-        )));
-    }
-    Ok(())
+    crate::fs_atomic::write_atomic_bytes(path, bytes).map_err(|err| {
+        DataError::at(
+            path.display().to_string(),
+            None,
+            None,
+            format!("cannot write the file: {err}; check that the folder exists and is writable"),
+        )
+    })
 }
 
 #[cfg(test)]

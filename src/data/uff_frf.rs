@@ -246,10 +246,11 @@ pub fn frf_set_from_uff_files(
             match role(d, opts) {
                 Role::Other => continue,
                 Role::Coherence => {
+                    crate::data::checks::check_dataset(&f.label, d, true)?;
                     coh.push((name, f, d));
                     continue;
                 }
-                Role::Frf => {}
+                Role::Frf => crate::data::checks::check_dataset(&f.label, d, false)?,
             }
             let Some(((rid, rdir), (fid, fdir))) = dataset_dofs(d, opts) else {
                 return Err(err(format!(
@@ -276,12 +277,26 @@ pub fn frf_set_from_uff_files(
                     "FRF over a time abscissa (spec type 17); expected frequency in Hz".into(),
                 ));
             }
+            let force_rms_n = parse_kv(&d.ids, "force_rms_n");
+            if let Some(f) = force_rms_n.filter(|f| !(f.is_finite() && *f > 0.0)) {
+                return Err(err(format!(
+                    "force_rms_n={f} in the ID lines: the RMS force of a level is a positive number in N; fix it or remove the token"
+                )));
+            }
+            let n_averages = parse_kv(&d.ids, "n_averages");
+            if let Some(n) =
+                n_averages.filter(|n| !(*n >= 1.0 && *n <= u32::MAX as f64 && n.fract() == 0.0))
+            {
+                return Err(err(format!(
+                    "n_averages={n} in the ID lines: the number of averages is a whole number of at least 1; fix it or remove the token"
+                )));
+            }
             let level = levels.entry(name.clone()).or_insert_with(|| {
                 order.push(name.clone());
                 FrfLevel {
                     name: name.clone(),
-                    force_rms_n: parse_kv(&d.ids, "force_rms_n"),
-                    n_averages: parse_kv(&d.ids, "n_averages").map(|v| v as u32),
+                    force_rms_n,
+                    n_averages: n_averages.map(|v| v as u32),
                     quantity: q,
                     freq_hz: d.x.clone(),
                     channels: Vec::new(),

@@ -12,7 +12,7 @@ use super::of_study::{no_inference, wants_sensor_mass, StudyPosterior};
 use super::params::{DiagnoseParams, LoopInputs};
 use super::summary::DiagnoseSummary;
 use crate::closed_loop::{ClosedLoopParams, StartingFit};
-use crate::output::ResultsDir;
+use crate::output::{Manifest, Replace, ResultsDir};
 use crate::stage::RunError;
 use crate::study::Study;
 use std::path::Path;
@@ -34,6 +34,8 @@ pub fn diagnose_study(
 }
 
 /// [`diagnose_study`] into `<parent>/<dir_name>/`, with the residual figures when `figures`.
+/// The folder is replaced as a whole when rfmlab wrote it, it is empty or absent; another is
+/// refused before anything is computed ([`diagnose_into_as`] to force).
 pub fn diagnose_into(
     study: &Study,
     model: Option<&str>,
@@ -42,10 +44,38 @@ pub fn diagnose_into(
     dir_name: &str,
     figures: bool,
 ) -> Result<DiagnoseSummary, RunError> {
+    diagnose_into_as(
+        study,
+        model,
+        params,
+        parent,
+        dir_name,
+        figures,
+        Replace::IfOurs,
+    )
+}
+
+/// [`diagnose_into`] under the output contract's choice `replace`
+/// ([`crate::output::contract`]).
+pub fn diagnose_into_as(
+    study: &Study,
+    model: Option<&str>,
+    params: &ClosedLoopParams,
+    parent: &Path,
+    dir_name: &str,
+    figures: bool,
+    replace: Replace,
+) -> Result<DiagnoseSummary, RunError> {
     let t0 = std::time::Instant::now();
+    let target = parent.join(dir_name);
+    crate::output::claim_folder(&target, replace)?;
     if study.inference.is_none() {
         return Err(no_inference(study));
     }
+    // The pre-flight before anything is built: the model asked for, a writable folder (the
+    // data are checked as the model is set up).
+    DiagnoseParams::of(study, model)?;
+    crate::stage::preflight::check_settings(&study.models, &parent.join(dir_name), &study.file)?;
     let joint = crate::study::build::joint_spec(&study.structure).is_some();
     // A sensor's mass acts in x, y and z: when `[closed_loop] candidates` names the
     // sensor-mass candidate, the other two directions of every measured point of a meshed
@@ -217,9 +247,23 @@ pub fn diagnose_into(
     }
     outcome.markdown += &sections;
     outcome.mesh = mesh_comparison;
-    let mut dir = ResultsDir::create(parent, dir_name).map_err(RunError::Output)?;
-    super::write_loop(&mut dir, &outcome, &study.name, figures)?;
-    outcome.summary.output_dir = dir.path().to_path_buf();
+    // The folder is filled as a temporary sibling and swapped in whole, with a manifest that
+    // marks it as rfmlab's.
+    crate::output::replace_dir_as(&target, replace, |tmp| {
+        let tmp_parent = tmp.parent().map(Path::to_path_buf).unwrap_or_default();
+        let tmp_name = tmp
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let mut dir = ResultsDir::create(tmp_parent, &tmp_name).map_err(RunError::Output)?;
+        super::write_loop(&mut dir, &outcome, &study.name, figures)?;
+        let mut manifest = Manifest::new(&study.file, Some(study.seed));
+        manifest.add_timing("closed loop", t0.elapsed().as_secs_f64());
+        dir.write_manifest(&mut manifest)
+            .map_err(RunError::Output)?;
+        Ok::<_, RunError>(())
+    })?;
+    outcome.summary.output_dir = target;
     outcome.summary.seconds = t0.elapsed().as_secs_f64();
     Ok(outcome.summary)
 }
@@ -300,6 +344,7 @@ fn loop_once(
         built,
         levels,
         engines,
+        warnings,
     } = crate::stage::setup::setup(
         study,
         // The loop's candidate masses act at every measured point.
@@ -307,6 +352,11 @@ fn loop_once(
         // The certified ROM is cached beside the results, as `rfmlab run` caches it.
         Some(&crate::stage::rom_cache_dir(&study.output_dir)),
     )?;
+    if starting_fits.is_empty() {
+        for w in &warnings {
+            params.progress.say(&format!("warning: {w}"));
+        }
+    }
     let engine = engines
         .likelihood
         .as_deref()

@@ -16,7 +16,9 @@ use crate::stage::RunError;
 pub(crate) fn closed_loop_table(
     results: &[LevelResult],
     summary: &[DiagnoseLevel],
+    term_box: Option<&crate::rom::ModulusRange>,
 ) -> Result<Table, RunError> {
+    let (mut fit_status, mut fit_reason) = (Vec::new(), Vec::new());
     let (mut lv, mut q) = (Vec::new(), Vec::new());
     let (mut b, mut bs, mut a, mut as_, mut tr) =
         (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
@@ -73,6 +75,12 @@ pub(crate) fn closed_loop_table(
             warning.push(String::new());
         }
         status.extend(std::iter::repeat_n(v.status.to_string(), q.len() - n_rows));
+        let fs = after_status(res, results_lines(results, level), term_box);
+        fit_status.extend(std::iter::repeat_n(
+            fs.label().to_string(),
+            q.len() - n_rows,
+        ));
+        fit_reason.extend(std::iter::repeat_n(fs.reason_text(), q.len() - n_rows));
     }
     let mut t = Table::new("closed_loop");
     t.push_str("level", lv)
@@ -84,8 +92,58 @@ pub(crate) fn closed_loop_table(
         .and_then(|t| t.push_opt_f64("after_sd", "SI", as_))
         .and_then(|t| t.push_opt_f64("truth", "SI", tr))
         .and_then(|t| t.push_str("warning", warning))
+        .and_then(|t| t.push_str("fit_status", fit_status))
+        .and_then(|t| t.push_str("fit_status_reason", fit_reason))
         .map_err(RunError::Output)?;
     Ok(t)
+}
+
+/// The lines (Hz) of `level` among `results`.
+fn results_lines<'r>(results: &'r [LevelResult], level: &str) -> &'r [f64] {
+    results
+        .iter()
+        .find(|r| r.0 == level)
+        .map(|r| r.1.as_slice())
+        .unwrap_or(&[])
+}
+
+/// Whether the loop's final MAP is a result ([`crate::rfm::status`]): its law's parameters
+/// finite and, for a modulus, physical; its modulus on `freq_hz` inside the term ROM's
+/// certified box when the loop ran on one.
+fn after_status(
+    res: &crate::closed_loop::ClosedLoopResult,
+    freq_hz: &[f64],
+    term_box: Option<&crate::rom::ModulusRange>,
+) -> crate::rfm::FitStatus {
+    use crate::rfm::status::{box_flag, parameter_flags, ParamCheck};
+    let after = &res.after;
+    let n = after.n_law.min(after.values.len()).min(after.names.len());
+    let Ok(law) = crate::material::model_from_name(&after.law, None) else {
+        return crate::rfm::FitStatus::Converged;
+    };
+    let units = law.param_units();
+    let checks: Vec<ParamCheck<'_>> = (0..n)
+        .map(|k| ParamCheck {
+            name: &after.names[k],
+            unit: units.get(k).map(String::as_str).unwrap_or(""),
+            value: after.values[k],
+            range: (f64::NEG_INFINITY, f64::INFINITY),
+        })
+        .collect();
+    let mut reasons = parameter_flags(&checks);
+    if let (Some(range), true) = (term_box, n == law.n_params()) {
+        let curve: Vec<(f64, crate::common::C64)> = freq_hz
+            .iter()
+            .map(|&f| {
+                (
+                    f,
+                    law.modulus(&after.values[..n], std::f64::consts::TAU * f),
+                )
+            })
+            .collect();
+        reasons.extend(box_flag(&curve, range));
+    }
+    crate::rfm::FitStatus::from_reasons(reasons)
 }
 
 /// `verdict`: one row per level: the status, the null level and threshold, where the residual

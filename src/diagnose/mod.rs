@@ -48,7 +48,7 @@ mod term_box;
 pub mod terms;
 
 pub use candidates::{bond_candidates, term_candidates, with_declared};
-pub use command::{diagnose_into, diagnose_study};
+pub use command::{diagnose_into, diagnose_into_as, diagnose_study};
 pub use markdown::{report_section, status_line};
 pub use of_study::{params_of, wants_sensor_mass, StudyPosterior};
 pub use params::{DiagnoseParams, LevelPosterior, LoopInputs, NullChainParams, TermParams};

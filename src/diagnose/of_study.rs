@@ -11,10 +11,11 @@ use crate::material::ConstitutiveModel;
 use crate::stage::{LevelData, RunError};
 use crate::study::Study;
 
-/// The loop's settings from the study's `[closed_loop]` section (defaults without one): how
-/// the plan is made.
+/// The loop's settings from the study's `[closed_loop]` section (defaults without one), its
+/// MAP searches seeded with the study's seed: how the plan is made.
 pub fn params_of(study: &Study) -> ClosedLoopParams {
-    let d = ClosedLoopParams::default();
+    let mut d = ClosedLoopParams::default();
+    d.map.seed = study.seed;
     match &study.closed_loop {
         None => d,
         Some(s) => ClosedLoopParams {

@@ -46,6 +46,7 @@ impl Prepared {
             built,
             levels,
             engines,
+            ..
         } = crate::stage::setup::setup(
             study,
             crate::stage::engine::LikelihoodInputs::of(study),

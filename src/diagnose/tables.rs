@@ -13,7 +13,11 @@ pub fn loop_tables(o: &LoopOutcome) -> Result<Vec<Table>, RunError> {
     let mut tables = vec![
         residuals_table(&o.levels)?,
         candidates_table(&o.levels)?,
-        closed_loop_table(&o.levels, &o.summary.levels)?,
+        closed_loop_table(
+            &o.levels,
+            &o.summary.levels,
+            o.summary.term_rom.as_ref().map(|(_, r)| r),
+        )?,
         verdict_table(&o.levels, &o.summary.levels)?,
         signatures_table(&o.levels)?,
     ];

@@ -47,7 +47,6 @@ use crate::fe::model::{ObservationPoint, SpMat, StructuralModel};
 use faer::sparse::Triplet;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Errors of Matrix Market import and export.
@@ -269,15 +268,10 @@ pub fn format_mtx(a: &SpMat, comment: &str) -> String {
     s
 }
 
-/// Write `contents` to `path` atomically (temporary file in the same folder, then rename).
+/// Write `contents` to `path` atomically ([`crate::fs_atomic`]: a uniquely named temporary
+/// file in the same folder, fsynced, then renamed).
 fn write_atomic(path: &Path, contents: &str) -> Result<(), MmError> {
-    let tmp = path.with_extension("tmp~");
-    {
-        let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
-        f.write_all(contents.as_bytes()).map_err(io_err(&tmp))?;
-        f.sync_all().map_err(io_err(&tmp))?;
-    }
-    std::fs::rename(&tmp, path).map_err(io_err(path))
+    crate::fs_atomic::write_atomic_bytes(path, contents.as_bytes()).map_err(io_err(path))
 }
 
 /// Write one matrix as a Matrix Market file.

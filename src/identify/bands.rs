@@ -40,8 +40,22 @@ pub(super) fn band_constant(ctx: &Level<'_>) -> Result<Vec<BandConstantResult>, 
             &sub,
             |c, prev: Option<&BandResult>| {
                 let e0 = prev.map(|p| p.modulus).unwrap_or(model1_e0);
-                crate::rfm::rfm_band_constant(engine, c, band, e0, params)
-                    .map_err(|e| analysis(&name, e))
+                // The corrected passes share `max_iterations` (as the global RFM's do); the
+                // count is that of every pass together.
+                let used = prev.map_or(0, |p| p.run.iterations);
+                if let Some(p) = prev.filter(|_| used >= params.max_iterations) {
+                    let mut r = p.clone();
+                    r.run.stop_reason = crate::rfm::StopReason::MaxIterations;
+                    return Ok(r);
+                }
+                let budget = crate::rfm::RfmParams {
+                    max_iterations: params.max_iterations - used,
+                    ..params.clone()
+                };
+                let mut r = crate::rfm::rfm_band_constant(engine, c, band, e0, &budget)
+                    .map_err(|e| analysis(&name, e))?;
+                r.run.iterations += used;
+                Ok(r)
             },
             |r| vec![r.modulus.re, r.modulus.im],
             &constant,

@@ -41,7 +41,20 @@ pub(super) fn global_models(
             col,
             |c, prev: Option<&RfmResult>| {
                 let p0 = prev.map(|p| p.params.as_slice()).unwrap_or(&m.initial);
-                let r = crate::rfm::rfm_global(engine, c, law.as_ref(), p0, params);
+                // `max_iterations` bounds the updates of the whole fit: the corrected passes
+                // share it. Once it is spent the fixed point stops where it is, at the
+                // iteration limit (the previous pass unchanged).
+                let used = prev.map_or(0, |p| p.iterations);
+                if let Some(p) = prev.filter(|_| used >= params.max_iterations) {
+                    let mut r = p.clone();
+                    r.stop_reason = crate::rfm::StopReason::MaxIterations;
+                    return Ok(r);
+                }
+                let budget = crate::rfm::RfmParams {
+                    max_iterations: params.max_iterations - used,
+                    ..params.clone()
+                };
+                let r = crate::rfm::rfm_global(engine, c, law.as_ref(), p0, &budget);
                 // A corrected pass continues the history of the previous one (Fig. 8 shows
                 // the whole path from the initial values).
                 let r = r.map(|mut r| {
@@ -94,7 +107,16 @@ pub(super) fn global_models(
         let (initial_frf, _) = predicted(&m.initial, &initial_modulus, "initial")?;
         let (updated_frf, leakage_bias) = predicted(&r.params, &r.modulus, "updated")?;
         let (ri, ru) = (rows(&initial_frf, n_out), rows(&updated_frf, n_out));
+        let status = crate::rfm::status::rfm_status(
+            &r,
+            &law.param_units(),
+            &law.bounds(),
+            &ctx.inputs.level.freq_hz,
+            ctx.inputs.certified,
+            params.max_iterations,
+        );
         global.push(GlobalResult {
+            status,
             leakage_passes: passes,
             leakage_bias,
             frac_initial: crate::correlation::frac_per_frf(&x_rows, &ri),

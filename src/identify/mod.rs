@@ -56,6 +56,10 @@ pub struct LevelInputs<'a> {
     pub estimator: Option<&'a crate::study::Estimator>,
     /// The study file, named by input errors.
     pub file: &'a Path,
+    /// The modulus box the engine is certified over (the reduced model's), `None` for an
+    /// engine valid at every modulus (the full model): a fit whose modulus leaves it is
+    /// flagged ([`crate::rfm::status`]).
+    pub certified: Option<&'a crate::rom::ModulusRange>,
 }
 
 /// Default initial modulus where a study gives none (Pa): the paper's IEM value, Level 1 mode 1.
@@ -99,6 +103,9 @@ pub struct IemFailed {
 #[derive(Clone, Debug)]
 pub struct GlobalResult {
     pub result: RfmResult,
+    /// Whether the fit is a result ([`crate::rfm::status::rfm_status`]): the one status the
+    /// console, the tables and the report show.
+    pub status: crate::rfm::FitStatus,
     /// Leakage-corrected passes (0 without `[measurements.estimator]`).
     pub leakage_passes: usize,
     /// The H1 estimator's leakage bias at the updated parameters, `[line][k]` flattened (empty

@@ -15,7 +15,7 @@
 //! its own checkpoint directory.
 
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use sha2::{Digest, Sha256};
 
@@ -170,24 +170,15 @@ pub fn ensure_dir(dir: &Path) -> Result<(), SamplerError> {
     fs::create_dir_all(dir).map_err(|e| io_err(dir, "create directory", e))
 }
 
-/// Writes `MAGIC`, `key` and `payload` to `path` atomically (temporary file in the same
-/// directory, flushed, then renamed over `path`).
+/// Writes `MAGIC`, `key` and `payload` to `path` atomically ([`crate::fs_atomic`]: a uniquely
+/// named temporary file in the same directory, fsynced, then renamed over `path`).
 pub fn write_atomic(path: &Path, key: &[u8; 32], payload: &[u8]) -> Result<(), SamplerError> {
-    use std::io::Write;
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "checkpoint".into());
-    let tmp: PathBuf = path.with_file_name(format!(".{name}.tmp{}", std::process::id()));
-    let mut f = fs::File::create(&tmp).map_err(|e| io_err(&tmp, "create", e))?;
-    let mut bytes = Vec::with_capacity(MAGIC.len() + 32 + payload.len());
-    bytes.extend_from_slice(MAGIC);
-    bytes.extend_from_slice(key);
-    bytes.extend_from_slice(payload);
-    f.write_all(&bytes).map_err(|e| io_err(&tmp, "write", e))?;
-    f.sync_all().map_err(|e| io_err(&tmp, "sync", e))?;
-    drop(f);
-    fs::rename(&tmp, path).map_err(|e| io_err(path, "rename", e))
+    crate::fs_atomic::write_atomic(path, |w| {
+        w.write_all(MAGIC)?;
+        w.write_all(key)?;
+        w.write_all(payload)
+    })
+    .map_err(|e| io_err(path, "write", e))
 }
 
 /// The payload of the checkpoint at `path` if it exists and was written under `key`; `None`
@@ -255,7 +246,7 @@ mod tests {
         let err = write_atomic(&missing, &[0; 32], &[]).unwrap_err();
         let msg = err.to_string();
         assert!(
-            msg.contains("checkpoint create failed") && msg.contains("no"),
+            msg.contains("checkpoint write failed") && msg.contains("no"),
             "{msg}"
         );
     }

@@ -12,7 +12,7 @@ pub enum ModalError {
     #[error("{n_freq} frequency lines but {n_values} FRF values: give one value per line")]
     LengthMismatch { n_freq: usize, n_values: usize },
     /// The band is empty, reversed or has too few usable lines.
-    #[error("band {lo_hz} - {hi_hz} Hz holds {n_points} usable lines (lines at 0 Hz excluded); the circle fit needs at least {needed}: widen the band or raise points_each_side")]
+    #[error("band {lo_hz} - {hi_hz} Hz holds {n_points} usable lines (lines at 0 Hz excluded); the circle fit needs at least {needed}: widen the band (width_hz of its [analyses] entry) or give data on finer frequency lines")]
     TooFewPoints {
         lo_hz: f64,
         hi_hz: f64,

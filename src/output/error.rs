@@ -56,12 +56,33 @@ pub enum OutputError {
         name: String,
         reason: &'static str,
     },
+    /// An output path holds something rfmlab may not replace (the output contract,
+    /// [`crate::output::contract`]): nothing was written.
+    #[error("refusing to write '{}': it is {found}; {fix}", path.display())]
+    Refused {
+        path: PathBuf,
+        /// What is there, in words.
+        found: String,
+        /// What the user can do.
+        fix: String,
+    },
+    /// An output path cannot be created.
+    #[error("cannot write '{}': {reason}; choose a folder you can write to with -o/--output", path.display())]
+    NotWritable { path: PathBuf, reason: String },
     /// The parts of a sharded table do not fit together.
     #[error("sharded table '{table}': {message}")]
     Shard { table: String, message: String },
 }
 
 impl OutputError {
+    /// Whether the error is about the output path the user chose (a refused or unwritable
+    /// output: exit code 2 on the command line) rather than a failure while writing.
+    pub fn is_input(&self) -> bool {
+        matches!(
+            self,
+            OutputError::Refused { .. } | OutputError::NotWritable { .. }
+        )
+    }
     pub(crate) fn io(
         path: impl Into<PathBuf>,
         action: &'static str,

@@ -33,7 +33,7 @@ pub struct Manifest {
     /// `git rev-parse HEAD` of the rfmlab source tree, `-dirty` appended when it has
     /// uncommitted changes; `None` when git or the source tree is not available.
     pub git_revision: Option<String>,
-    /// The study file as given on the command line.
+    /// The study file, as an absolute path (canonical when the file exists).
     pub study_file: String,
     /// SHA-256 of the study file's bytes (lowercase hex); `None` if it could not be read.
     pub study_sha256: Option<String>,
@@ -66,7 +66,11 @@ impl Manifest {
         Manifest {
             version: env!("CARGO_PKG_VERSION").to_string(),
             git_revision: git_revision(),
-            study_file: study_file.display().to_string(),
+            study_file: std::fs::canonicalize(study_file)
+                .or_else(|_| std::path::absolute(study_file))
+                .unwrap_or_else(|_| study_file.to_path_buf())
+                .display()
+                .to_string(),
             study_sha256,
             seed,
             started_utc: utc_now_rfc3339(),
@@ -222,6 +226,15 @@ mod tests {
         assert_eq!(format_utc(951_782_400), "2000-02-29T00:00:00Z");
         assert_eq!(format_utc(1_700_000_000), "2023-11-14T22:13:20Z");
         assert_eq!(format_utc(4_107_542_399), "2100-02-28T23:59:59Z");
+    }
+
+    #[test]
+    fn the_study_path_is_recorded_absolute() {
+        let m = Manifest::new("studies/default.toml", None);
+        assert!(Path::new(&m.study_file).is_absolute(), "{}", m.study_file);
+        assert!(m.study_file.ends_with("default.toml"), "{}", m.study_file);
+        let m = Manifest::new("no/such/study.toml", None);
+        assert!(Path::new(&m.study_file).is_absolute(), "{}", m.study_file);
     }
 
     #[test]

@@ -14,12 +14,16 @@
 //!   `polars.read_parquet_metadata(path)["rfmlab.units"]`.
 //! - A complex quantity `x` is stored as two f64 columns `x_re` and `x_im` (same unit);
 //!   see [`Table::push_c64`] and [`Table::c64_column`].
-//! - Every file is written atomically ([`write_atomic`]): a temporary file in the same folder,
-//!   fsync, rename. An interrupted or failed run never leaves a half-written file and earlier
-//!   results stay intact.
+//! - Every file is written atomically ([`write_atomic`], on [`crate::fs_atomic`]): a uniquely
+//!   named temporary file in the same folder, fsync, rename. An interrupted or failed run never
+//!   leaves a half-written file and earlier results stay intact.
+//! - A results folder is replaced only when rfmlab made it (its `manifest.json`), it is empty
+//!   or absent, or the caller forces it ([`contract`]); it is filled as a temporary sibling and
+//!   swapped in whole ([`swap`]).
 
 mod atomic;
 mod columns;
+pub mod contract;
 mod error;
 mod manifest;
 mod report;
@@ -38,4 +42,5 @@ pub use results_dir::ResultsDir;
 pub use table::{ColumnData, Table};
 pub mod shards;
 pub mod swap;
-pub use swap::replace_dir;
+pub use contract::{claim_file, claim_folder, Replace};
+pub use swap::{replace_dir, replace_dir_as};

@@ -11,7 +11,12 @@
 //! Temporary (`.tmp-<pid>`) and old (`.old-<pid>`) siblings left by a killed process (one no
 //! longer running, on Linux; any other process elsewhere) are deleted by the next call for
 //! the same target.
+//!
+//! What may be replaced is the output contract's ([`super::contract`]): [`replace_dir`]
+//! replaces only an absent or empty folder or one rfmlab wrote; [`replace_dir_as`] with
+//! [`Replace::Force`] replaces anything, a regular file included.
 
+use super::contract::{claim_folder, Replace};
 use super::OutputError;
 use std::path::{Path, PathBuf};
 
@@ -22,6 +27,15 @@ fn sibling(dir: &Path, suffix: &str) -> PathBuf {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "results".into());
     dir.with_file_name(format!("{name}.{suffix}"))
+}
+
+/// Remove a folder with its contents, or a file.
+fn remove_any(p: &Path) -> std::io::Result<()> {
+    if std::fs::symlink_metadata(p)?.is_dir() {
+        std::fs::remove_dir_all(p)
+    } else {
+        std::fs::remove_file(p)
+    }
 }
 
 /// Whether process `pid` may still be running (so its temporary folder is not stale).
@@ -71,7 +85,7 @@ pub fn clean_stale(target: &Path) -> Result<(), OutputError> {
         if kind == "old" {
             olds.push(e.path());
         } else {
-            std::fs::remove_dir_all(e.path())
+            remove_any(&e.path())
                 .map_err(|err| OutputError::io(e.path(), "remove stale temporary folder", err))?;
         }
     }
@@ -80,7 +94,7 @@ pub fn clean_stale(target: &Path) -> Result<(), OutputError> {
             std::fs::rename(&old, target)
                 .map_err(|e| OutputError::io(&old, "restore the previous results from", e))?;
         } else {
-            std::fs::remove_dir_all(&old)
+            remove_any(&old)
                 .map_err(|e| OutputError::io(&old, "remove stale previous results", e))?;
         }
     }
@@ -93,13 +107,13 @@ pub fn swap_dir(new: &Path, target: &Path) -> Result<(), OutputError> {
     if target.exists() {
         use rustix::fs::{renameat_with, RenameFlags, CWD};
         if renameat_with(CWD, new, CWD, target, RenameFlags::EXCHANGE).is_ok() {
-            // `new` now holds the previous results.
-            let _ = std::fs::remove_dir_all(new);
+            // `new` now holds the previous results (a folder, or a file replaced by force).
+            let _ = remove_any(new);
             return Ok(());
         }
     }
     let old = sibling(target, &format!("old-{}", std::process::id()));
-    if target.exists() {
+    if std::fs::symlink_metadata(target).is_ok() {
         std::fs::rename(target, &old)
             .map_err(|e| OutputError::io(target, "move the previous results aside", e))?;
     }
@@ -111,23 +125,39 @@ pub fn swap_dir(new: &Path, target: &Path) -> Result<(), OutputError> {
             e,
         ));
     }
-    if old.exists() {
-        let _ = std::fs::remove_dir_all(&old);
+    if std::fs::symlink_metadata(&old).is_ok() {
+        let _ = remove_any(&old);
     }
     Ok(())
 }
 
 /// Fill a fresh temporary sibling of `target` with `fill` (given its path), then swap it into
-/// place. On error the temporary folder is removed and `target` is untouched.
+/// place. On error the temporary folder is removed and `target` is untouched. `target` must be
+/// absent, an empty folder or a folder rfmlab wrote ([`Replace::IfOurs`]); else nothing is
+/// written and the error is [`OutputError::Refused`].
 pub fn replace_dir<T, E>(target: &Path, fill: impl FnOnce(&Path) -> Result<T, E>) -> Result<T, E>
 where
     E: From<OutputError>,
 {
+    replace_dir_as(target, Replace::IfOurs, fill)
+}
+
+/// [`replace_dir`] with the contract's choice: [`Replace::Force`] replaces whatever is at
+/// `target` (a folder rfmlab did not write, a file) as a whole. The contract is checked before
+/// `fill` runs and again just before the swap.
+pub fn replace_dir_as<T, E>(
+    target: &Path,
+    replace: Replace,
+    fill: impl FnOnce(&Path) -> Result<T, E>,
+) -> Result<T, E>
+where
+    E: From<OutputError>,
+{
+    claim_folder(target, replace)?;
     clean_stale(target)?;
     let tmp = sibling(target, &format!("tmp-{}", std::process::id()));
-    if tmp.exists() {
-        std::fs::remove_dir_all(&tmp)
-            .map_err(|e| OutputError::io(&tmp, "remove stale temporary folder", e))?;
+    if std::fs::symlink_metadata(&tmp).is_ok() {
+        remove_any(&tmp).map_err(|e| OutputError::io(&tmp, "remove stale temporary folder", e))?;
     }
     if let Some(p) = target.parent().filter(|p| !p.as_os_str().is_empty()) {
         std::fs::create_dir_all(p)
@@ -141,7 +171,8 @@ where
             return Err(e);
         }
     };
-    if let Err(e) = swap_dir(&tmp, target) {
+    let swapped = claim_folder(target, replace).and_then(|_| swap_dir(&tmp, target));
+    if let Err(e) = swapped {
         let _ = std::fs::remove_dir_all(&tmp);
         return Err(e.into());
     }
@@ -158,6 +189,9 @@ mod tests {
         let target = root.path().join("res");
         std::fs::create_dir(&target).unwrap();
         std::fs::write(target.join("a"), "old").unwrap();
+        super::super::Manifest::new("s.toml", None)
+            .write(target.join("manifest.json"))
+            .unwrap();
         // A temporary folder and an old folder of a process that no longer runs.
         let dead = u32::MAX - 1;
         std::fs::create_dir(root.path().join(format!("res.tmp-{dead}"))).unwrap();
@@ -178,6 +212,47 @@ mod tests {
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
         assert_eq!(names, vec!["res".to_string()], "stray folders: {names:?}");
+    }
+
+    #[test]
+    fn a_foreign_folder_or_file_is_refused_untouched_and_replaced_whole_when_forced() {
+        let root = tempfile::tempdir().unwrap();
+        let fill = |p: &Path| -> Result<(), OutputError> {
+            std::fs::write(p.join("new"), "results").map_err(|e| OutputError::io(p, "write", e))
+        };
+        let victim = root.path().join("victim");
+        std::fs::create_dir(&victim).unwrap();
+        std::fs::write(victim.join("important.txt"), "mine").unwrap();
+        let afile = root.path().join("afile");
+        std::fs::write(&afile, "mine too").unwrap();
+        for t in [&victim, &afile] {
+            let called = std::cell::Cell::new(false);
+            let r = replace_dir(t, |p| {
+                called.set(true);
+                fill(p)
+            });
+            assert!(matches!(r, Err(OutputError::Refused { .. })), "{r:?}");
+            assert!(!called.get(), "the folder was filled before the refusal");
+        }
+        assert_eq!(
+            std::fs::read_to_string(victim.join("important.txt")).unwrap(),
+            "mine"
+        );
+        assert_eq!(std::fs::read_to_string(&afile).unwrap(), "mine too");
+        for t in [&victim, &afile] {
+            replace_dir_as(t, Replace::Force, fill).unwrap();
+            let names: Vec<String> = std::fs::read_dir(t)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            assert_eq!(names, vec!["new".to_string()]);
+        }
+        let mut names: Vec<String> = std::fs::read_dir(root.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(names, vec!["afile".to_string(), "victim".to_string()]);
     }
 
     #[test]

@@ -44,7 +44,18 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
         None => None,
     };
     let built = model::build(&study.structure, file)?;
-    let levels = crate::stage::data::load_levels(Some(&plan.data), &built, file)?;
+    let id = &plan.identification;
+    let loaded = preflight::check_data(
+        &preflight::DataChecks {
+            file,
+            measurements: Some(&plan.data),
+            points: &study.structure.points,
+            band_constant: &id.band_constant,
+            iem: &id.iem,
+        },
+        &built,
+    )?;
+    let levels = loaded.levels;
     let mut pf = preflight::Preflight {
         cost: cost.map(|c| preflight::CostSummary {
             n_dof: c.n_dof,
@@ -52,10 +63,9 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
             factor_seconds: c.factor_seconds,
             available_memory_bytes: crate::fe::cost::available_memory_bytes(),
         }),
+        warnings: loaded.warnings,
         ..Default::default()
     };
-    let id = &plan.identification;
-    preflight::check_bands(&id.band_constant, &id.iem, file, &levels, &mut pf.warnings)?;
     preflight::check_channels(&built, &levels, &mut pf.warnings);
     let lines_checked = model::check_initial_values(models, file, &built, &levels, &laws)?;
     preflight::check_first_mode(models, &built, &levels, &laws, &mut pf)?;

@@ -17,6 +17,7 @@ impl Plan {
     /// written in (module doc).
     pub(crate) fn lowered(&self) -> Result<Lowered, RunError> {
         let mut s = self.study().clone();
+        s.seed = self.seed;
         let bad = |key: &str, message: String| {
             RunError::Study(crate::study::StudyError {
                 file: self.study().file.display().to_string(),

@@ -39,7 +39,7 @@ pub use plan::{
     DataParams, EngineParams, IdentificationParams, InferenceParams, LikelihoodInputs, Plan,
     SamplerParams,
 };
-pub use results::ModelSummary;
+pub use results::{FlaggedFit, ModelSummary};
 pub use results::{IdentifiedParameters, ModelProbabilities, ModelProbability, Results, LOOP_DIR};
 
 use std::sync::Arc;
@@ -95,7 +95,7 @@ fn run_here(
             point_ids: &point_ids,
             declared: &study.declared_effects,
         },
-        seed: study.seed,
+        seed: plan.seed,
         models: &plan.identification.models,
         laws: &run.laws,
         checkpoints: crate::bayes::Checkpoints {
@@ -116,9 +116,10 @@ fn run_here(
         data,
         engines,
         mesh_error,
+        warnings,
         ..
     } = run;
-    Results::new(
+    let mut results = Results::new(
         Arc::new(lowered.study.clone()),
         data,
         levels,
@@ -130,7 +131,9 @@ fn run_here(
         plan.output_dir.clone(),
         closed_loop,
         mesh_error,
-    )
+    )?;
+    results.preflight_warnings = warnings;
+    Ok(results)
 }
 
 /// The samplers' and the stepping-stone's checkpoints of a run writing to `output_dir`:

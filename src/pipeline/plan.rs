@@ -25,6 +25,11 @@ pub type DataParams = crate::study::Measurements;
 #[derive(Clone, Debug)]
 pub struct Plan {
     study: Arc<Study>,
+    /// The seed of every random stream of the run (`[study] seed`): the samplers' chains, the
+    /// MAP searches' space-filling starts, the closed loop's multistart searches and its
+    /// simulated replicate experiments all derive their streams from it, and from nothing else
+    /// (not the thread count).
+    pub seed: u64,
     pub engine: EngineParams,
     pub data: DataParams,
     pub identification: IdentificationParams,
@@ -101,6 +106,7 @@ impl Plan {
             None => None,
         };
         Ok(Plan {
+            seed: s.seed,
             engine: EngineParams::of(s),
             data,
             identification: IdentificationParams {

@@ -49,12 +49,16 @@ pub struct IdentifiedParameters {
     pub identified: Vec<f64>,
     pub iterations: usize,
     pub stop_reason: String,
-    /// FRAC per response channel at the initial and the identified parameters.
+    /// Whether the fit is a result ([`crate::rfm::status`]).
+    pub status: crate::rfm::FitStatus,
+    /// FRAC per response channel at the initial and the identified parameters: the data
+    /// against the predicted measurement (the `correlation` table's).
     pub frac_initial: Vec<f64>,
     pub frac_updated: Vec<f64>,
 }
 
-/// One global RFM run in the summary.
+/// One global RFM run in the summary (`rfmlab run --json` and the console): the numbers of
+/// [`IdentifiedParameters`], the same as the `parameters` and `correlation` tables'.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ModelSummary {
     pub level: String,
@@ -64,7 +68,55 @@ pub struct ModelSummary {
     pub identified: Vec<f64>,
     pub iterations: usize,
     pub stop_reason: String,
+    /// `converged` or `flagged` (the tables' `status` column).
+    pub status: String,
+    /// Why the fit is flagged, in plain words (empty when converged).
+    pub status_reason: String,
+    /// The typed reasons (empty when converged).
+    pub flags: Vec<crate::rfm::FlagReason>,
+    /// FRAC per response channel at the identified parameters (`frac_updated`).
     pub frac: Vec<f64>,
+}
+
+impl From<&IdentifiedParameters> for ModelSummary {
+    fn from(p: &IdentifiedParameters) -> Self {
+        ModelSummary {
+            level: p.level.clone(),
+            model: p.model.clone(),
+            param_names: p.names.clone(),
+            initial: p.initial.clone(),
+            identified: p.identified.clone(),
+            iterations: p.iterations,
+            stop_reason: p.stop_reason.clone(),
+            status: p.status.label().to_string(),
+            status_reason: p.status.reason_text(),
+            flags: p.status.reasons().to_vec(),
+            frac: p.frac_updated.clone(),
+        }
+    }
+}
+
+/// A fit that is not a result ([`Results::flagged`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct FlaggedFit {
+    pub level: String,
+    pub model: String,
+    /// `global RFM` or `MAP`.
+    pub fit: String,
+    pub status: crate::rfm::FitStatus,
+}
+
+impl std::fmt::Display for FlaggedFit {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} {} ({}): {}",
+            self.level,
+            self.model,
+            self.fit,
+            self.status.reason_text()
+        )
+    }
 }
 
 /// A run's results in memory (see the module doc).
@@ -81,6 +133,9 @@ pub struct Results {
     pub(crate) output_dir: std::path::PathBuf,
     pub(crate) closed_loop: Option<LoopOutcome>,
     pub(crate) mesh_error: Vec<crate::stage::preflight::ModeDiscretisation>,
+    /// The pre-flight's warnings that bear on the results (channels flipped, a level's file
+    /// whose force level differs from the level's, bands beyond the data).
+    pub(crate) preflight_warnings: Vec<String>,
     /// (name = path of the parquet file without `.parquet`, table, its DataFrame).
     tables: Vec<(String, Table, DataFrame)>,
 }
@@ -123,8 +178,15 @@ impl Results {
             output_dir,
             closed_loop,
             mesh_error,
+            preflight_warnings: Vec::new(),
             tables,
         })
+    }
+
+    /// The pre-flight's warnings that bear on the results, one sentence each (the console
+    /// and the report's first lines show them).
+    pub fn preflight_warnings(&self) -> &[String] {
+        &self.preflight_warnings
     }
 
     /// The mesh's estimated discretisation error per low mode (`[analyses] mesh_error`;
@@ -206,6 +268,7 @@ impl Results {
                         identified: res.params.clone(),
                         iterations: res.iterations,
                         stop_reason: res.stop_reason.to_string(),
+                        status: g.status.clone(),
                         frac_initial: g.frac_initial.clone(),
                         frac_updated: g.frac_updated.clone(),
                     }
@@ -289,22 +352,36 @@ impl Results {
     pub fn seconds(&self) -> f64 {
         self.seconds
     }
-    /// Per level and model: identified parameters, stop reason and FRAC per FRF.
+    /// Per level and model: identified parameters, stop reason, status and FRAC per FRF, made
+    /// from [`Results::identified`] (the numbers of the tables and the report).
     pub fn model_summaries(&self) -> Vec<ModelSummary> {
-        self.level_results
-            .iter()
-            .flat_map(|r| {
-                r.global.iter().map(move |g| ModelSummary {
-                    level: r.level.clone(),
-                    model: g.result.model_name.clone(),
-                    param_names: g.result.param_names.clone(),
-                    initial: g.result.initial.clone(),
-                    identified: g.result.params.clone(),
-                    iterations: g.result.iterations,
-                    stop_reason: g.result.stop_reason.to_string(),
-                    frac: g.result.frac.clone(),
-                })
+        self.identified().iter().map(ModelSummary::from).collect()
+    }
+    /// The fits that are not results ([`crate::rfm::FitStatus::Flagged`]): the global RFM per
+    /// level and model, then each posterior's MAP.
+    pub fn flagged(&self) -> Vec<FlaggedFit> {
+        let mut out: Vec<FlaggedFit> = self
+            .identified()
+            .into_iter()
+            .filter(|p| p.status.is_flagged())
+            .map(|p| FlaggedFit {
+                level: p.level,
+                model: p.model,
+                fit: "global RFM".into(),
+                status: p.status,
             })
-            .collect()
+            .collect();
+        for p in self.posteriors() {
+            let status = crate::bayes::map_status(p);
+            if status.is_flagged() {
+                out.push(FlaggedFit {
+                    level: p.level.clone(),
+                    model: p.model.clone(),
+                    fit: "MAP".into(),
+                    status,
+                });
+            }
+        }
+        out
     }
 }

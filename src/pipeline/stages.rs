@@ -26,6 +26,8 @@ pub(super) struct Prepared {
     pub declared_terms: Option<crate::rom::TermRom>,
     /// The band of the levels' lines (Hz).
     pub band_hz: (f64, f64),
+    /// The pre-flight's warnings that bear on the results.
+    pub warnings: Vec<String>,
 }
 
 impl Prepared {
@@ -74,6 +76,7 @@ pub(super) fn prepare(
     progress: &(dyn Fn(Event) + Sync),
 ) -> Result<Prepared, RunError> {
     let models = &plan.identification.models;
+    crate::stage::preflight::check_settings(models, &plan.output_dir, &study.file)?;
     let laws = crate::stage::model_laws(models, &study.file)?;
     progress(Event::Start {
         step: "assembling the FE model".into(),
@@ -82,7 +85,20 @@ pub(super) fn prepare(
     let built = crate::stage::model::build(&study.structure, &study.file)?;
     progress(Event::Finish);
     ex.lap("build model")?;
-    let mut data = crate::stage::data::load_levels(Some(&plan.data), &built, &study.file)?;
+    // The pre-flight of the data, before anything is fitted.
+    let crate::stage::data::LoadedLevels {
+        levels: mut data,
+        warnings,
+    } = crate::stage::preflight::check_data(
+        &crate::stage::preflight::DataChecks {
+            file: &study.file,
+            measurements: Some(&plan.data),
+            points: &study.structure.points,
+            band_constant: &plan.identification.band_constant,
+            iem: &plan.identification.iem,
+        },
+        &built,
+    )?;
     let band_hz = crate::stage::data::band_of(&data);
     crate::stage::model::check_initial_values(models, &study.file, &built, &data, &laws)?;
     ex.lap("load and check data")?;
@@ -134,6 +150,7 @@ pub(super) fn prepare(
         mesh_error,
         declared_terms: None,
         band_hz,
+        warnings,
     })
 }
 
@@ -200,6 +217,7 @@ pub(super) fn level(
         laws: &run.laws,
         estimator: plan.data.estimator.as_ref(),
         file: &study.file,
+        certified: run.engines.certified.as_ref(),
     };
     let id = crate::identify::analyse_level(&plan.identification, &inputs, progress)?;
     let mut r = LevelResults::new(id);
@@ -276,6 +294,8 @@ pub(super) fn closed_loop(
         return Ok(None);
     };
     let mut params = params.clone();
+    // The loop's multistart searches and its replicate experiments follow the plan's seed.
+    params.map.seed = plan.seed;
     let say = ex.progress();
     params.progress = crate::closed_loop::Progress::new(move |m| {
         say(Event::Start {
@@ -283,10 +303,11 @@ pub(super) fn closed_loop(
             total: 0,
         })
     });
-    let stage = match &plan.closed_loop_stage {
+    let mut stage = match &plan.closed_loop_stage {
         Some(s) => s.clone(),
         None => crate::diagnose::DiagnoseParams::of(study, None)?,
     };
+    stage.null.seed = plan.seed;
     let posterior = plan_loop::PlanPosterior {
         stages: &plan.inference,
         inputs: bayes_run.posterior,

@@ -2,8 +2,10 @@
 //! metadata, see [`crate::output`]), the figures when the plan asks for them, `report.md` and
 //! `manifest.json` (written last, with every file's SHA-256, the timings and counters).
 //!
-//! The folder is replaced as a whole ([`crate::output::replace_dir`]): everything is written
-//! into a temporary sibling `<dir>.tmp-<pid>` that is then swapped with `dir`. A failed or
+//! The folder is replaced as a whole ([`crate::output::replace_dir`]), and only when rfmlab
+//! wrote it, it is empty or absent, or the caller forces it ([`crate::output::contract`]):
+//! everything is written into a temporary sibling `<dir>.tmp-<pid>` that is then swapped with
+//! `dir`. A failed or
 //! killed write leaves the previous results intact; a temporary folder left by a killed run is
 //! deleted by the next write to the same folder.
 //!
@@ -16,7 +18,7 @@ mod markdown;
 pub mod material;
 
 use crate::diagnose;
-use crate::output::{Manifest, ResultsDir};
+use crate::output::{Manifest, Replace, ResultsDir};
 use crate::pipeline::results::{Results, LOOP_DIR};
 use crate::pipeline::{Executor, ModelSummary};
 use crate::stage::{Event, RunError};
@@ -42,8 +44,11 @@ pub struct RunSummary {
     pub study: String,
     pub output_dir: PathBuf,
     pub files: Vec<String>,
-    /// Per level and model: identified parameters (SI), stop reason and FRAC per FRF.
+    /// Per level and model: identified parameters (SI), stop reason, status and FRAC per FRF.
     pub models: Vec<ModelSummary>,
+    /// The fits that are not results (global RFM and MAP), with their reasons: `rfmlab run`
+    /// exits with code 3 when this is not empty.
+    pub flagged: Vec<crate::pipeline::FlaggedFit>,
     pub seconds: f64,
 }
 
@@ -69,9 +74,21 @@ pub fn write_with(
     dir: impl AsRef<Path>,
     progress: &(dyn Fn(Event) + Sync),
 ) -> Result<Written, RunError> {
+    write_as(results, dir, Replace::IfOurs, progress)
+}
+
+/// [`write_with`] under the output contract's choice `replace` ([`crate::output::contract`]):
+/// [`Replace::IfOurs`] refuses a folder rfmlab did not write, [`Replace::Force`] replaces it.
+pub fn write_as(
+    results: &Results,
+    dir: impl AsRef<Path>,
+    replace: Replace,
+    progress: &(dyn Fn(Event) + Sync),
+) -> Result<Written, RunError> {
     let dir = dir.as_ref();
     let t0 = Instant::now();
-    let files = crate::output::replace_dir(dir, |tmp| fill(tmp, results, t0, progress))?;
+    let files =
+        crate::output::replace_dir_as(dir, replace, |tmp| fill(tmp, results, t0, progress))?;
     Ok(Written {
         dir: dir.to_path_buf(),
         files,
@@ -103,6 +120,7 @@ pub fn run_study(
         output_dir: plan.output_dir.clone(),
         files: written.files,
         models: results.model_summaries(),
+        flagged: results.flagged(),
         seconds: results.seconds() + written.seconds,
     })
 }

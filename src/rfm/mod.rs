@@ -61,6 +61,7 @@ mod dense;
 mod global;
 mod linearise;
 mod per_line;
+pub mod status;
 
 pub use dense::DenseEngine;
 pub use global::{
@@ -69,6 +70,7 @@ pub use global::{
 };
 pub use linearise::{frac, rfm_linearise, Linearisation};
 pub use per_line::{rfm_per_line, PerLineEstimate};
+pub use status::{FitStatus, FlagReason};
 
 use crate::common::C64;
 use crate::frf::FrfError;

@@ -190,18 +190,15 @@ impl ModelJson {
     }
 }
 
-/// Write `value` as JSON to `path` atomically (a temporary file renamed).
+/// Write `value` as JSON to `path` atomically ([`crate::fs_atomic`]: a temporary file named
+/// for this process and call, fsynced and renamed, so two runs sharing a cache folder may save
+/// the same key), creating the cache folder if needed.
 fn write_atomic<T: Serialize>(path: &Path, value: &T) -> std::io::Result<()> {
     let text = serde_json::to_vec(value).map_err(std::io::Error::other)?;
-    if let Some(dir) = path.parent() {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
     }
-    // A name of this writer's own: two runs sharing a cache folder may save the same key.
-    static WRITES: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let n = WRITES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = path.with_extension(format!("json.{}-{n}.tmp", std::process::id()));
-    std::fs::write(&tmp, text)?;
-    std::fs::rename(&tmp, path)
+    crate::fs_atomic::write_atomic_bytes(path, &text)
 }
 
 /// Save a ROM and its certificate under `key` (atomic write).

@@ -23,6 +23,7 @@ use crate::study::StudyError;
 use serde_json::json;
 
 mod write;
+pub use write::{is_simulated_file, planned_files};
 
 /// Why a simulation failed.
 #[derive(Debug, thiserror::Error)]

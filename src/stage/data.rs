@@ -89,12 +89,304 @@ fn to_accelerance(h: C64, freq_hz: f64, q: Quantity) -> C64 {
     }
 }
 
+/// The measured data of every level ([`load_levels`]) and what the pre-flight said of it:
+/// channels whose sign was flipped, files whose force level does not match their level.
+pub struct LoadedLevels {
+    pub levels: Vec<LevelData>,
+    /// Notices and warnings that bear on the results, one sentence each.
+    pub warnings: Vec<String>,
+}
+
+/// Two force levels (N) differ beyond this ratio: a level's file whose header states another
+/// force than the study's level is reported, and a level's files must agree within it.
+pub const FORCE_RATIO_TOL: f64 = 1.1;
+
+/// What one file of a level says of itself: its force level and its own level name, from
+/// the header (UFF58 ID lines `force_rms_n=` and load case name; CSV `# level=... force_rms_n=`).
+struct FileHeader {
+    path: PathBuf,
+    force_rms_n: Vec<f64>,
+    level_name: Option<String>,
+}
+
+fn is_csv(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+}
+
+/// The FRFs of level `li` of the study read from its files (UFF58 or CSV, by extension), in
+/// one [`FrfLevel`], with each file's header.
+fn read_level_files(
+    file: &Path,
+    li: usize,
+    level: &crate::study::Level,
+) -> Result<(FrfLevel, Vec<FileHeader>), RunError> {
+    let mut headers = Vec::new();
+    let mut uff = Vec::new();
+    let mut csv_levels = Vec::new();
+    for (fi, f) in level.files.iter().enumerate() {
+        let key = format!("measurements.levels[{li}].files[{fi}]");
+        if f.is_dir() {
+            return Err(input_error(
+                file,
+                key,
+                format!(
+                    "{} is a folder, not a data file: give the UFF58 or CSV file inside it (relative paths are relative to the study file's folder)",
+                    f.display()
+                ),
+            ));
+        }
+        if !f.is_file() {
+            return Err(input_error(
+                file,
+                key,
+                format!(
+                    "data file {} does not exist; check the path (relative paths are relative to the study file's folder)",
+                    f.display()
+                ),
+            ));
+        }
+        if is_csv(f) {
+            let set = crate::data::csv::read_csv(f, &crate::data::csv::CsvOptions::default())?;
+            let names: Vec<&str> = set.levels.iter().map(|l| l.name.as_str()).collect();
+            let pick = if set.levels.len() == 1 {
+                0
+            } else {
+                set.levels
+                    .iter()
+                    .position(|l| l.name == level.name)
+                    .ok_or_else(|| {
+                        input_error(
+                            file,
+                            key.clone(),
+                            format!(
+                                "{} holds levels {names:?} but none named {}: give a file of one level, or name the study's level as in the file",
+                                f.display(),
+                                level.name
+                            ),
+                        )
+                    })?
+            };
+            let mut l = set.levels.into_iter().nth(pick).expect("picked level");
+            headers.push(FileHeader {
+                path: f.clone(),
+                force_rms_n: l.force_rms_n.into_iter().collect(),
+                level_name: Some(l.name.clone()),
+            });
+            l.name = level.name.clone();
+            csv_levels.push(l);
+        } else {
+            let u = crate::data::read_uff(f)?;
+            let mut force: Vec<f64> = Vec::new();
+            let mut own = None;
+            for d in &u.datasets {
+                for v in d
+                    .ids
+                    .iter()
+                    .flat_map(|s| s.split_whitespace())
+                    .filter_map(|t| {
+                        t.strip_prefix("force_rms_n=")
+                            .and_then(|v| v.parse::<f64>().ok())
+                    })
+                {
+                    if v.is_finite() && v > 0.0 && !force.contains(&v) {
+                        force.push(v);
+                    }
+                }
+                let name = d.ids[3].trim();
+                if own.is_none() && !name.is_empty() && name != "NONE" {
+                    own = Some(name.to_string());
+                }
+            }
+            headers.push(FileHeader {
+                path: f.clone(),
+                force_rms_n: force,
+                level_name: own,
+            });
+            uff.push((u, level.name.clone()));
+        }
+    }
+    let mut parts: Vec<FrfLevel> = Vec::new();
+    if !uff.is_empty() {
+        let set = crate::data::uff_frf::frf_set_from_uff_files(
+            &uff,
+            &crate::data::UffImportOptions::default(),
+        )?;
+        parts.extend(set.levels.into_iter().filter(|l| l.name == level.name));
+    }
+    parts.extend(csv_levels);
+    let mut parts = parts.into_iter();
+    let mut lvl = parts.next().ok_or_else(|| {
+        input_error(
+            file,
+            format!("measurements.levels[{li}]"),
+            format!(
+                "the files of level {} hold no FRFs of that level",
+                level.name
+            ),
+        )
+    })?;
+    for p in parts {
+        let scale = lvl
+            .freq_hz
+            .iter()
+            .chain(&p.freq_hz)
+            .fold(0.0f64, |m, x| m.max(x.abs()))
+            .max(1e-300);
+        let same_grid = p.freq_hz.len() == lvl.freq_hz.len()
+            && p.freq_hz
+                .iter()
+                .zip(&lvl.freq_hz)
+                .all(|(a, b)| (a - b).abs() <= 1e-6 * scale);
+        if !same_grid {
+            return Err(input_error(
+                file,
+                format!("measurements.levels[{li}].files"),
+                format!(
+                    "the files of level {} have different frequency lines ({} lines {}..{} Hz against {} lines {}..{} Hz): resample them to one grid or put them in separate levels",
+                    level.name,
+                    p.freq_hz.len(),
+                    p.freq_hz.first().copied().unwrap_or(f64::NAN),
+                    p.freq_hz.last().copied().unwrap_or(f64::NAN),
+                    lvl.freq_hz.len(),
+                    lvl.freq_hz.first().copied().unwrap_or(f64::NAN),
+                    lvl.freq_hz.last().copied().unwrap_or(f64::NAN),
+                ),
+            ));
+        }
+        let p = p.convert(lvl.quantity);
+        lvl.force_rms_n = lvl.force_rms_n.or(p.force_rms_n);
+        lvl.n_averages = lvl.n_averages.or(p.n_averages);
+        lvl.channels.extend(p.channels);
+    }
+    crate::data::check_level(&lvl, None, None)?;
+    Ok((lvl, headers))
+}
+
+/// Each level's files against the level: the force levels the files' headers state must
+/// agree within a level (else an input error), and a warning when they differ from the
+/// study's `force_rms_n` of the level, when a file names another level of the study, or when
+/// two levels read the same file.
+fn check_level_files(
+    file: &Path,
+    meas: &Measurements,
+    headers: &[Vec<FileHeader>],
+    warnings: &mut Vec<String>,
+) -> Result<(), RunError> {
+    let ratio = |a: f64, b: f64| a.max(b) / a.min(b);
+    for (li, (level, files)) in meas.levels.iter().zip(headers).enumerate() {
+        let stated: Vec<(&Path, f64)> = files
+            .iter()
+            .flat_map(|h| h.force_rms_n.iter().map(move |&f| (h.path.as_path(), f)))
+            .collect();
+        if let (Some(lo), Some(hi)) = (
+            stated.iter().min_by(|a, b| a.1.total_cmp(&b.1)),
+            stated.iter().max_by(|a, b| a.1.total_cmp(&b.1)),
+        ) {
+            if ratio(lo.1, hi.1) > FORCE_RATIO_TOL {
+                let which = if lo.0 == hi.0 {
+                    format!(
+                        "{} states both force_rms_n={} and {} N",
+                        lo.0.display(),
+                        lo.1,
+                        hi.1
+                    )
+                } else {
+                    format!(
+                        "{} states force_rms_n={} N and {} states {} N",
+                        lo.0.display(),
+                        lo.1,
+                        hi.0.display(),
+                        hi.1
+                    )
+                };
+                return Err(input_error(
+                    file,
+                    format!("measurements.levels[{li}].files"),
+                    format!(
+                        "the files of level {} disagree on the excitation level ({which}, {:.1}x apart): one level's files must come from one force level; give each force level its own [[measurements.levels]]",
+                        level.name,
+                        ratio(lo.1, hi.1)
+                    ),
+                ));
+            }
+        }
+        let others = || {
+            meas.levels
+                .iter()
+                .enumerate()
+                .filter(move |(lj, _)| *lj != li)
+                .map(|(_, l)| l)
+        };
+        if let (Some(want), Some(&(path, got))) = (level.force_rms_n, stated.first()) {
+            if want > 0.0 && ratio(want, got) > FORCE_RATIO_TOL {
+                let like = others()
+                    .find(|o| {
+                        o.force_rms_n
+                            .is_some_and(|f| f > 0.0 && ratio(f, got) <= FORCE_RATIO_TOL)
+                    })
+                    .map(|o| {
+                        format!(
+                            "; it looks like level {}'s data (force_rms_n = {} N)",
+                            o.name,
+                            o.force_rms_n.unwrap_or_default()
+                        )
+                    })
+                    .unwrap_or_default();
+                warnings.push(format!(
+                    "measurements.levels[{li}]: level {} has force_rms_n = {want} N but its file {} states force_rms_n={got} N ({:.1}x apart){like}: check that the file belongs to this level",
+                    level.name,
+                    path.display(),
+                    ratio(want, got)
+                ));
+            }
+        }
+        for h in files {
+            if let Some(own) = &h.level_name {
+                if *own != level.name && others().any(|o| o.name == *own) {
+                    warnings.push(format!(
+                        "measurements.levels[{li}]: the file {} names level {own} in its header but is given as level {}: check that it belongs to this level",
+                        h.path.display(),
+                        level.name
+                    ));
+                }
+            }
+            for (lj, o) in meas.levels.iter().enumerate().skip(li + 1) {
+                if o.files.contains(&h.path) {
+                    warnings.push(format!(
+                        "measurements.levels[{li}] and [{lj}]: levels {} and {} read the same file {}",
+                        level.name,
+                        o.name,
+                        h.path.display()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Load and check the measured data of every level; returns one [`LevelData`] per level.
+/// [`load_checked`] with its warnings dropped, every point of the model required.
 pub fn load_levels(
     measurements: Option<&Measurements>,
     built: &BuiltModel,
     file: &Path,
 ) -> Result<Vec<LevelData>, RunError> {
+    load_checked(measurements, built, &[], file).map(|l| l.levels)
+}
+
+/// Load and check the measured data of every level against the study (the data part of the
+/// pre-flight, [`crate::stage::preflight`]): each level's files against the level (force
+/// level, level name), the direction of every channel against its point (the same axis with
+/// the opposite sign is flipped, with a notice; another axis is an input error), and every
+/// point of the model measured unless `points` marks it optional.
+pub fn load_checked(
+    measurements: Option<&Measurements>,
+    built: &BuiltModel,
+    points: &[crate::study::Point],
+    file: &Path,
+) -> Result<LoadedLevels, RunError> {
     let meas = measurements.ok_or_else(|| {
         input_error(
             file,
@@ -103,40 +395,29 @@ pub fn load_levels(
         )
     })?;
     let exc_point = &built.model.points[built.excitation];
-    let mut out = Vec::new();
+    let optional = |id: u32, axis: crate::common::Axis| {
+        points
+            .iter()
+            .any(|p| p.id == id && p.direction.axis == axis && p.optional)
+    };
+    let point_key = |id: u32, axis: crate::common::Axis| {
+        points
+            .iter()
+            .position(|p| p.id == id && p.direction.axis == axis)
+            .map(|i| format!("structure.points[{i}].direction"))
+            .unwrap_or_else(|| "structure.points".into())
+    };
+    let mut warnings = Vec::new();
+    let mut read = Vec::new();
+    let mut headers = Vec::new();
     for (li, level) in meas.levels.iter().enumerate() {
-        for (fi, f) in level.files.iter().enumerate() {
-            if !f.is_file() {
-                return Err(input_error(
-                    file,
-                    format!("measurements.levels[{li}].files[{fi}]"),
-                    format!(
-                        "data file {} does not exist; check the path (relative paths are relative to the study file's folder)",
-                        f.display()
-                    ),
-                ));
-            }
-        }
-        let files: Vec<(PathBuf, String)> = level
-            .files
-            .iter()
-            .map(|f| (f.clone(), level.name.clone()))
-            .collect();
-        let set = crate::data::frf_set_from_uff(&files, &crate::data::UffImportOptions::default())?;
-        let lvl: &FrfLevel = set
-            .levels
-            .iter()
-            .find(|l| l.name == level.name)
-            .ok_or_else(|| {
-                input_error(
-                    file,
-                    format!("measurements.levels[{li}]"),
-                    format!(
-                        "the files of level {} hold no FRFs of that level",
-                        level.name
-                    ),
-                )
-            })?;
+        let (lvl, h) = read_level_files(file, li, level)?;
+        read.push(lvl);
+        headers.push(h);
+    }
+    check_level_files(file, meas, &headers, &mut warnings)?;
+    let mut out = Vec::new();
+    for (level, lvl) in meas.levels.iter().zip(&read) {
         crate::data::check_level(lvl, Some((exc_point.id, exc_point.direction)), meas.band_hz)
             .map_err(|e| {
                 RunError::Data(DataError {
@@ -162,12 +443,22 @@ pub fn load_levels(
                 ),
             ));
         }
-        // Channels: reference = excitation point, response among the model's points.
+        let source = |ch: &crate::data::Channel| {
+            ch.source
+                .as_ref()
+                .map(|(f, d)| format!("{f} dataset {d}"))
+                .unwrap_or_else(|| "its file".into())
+        };
+        // Channels: reference = the excitation point along its axis (a reference along
+        // another axis is another column of the FRF matrix), response = one of the model's
+        // points along its axis.
         let mut outputs = Vec::new();
         let mut ids = Vec::new();
         let mut chans = Vec::new();
+        let mut other_axis = Vec::new();
         for ch in &lvl.channels {
-            if ch.reference_id != exc_point.id {
+            if ch.reference_id != exc_point.id || ch.reference_dir.axis != exc_point.direction.axis
+            {
                 continue;
             }
             if let Some(sel) = &meas.channels {
@@ -175,26 +466,88 @@ pub fn load_levels(
                     continue;
                 }
             }
-            let Some(k) = built
-                .model
-                .points
-                .iter()
-                .position(|p| p.id == ch.response_id)
+            let Some(k) =
+                built.model.points.iter().position(|p| {
+                    p.id == ch.response_id && p.direction.axis == ch.response_dir.axis
+                })
             else {
+                other_axis.push(ch);
                 continue;
             };
             if outputs.contains(&k) {
                 continue;
             }
-            // Sign: a channel measured in the opposite direction of the model's point flips.
-            let sign = if ch.response_dir == built.model.points[k].direction {
-                1.0
-            } else {
-                -1.0
-            };
+            // Sign: a response (or force) measured opposite to the model's direction flips.
+            let point = &built.model.points[k];
+            let sign = f64::from(ch.response_dir.sign * point.direction.sign)
+                * f64::from(ch.reference_dir.sign * exc_point.direction.sign);
+            if sign < 0.0 {
+                warnings.push(format!(
+                    "level {}: channel {}{}/{}{} ({}) is measured opposite to point {}{} / excitation {}{} of the study: its sign is flipped",
+                    level.name,
+                    ch.response_id,
+                    ch.response_dir,
+                    ch.reference_id,
+                    ch.reference_dir,
+                    source(ch),
+                    point.id,
+                    point.direction,
+                    exc_point.id,
+                    exc_point.direction
+                ));
+            }
             outputs.push(k);
             ids.push(ch.response_id);
             chans.push((ch, sign));
+        }
+        // Every point of the model measured (unless optional or left out by
+        // measurements.channels); a channel along another axis cannot stand for it.
+        let mut missing = Vec::new();
+        for (k, p) in built.model.points.iter().enumerate() {
+            if outputs.contains(&k)
+                || optional(p.id, p.direction.axis)
+                || meas.channels.as_ref().is_some_and(|s| !s.contains(&p.id))
+            {
+                continue;
+            }
+            if let Some(ch) = other_axis.iter().find(|c| c.response_id == p.id) {
+                return Err(input_error(
+                    file,
+                    point_key(p.id, p.direction.axis),
+                    format!(
+                        "level {}: channel {}{}/{}{} ({}) is measured along {} but point {} is declared {} (with no channel along that axis): a response along another axis cannot stand for it. Set the point's direction to the measured one (direction = \"{}\"), give the data measured along {}, or mark the point optional = true",
+                        level.name,
+                        ch.response_id,
+                        ch.response_dir,
+                        ch.reference_id,
+                        ch.reference_dir,
+                        source(ch),
+                        ch.response_dir,
+                        p.id,
+                        p.direction,
+                        ch.response_dir,
+                        p.direction
+                    ),
+                ));
+            }
+            missing.push(p.id);
+        }
+        if !missing.is_empty() && !outputs.is_empty() {
+            let files: Vec<String> = level
+                .files
+                .iter()
+                .map(|f| f.display().to_string())
+                .collect();
+            return Err(input_error(
+                file,
+                "structure.points",
+                format!(
+                    "level {}: point(s) {missing:?} have no channel in the level's files ({}), which hold responses {ids:?} to the excitation at point {}: give their data, remove the points, or mark them optional = true in [[structure.points]]",
+                    level.name,
+                    files.join(", "),
+                    exc_point.id
+                ),
+            ));
         }
         if outputs.is_empty() {
             return Err(input_error(file, "measurements.channels", {
@@ -253,7 +606,10 @@ pub fn load_levels(
             },
         });
     }
-    Ok(out)
+    Ok(LoadedLevels {
+        levels: out,
+        warnings,
+    })
 }
 
 /// Lines of the lowest clear peak of the summed magnitude (a local maximum above a tenth of

@@ -102,6 +102,9 @@ pub struct Engines {
     pub likelihood: Option<Box<dyn FrfEngine>>,
     /// ROMs built and certified (0: full model, or loaded from the cache).
     pub rom_builds: u64,
+    /// The modulus box the deterministic engine is certified over (the ROM's); `None` for the
+    /// full model, valid at every modulus.
+    pub certified: Option<crate::rom::ModulusRange>,
 }
 
 /// Build the FRF engine with inputs = all measured points of every level, and the likelihood's
@@ -155,6 +158,7 @@ pub fn build_engine(
             note: format!("engine: full model, {} DOFs", built.model.n_dof()),
             likelihood: None,
             rom_builds: 0,
+            certified: None,
         }),
         Engine::Rom => {
             let (lo, hi) = super::data::band_of(levels);
@@ -291,6 +295,7 @@ pub fn build_engine(
                 note,
                 likelihood: lik_engine,
                 rom_builds: u64::from(!from_cache),
+                certified: Some(params.range),
             })
         }
     }

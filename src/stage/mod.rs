@@ -49,7 +49,12 @@ pub enum RunError {
 impl RunError {
     /// True for errors caused by the study file or the data (the CLI exits with code 2).
     pub fn is_input(&self) -> bool {
-        matches!(self, RunError::Study(_) | RunError::Data(_))
+        match self {
+            RunError::Study(_) | RunError::Data(_) => true,
+            // A refused or unwritable output folder is the user's choice of path.
+            RunError::Output(o) => o.is_input(),
+            _ => false,
+        }
     }
 }
 

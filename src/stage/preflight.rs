@@ -1,8 +1,10 @@
-//! The pre-flight of `rfmlab check` beyond loading the study and its data: at least one
-//! model, a writable output folder, the analysis bands against the data's lines, the
-//! structure's points against the data's channels, the model's first mode at the initial
-//! values against the data's first peak, the cost of the engine, and the mesh's remaining
-//! discretisation error per mode.
+//! The pre-flight: what `rfmlab run`, `rfmlab diagnose` and `rfmlab check` check before
+//! anything is fitted. [`check_settings`] (at least one model, a writable output folder) and
+//! [`check_data`] (the data against the study: each level's files against the level, the
+//! direction of every channel against its point, every point measured unless optional, the
+//! analysis bands inside the data) run first in all three; `rfmlab check` adds the model's
+//! first mode at the initial values against the data's first peak, the cost of the engine
+//! and the mesh's remaining discretisation error per mode.
 //!
 //! The mesh-error estimate is [`super::mesh_error`]'s.
 
@@ -53,26 +55,48 @@ pub fn check_settings(
             "no [[models]] to identify: add at least one, e.g. [[models]] name = \"model1\" with [models.initial] E0 and h",
         ));
     }
-    let dir = output_dir;
-    let parent = dir
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    let probe = parent.join(format!(".rfmlab-write-check-{}", std::process::id()));
-    let ok = std::fs::create_dir_all(parent)
-        .and_then(|_| std::fs::write(&probe, b"check"))
-        .and_then(|_| std::fs::remove_file(&probe));
-    if let Err(e) = ok {
+    if let Err(e) = crate::output::contract::check_writable(output_dir) {
         return Err(input_error(
             file,
             "study.output_dir",
             format!(
-                "the results folder {} cannot be written ({e}): choose a folder you can write to",
-                dir.display()
+                "the results folder {} cannot be written ({e}): choose a folder you can write to ([study] output_dir or -o/--output)",
+                output_dir.display()
             ),
         ));
     }
     Ok(())
+}
+
+/// What [`check_data`] checks the data against: the study's points and measurements, and the
+/// analysis bands.
+pub struct DataChecks<'a> {
+    /// The study file (errors name it).
+    pub file: &'a Path,
+    pub measurements: Option<&'a crate::study::Measurements>,
+    /// The structure's points (their `optional` flags).
+    pub points: &'a [crate::study::Point],
+    pub band_constant: &'a [Band],
+    pub iem: &'a [Band],
+}
+
+/// The data part of the pre-flight: every level loaded and checked against the study
+/// ([`super::data::load_checked`]) and the analysis bands against its lines
+/// ([`check_bands`]). Returns the levels and the warnings that bear on the results.
+pub fn check_data(
+    checks: &DataChecks<'_>,
+    built: &BuiltModel,
+) -> Result<super::data::LoadedLevels, RunError> {
+    let mut loaded =
+        super::data::load_checked(checks.measurements, built, checks.points, checks.file)?;
+    check_bands(
+        checks.band_constant,
+        checks.iem,
+        checks.file,
+        &loaded.levels,
+        &mut loaded.warnings,
+    )?;
+    Ok(loaded)
 }
 
 /// The analysis bands against each level's lines: an error when a band holds no line of a
@@ -129,8 +153,8 @@ pub fn check_bands(
     Ok(())
 }
 
-/// The structure's points against each level's channels: a warning listing what the files
-/// hold when a point has no channel.
+/// The structure's points against each level's channels: a note for each optional point
+/// without a channel (a required one is an error of [`check_data`]).
 pub fn check_channels(built: &BuiltModel, levels: &[LevelData], warnings: &mut Vec<String>) {
     for level in levels {
         let missing: Vec<u32> = built
@@ -142,7 +166,7 @@ pub fn check_channels(built: &BuiltModel, levels: &[LevelData], warnings: &mut V
             .collect();
         if !missing.is_empty() {
             warnings.push(format!(
-                "structure.points: point(s) {missing:?} have no channel in level {}'s files, which hold responses {:?} to the excitation at point {}; they are not used",
+                "structure.points: optional point(s) {missing:?} have no channel in level {}'s files, which hold responses {:?} to the excitation at point {}; they are not used",
                 level.name, level.response_ids, level.reference_id
             ));
         }

@@ -15,6 +15,9 @@ pub struct Setup {
     pub built: BuiltModel,
     pub levels: Vec<LevelData>,
     pub engines: Engines,
+    /// The pre-flight's warnings that bear on the results (channels flipped, a level's file
+    /// whose force level differs from the level's).
+    pub warnings: Vec<String>,
 }
 
 /// The [`Setup`] of `study`, with the likelihood's engine on `likelihood`'s inputs, reusing
@@ -28,7 +31,21 @@ pub fn setup(
     let file = study.file.as_path();
     let laws = crate::stage::model_laws(&study.models, file)?;
     let built = build(&study.structure, file)?;
-    let mut levels = super::data::load_levels(study.measurements.as_ref(), &built, file)?;
+    // The pre-flight of the data, before anything is fitted (the analysis bands are
+    // `rfmlab run`'s and are not checked here).
+    let super::data::LoadedLevels {
+        mut levels,
+        warnings,
+    } = super::preflight::check_data(
+        &super::preflight::DataChecks {
+            file,
+            measurements: study.measurements.as_ref(),
+            points: &study.structure.points,
+            band_constant: &[],
+            iem: &[],
+        },
+        &built,
+    )?;
     let models = ModelsAndData {
         models: &study.models,
         laws: &laws,
@@ -51,5 +68,6 @@ pub fn setup(
         built,
         levels,
         engines,
+        warnings,
     })
 }

@@ -184,8 +184,10 @@ pub fn points_in_all_directions(points: &[super::Point]) -> Vec<super::Point> {
     for p in points {
         for axis in [Axis::X, Axis::Y, Axis::Z] {
             if !out.iter().any(|q| q.id == p.id && q.direction.axis == axis) {
+                // a direction of the model only: the data need not measure it
                 out.push(super::Point {
                     direction: Direction::new(axis, 1),
+                    optional: true,
                     ..p.clone()
                 });
             }

@@ -22,7 +22,11 @@ impl Ctx<'_> {
         } else {
             Err(self.err(
                 key,
-                format!("must be a positive number in {unit}, got {v}: give the value in SI units ({unit})"),
+                if unit == "-" || unit.is_empty() {
+                    format!("must be a positive number (a plain ratio without unit), got {v}: give a number above 0 (docs/study-files.md gives its default)")
+                } else {
+                    format!("must be a positive number in {unit}, got {v}: give the value in SI units ({unit})")
+                },
             ))
         }
     }
@@ -30,7 +34,14 @@ impl Ctx<'_> {
         if v.is_finite() && v >= 0.0 {
             Ok(v)
         } else {
-            Err(self.err(key, format!("must be zero or positive ({unit}), got {v}")))
+            Err(self.err(
+                key,
+                if unit == "-" || unit.is_empty() {
+                    format!("must be zero or a positive number (a plain ratio without unit), got {v}")
+                } else {
+                    format!("must be zero or a positive number in {unit}, got {v}: give the value in SI units ({unit})")
+                },
+            ))
         }
     }
     pub(super) fn poisson(&self, key: &str, v: f64) -> Result<f64, StudyError> {

@@ -44,6 +44,9 @@ pub struct Point {
     pub id: u32,
     pub position_m: [f64; 3],
     pub direction: Direction,
+    /// The point may have no channel in the measured data (`optional = true`); otherwise a
+    /// point without data is an input error.
+    pub optional: bool,
 }
 
 /// The bonded joint built by the mesher.

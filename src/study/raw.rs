@@ -122,6 +122,9 @@ pub struct RawPoint {
     pub id: u32,
     pub position: Vec<f64>,
     pub direction: String,
+    /// The point may have no channel in the data (default false: a point without data stops
+    /// the run).
+    pub optional: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -91,25 +91,123 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
     })
 }
 
-/// Turn a TOML / serde error into a StudyError with the line and the offending key.
+/// The key (with its table, `section.key`) and the value written on the line of byte offset
+/// `at` of a TOML text, when that line is `key = value`.
+fn key_at(text: &str, at: usize) -> Option<(String, String)> {
+    let at = at.min(text.len());
+    let start = text[..at].rfind('\n').map_or(0, |i| i + 1);
+    let end = text[at..].find('\n').map_or(text.len(), |i| at + i);
+    let line = &text[start..end];
+    let (k, v) = line.split_once('=')?;
+    let k = k.trim().trim_matches('"');
+    if k.is_empty() || k.starts_with('#') || k.starts_with('[') {
+        return None;
+    }
+    // the value without a trailing comment (a '#' outside quotes)
+    let mut quoted = false;
+    let mut cut = v.len();
+    for (i, c) in v.char_indices() {
+        match c {
+            '"' | '\'' => quoted = !quoted,
+            '#' if !quoted => {
+                cut = i;
+                break;
+            }
+            _ => {}
+        }
+    }
+    let value = v[..cut].trim().to_string();
+    let table = text[..start]
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('['))
+        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+    let key = match table {
+        Some(t) if !t.is_empty() => format!("{t}.{k}"),
+        _ => k.to_string(),
+    };
+    Some((key, value))
+}
+
+/// A type name of serde's wording ("f64", "a boolean", "string \"x\"") in plain words.
+fn plain_type(t: &str) -> String {
+    let t = t.trim();
+    let word = t.split_whitespace().next().unwrap_or(t);
+    match word {
+        "f64" | "f32" | "float" | "floating" => "a number (e.g. 0.3 or 2.1e9)".into(),
+        "u8" | "u16" | "u32" | "u64" | "usize" | "i8" | "i16" | "i32" | "i64" | "isize"
+        | "integer" => "a whole number (e.g. 4)".into(),
+        "bool" | "boolean" => "true or false".into(),
+        "string" | "str" | "char" => "a text in quotes (e.g. \"+y\")".into(),
+        "sequence" | "array" => "a list in brackets (e.g. [1.0, 500.0])".into(),
+        "map" | "table" | "struct" => "a table (a [section] or { key = value })".into(),
+        "a" | "an" => plain_type(t.split_once(' ').map_or(t, |x| x.1)),
+        _ => t.to_string(),
+    }
+}
+
+/// Turn a TOML / serde error into a StudyError with the line, the offending key, the value
+/// given, what is allowed and the fix, in plain words.
 pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyError {
     let line = e
         .span()
         .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);
     let msg = e.message().trim().to_string();
-    let key = if let Some(rest) = msg.strip_prefix("unknown field `") {
-        rest.split('`').next().unwrap_or("?").to_string()
+    let at = e.span().and_then(|s| key_at(text, s.start));
+    let (key, message) = if let Some(rest) = msg.strip_prefix("unknown field `") {
+        let k = rest.split('`').next().unwrap_or("?").to_string();
+        let allowed = rest
+            .split_once("expected ")
+            .map(|x| format!("; the keys allowed here are {}", x.1.replace('`', "")))
+            .unwrap_or_default();
+        (
+            k.clone(),
+            format!("{k} is not a key of this section{allowed}: remove or rename it (docs/study-files.md lists every key)"),
+        )
     } else if let Some(rest) = msg.strip_prefix("missing field `") {
-        rest.split('`').next().unwrap_or("?").to_string()
+        let k = rest.split('`').next().unwrap_or("?").to_string();
+        (
+            k.clone(),
+            format!("the key {k} is required in this section: add it (docs/study-files.md gives its meaning and units)"),
+        )
+    } else if let Some(rest) = msg.strip_prefix("invalid type: ") {
+        let (given, expected) = rest.split_once(", expected ").unwrap_or((rest, "?"));
+        let (k, v) = at.unwrap_or_else(|| ("(value)".into(), String::new()));
+        let given = plain_type(given);
+        (
+            k.clone(),
+            format!(
+                "{k} = {v} is {given}, but {k} takes {}: write it as such (e.g. without quotes for a number); docs/study-files.md gives every key's type and units",
+                plain_type(expected)
+            ),
+        )
+    } else if let Some(rest) = msg.strip_prefix("invalid value: ") {
+        let (given, expected) = rest.split_once(", expected ").unwrap_or((rest, "?"));
+        let (k, v) = at.unwrap_or_else(|| ("(value)".into(), String::new()));
+        (
+            k.clone(),
+            format!(
+                "{k} = {v} ({given}) is not allowed: {k} takes {}; docs/study-files.md gives every key's range",
+                plain_type(expected)
+            ),
+        )
+    } else if let Some(rest) = msg.strip_prefix("unknown variant `") {
+        let v = rest.split('`').next().unwrap_or("?");
+        let allowed = rest
+            .split_once("expected ")
+            .map(|x| x.1.replace('`', "\""))
+            .unwrap_or_default();
+        let (k, _) = at.unwrap_or_else(|| ("(value)".into(), String::new()));
+        (
+            k.clone(),
+            format!("\"{v}\" is not one of the allowed values of {k}: use {allowed}"),
+        )
     } else {
-        "(syntax)".into()
-    };
-    let fix = if msg.starts_with("unknown field") {
-        " — remove or rename the key (docs/study-files.md lists every key)"
-    } else if msg.starts_with("missing field") {
-        " — add the key"
-    } else {
-        ""
+        (
+            at.map(|(k, _)| k).unwrap_or_else(|| "(TOML syntax)".into()),
+            format!("the file is not valid TOML here ({msg}): write `key = value` with text in quotes, numbers without, lists in [ ] and sections as [name]"),
+        )
     };
     StudyError {
         file: match line {
@@ -117,7 +215,7 @@ pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyE
             None => path.display().to_string(),
         },
         key,
-        message: format!("{msg}{fix}"),
+        message,
     }
 }
 
@@ -169,6 +267,14 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
                 let r = resolve(ctx.file, p);
                 if r.is_file() {
                     Ok(r)
+                } else if r.is_dir() {
+                    Err(ctx.err(
+                        format!("structure.import.{key}"),
+                        format!(
+                            "{} is a folder, not a file: give the file inside it (paths are relative to the study file)",
+                            r.display()
+                        ),
+                    ))
                 } else {
                     Err(ctx.err(
                         format!("structure.import.{key}"),
@@ -245,6 +351,7 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
             id: p.id,
             position_m: [p.position[0], p.position[1], p.position[2]],
             direction,
+            optional: p.optional.unwrap_or(false),
         });
     }
     if points.is_empty() {
@@ -298,6 +405,11 @@ fn check_point_on_beam(ctx: &Ctx, i: usize, p: &Point, j: &Joint) -> Result<(), 
     }
     Ok(())
 }
+
+/// Elements beyond which a mesh is refused outright, before its divisions are resolved or
+/// anything is allocated (10^8 20-node hexahedra need terabytes; the memory check of the
+/// model's cost estimate refuses far fewer on a real machine).
+const MAX_ELEMENTS: f64 = 1e8;
 
 fn joint(
     ctx: &Ctx,
@@ -377,6 +489,11 @@ fn joint(
             if h > bl.max(bt).max(bw) {
                 return Err(ctx.err("structure.mesh.element_size", format!("{h} m is larger than the beam itself: use a size of a few millimetres, e.g. 0.005")));
             }
+            let cells = |l: f64| (l / h).ceil();
+            let n = cells(bl) * (cells(bt).max(2.0) + cells(at).max(2.0)) * cells(bw);
+            if n > MAX_ELEMENTS {
+                return Err(ctx.err("structure.mesh.element_size", format!("{h} m makes about {n:.1e} elements, far beyond any computer (the limit is {MAX_ELEMENTS:.0e}; the memory check refuses much less): use a size of a few millimetres, e.g. 0.005")));
+            }
             MeshSize::ElementSize(h)
         }
         (None, Some(dv)) => {
@@ -398,6 +515,12 @@ fn joint(
                     "structure.mesh.divisions.x_outside",
                     "must be at least 1: part of the beam lies outside the adhesive",
                 ));
+            }
+            let n = (dv.x_adhesive as f64 + dv.x_outside as f64)
+                * (dv.y_beam as f64 + dv.y_adhesive as f64)
+                * dv.z as f64;
+            if n > MAX_ELEMENTS {
+                return Err(ctx.err("structure.mesh.divisions", format!("{n:.1e} elements, far beyond any computer (the limit is {MAX_ELEMENTS:.0e}; the memory check refuses much less): use a few to a few tens of divisions per direction")));
             }
             MeshSize::Divisions {
                 x_adhesive: dv.x_adhesive,
@@ -473,6 +596,12 @@ fn measurements(ctx: &Ctx, m: &RawMeasurements, s: &Structure) -> Result<Measure
         let mut files = Vec::new();
         for (k, f) in l.files.iter().enumerate() {
             let r = resolve(ctx.file, f);
+            if r.is_dir() {
+                return Err(ctx.err(
+                    format!("{key}.files[{k}]"),
+                    format!("{} is a folder, not a data file: give the UFF58 (.uff) or CSV (.csv) file inside it (paths are relative to the study file)", r.display()),
+                ));
+            }
             if !r.is_file() {
                 return Err(ctx.err(
                     format!("{key}.files[{k}]"),

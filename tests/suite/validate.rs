@@ -10,7 +10,7 @@
 //! the single-process tables value for value and the same parquet bytes; pyarrow and polars
 //! read the parts as one hive-partitioned table.
 //!
-//! The smoke-and-shards test runs with `RFMLAB_LONG=1` only: its 11 units took 377 s for the
+//! The smoke-and-shards test is ignored by default (`cargo test --test suite -- --ignored`): its 11 units took 377 s for the
 //! single run (729 s with the 3 shards) on this 2-core machine under a load of 11, far over the
 //! 30 s budget of a default test (each unit re-linearises the measurement bias at its MAP, a
 //! fine-grid ROM sweep with Jacobians per re-linearisation). The SciPy test is always on.
@@ -124,11 +124,8 @@ fn strs<'t>(t: &'t Table, c: &str) -> &'t [String] {
 }
 
 #[test]
+#[ignore = "slow: about 6-12 min on 2 busy cores; run with --ignored"]
 fn smoke_run_is_sane_and_three_shards_merge_to_the_single_run_bit_for_bit() {
-    if std::env::var_os("RFMLAB_LONG").is_none() {
-        eprintln!("SKIP: set RFMLAB_LONG=1 (about 6-12 min on 2 busy cores)");
-        return;
-    }
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("experiment.toml"), EXPERIMENT).unwrap();
     let file = dir.path().join("validation.toml");

@@ -5,7 +5,7 @@
 //! | table | columns (unit) |
 //! |---|---|
 //! | `frf` | level, model (`""` for measured), kind (measured / initial / updated), response_id, reference_id, freq_hz (Hz), accelerance_re, accelerance_im ((m/s^2)/N) |
-//! | `parameters` | level, model, parameter, unit, initial, identified (SI unit in `unit`), iterations, stop_reason, frac_initial_<id>, frac_updated_<id> (1) per response id |
+//! | `parameters` | level, model, parameter, unit, initial, identified (SI unit in `unit`), iterations (updates made, all leakage passes together), stop_reason, status (`converged` / `flagged`), status_reason (why flagged, in words; empty when converged), frac_initial_<id>, frac_updated_<id> (1) per response id |
 //! | `iterations` | level, model, iteration, parameter, value (SI), relative_change (1), residual_modulus (Pa), frf_relative_residual (1), rank, step_scale (1) |
 //! | `correlation` | level, model, kind (initial / updated), response_id, frac (1) |
 //! | `correlation_curves` | level, model, kind, freq_hz (Hz), scc (1), acc (1) |
@@ -82,6 +82,8 @@ fn build_tables(levels: &[LevelData], results: &[LevelResults]) -> Result<Tables
                 par.s("parameter", name.clone());
                 par.s("unit", units.get(p).cloned().unwrap_or_default());
                 par.s("stop_reason", res.stop_reason.to_string());
+                par.s("status", s(g.status.label()));
+                par.s("status_reason", g.status.reason_text());
                 par.i("iterations", res.iterations as i64);
                 par.f("initial", "SI (see unit)", res.initial[p]);
                 par.f("identified", "SI (see unit)", res.params[p]);

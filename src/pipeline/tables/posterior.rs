@@ -3,9 +3,9 @@
 //! | table | columns (unit) |
 //! |---|---|
 //! | `draws` | level, model, sampler, chain, draw, one column per parameter (SI: E0 in Pa, eta1 in Pa s, noise scales in 1), lp, log_lik, log_prior (nats), step_size, tree_depth, n_steps, diverging, energy (NUTS; NaN for TMCMC) |
-//! | `summary` | level, model, sampler, parameter, unit, mean, sd, median, q2_5, q97_5, q5, q95, hdi_lower, hdi_upper (94 %), r_hat, ess_bulk, ess_tail, mcse_mean, mcse_sd, prior_sd, map, laplace_sd, truth |
+//! | `summary` | level, model, sampler, parameter, unit, map_status (`converged` / `flagged`: the MAP's), map_status_reason, mean, sd, median, q2_5, q97_5, q5, q95, hdi_lower, hdi_upper (94 %), r_hat, ess_bulk, ess_tail, mcse_mean, mcse_sd, prior_sd, map, laplace_sd, truth |
 //! | `starts` | level, model, start, kind (initial / design / rfm), objective (nats), iterations, stop_reason, start_<param>, end_<param> (SI) |
-//! | `laplace` | level, model, parameter, unit, map, mode_x, sd, log_evidence (nats), log_likelihood, log_prior, positive_definite |
+//! | `laplace` | level, model, parameter, unit, status (`converged` / `flagged`: the MAP's), status_reason, map, mode_x, sd, log_evidence (nats), log_likelihood, log_prior, positive_definite |
 //! | `sampler_runs` | level, model, sampler, seconds, evaluations, ess_bulk_min, ess_per_1000_evals, ess_per_second, log_evidence, log_evidence_se |
 //!
 //! The draws table is what `scripts/to_arviz.py` turns into an ArviZ InferenceData.
@@ -75,6 +75,7 @@ pub(super) fn tables(
     for p in posts {
         let level = levels.iter().find(|l| l.name == p.level);
         let sums = summaries(p);
+        let map_status = p.map_status();
         for (s, (_, summ)) in p.samplers.iter().zip(&sums) {
             let d = &s.draws;
             for r in 0..d.chain.len() {
@@ -110,6 +111,8 @@ pub(super) fn tables(
                 su.s("sampler", s.sampler.to_string());
                 su.s("parameter", p.names[k].clone());
                 su.s("unit", p.units[k].clone());
+                su.s("map_status", map_status.label().to_string());
+                su.s("map_status_reason", map_status.reason_text());
                 // The unit varies by row (the parameter's, in `unit`).
                 let u = "SI (see unit)";
                 for (c, v) in [
@@ -187,6 +190,8 @@ pub(super) fn tables(
             la.s("model", p.model.clone());
             la.s("parameter", p.names[k].clone());
             la.s("unit", p.units[k].clone());
+            la.s("status", map_status.label().to_string());
+            la.s("status_reason", map_status.reason_text());
             // The unit varies by row (the parameter's, in `unit`).
             la.f("map", "SI (see unit)", p.map.map_physical[k]);
             la.f("mode_x", "SI (see unit)", lp.physical[k]);

@@ -35,6 +35,27 @@ fn s(v: impl Into<String>) -> String {
     v.into()
 }
 
+/// The warning that opens the report when a fit is not a result ([`Results::flagged`]): one
+/// line per flagged fit with its reasons, and where the status is in the tables.
+fn flagged_block(rep: &mut Report, flagged: &[crate::pipeline::FlaggedFit]) {
+    if flagged.is_empty() {
+        return;
+    }
+    let mut text = format!(
+        "> **WARNING: {} {}.** The values below are where the search stopped, not an identification: read the reasons before using them (the `status` and `status_reason` columns of parameters.parquet, `map_status` of summary.parquet). `rfmlab run` exits with code 3.\n>",
+        flagged.len(),
+        if flagged.len() == 1 {
+            "fit is not a result"
+        } else {
+            "fits are not results"
+        },
+    );
+    for f in flagged {
+        text.push_str(&format!("\n> - {f}"));
+    }
+    rep.paragraph(&text);
+}
+
 /// The report's opening: title, study, engine, declared effects and measurement model.
 pub(super) fn header(run: &Results, loop_status: Option<&str>) -> Report {
     let study = run.study();
@@ -49,6 +70,11 @@ pub(super) fn header(run: &Results, loop_status: Option<&str>) -> Report {
             None => format!("rfmlab study: {}", study.name),
         },
     );
+    flagged_block(&mut rep, &run.flagged());
+    // The pre-flight's warnings bear on every number below.
+    for w in run.preflight_warnings() {
+        rep.paragraph(&format!("**Warning (pre-flight):** {w}"));
+    }
     if !study.description.is_empty() {
         rep.paragraph(&study.description);
     }
@@ -119,6 +145,7 @@ pub(super) fn global_tables(rep: &mut Report, levels: &[LevelData], results: &[L
         }
         headers.push(s("Iterations"));
         headers.push(s("Stop"));
+        headers.push(s("Status"));
         for id in &ld.response_ids {
             headers.push(format!("FRAC {id}"));
         }
@@ -141,14 +168,21 @@ pub(super) fn global_tables(rep: &mut Report, levels: &[LevelData], results: &[L
             let mut c = fmt(&res.initial);
             c.resize(maxp, String::new());
             row.extend(c);
-            row.extend([s(""), s("")]);
+            row.extend([s(""), s(""), s("")]);
             row.extend(g.frac_initial.iter().map(|&v| f4(v)));
             rows.push(row);
             let mut row = vec![res.model_name.clone(), s("identified")];
             let mut c = fmt(&res.params);
             c.resize(maxp, String::new());
             row.extend(c);
-            row.extend([res.iterations.to_string(), res.stop_reason.to_string()]);
+            row.extend([
+                res.iterations.to_string(),
+                res.stop_reason.to_string(),
+                match &g.status {
+                    crate::rfm::FitStatus::Converged => s("converged"),
+                    crate::rfm::FitStatus::Flagged(_) => s("**FLAGGED** (see the warning above)"),
+                },
+            ]);
             row.extend(g.frac_updated.iter().map(|&v| f4(v)));
             rows.push(row);
             if let Some(t) = ld.truth.as_ref().filter(|t| t.law == res.model_name) {

@@ -11,13 +11,14 @@
 //! | `fit_storage`, `fit_loss`, `residuals`, `kk` (.png, .svg) | figures |
 //! | `manifest.json` | study hash, seed, timings, files |
 //!
-//! Files are written atomically one by one into the output folder.
+//! Files are written atomically into a temporary sibling of the output folder, which is then
+//! swapped in whole (the output contract, [`crate::output::contract`]).
 
 use crate::material_fit::{run_loop, Candidate, MaterialFitError};
-use crate::output::{Manifest, OutputError, ResultsDir};
+use crate::output::{Manifest, OutputError, Replace, ResultsDir};
 use crate::plot::PlotError;
 use crate::study::material::MaterialStudy;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 mod figures;
 mod markdown;
@@ -74,41 +75,43 @@ fn e(v: f64) -> String {
     }
 }
 
-/// Run a material study and write its results.
+/// Run a material study and write its results (the folder is replaced as a whole when rfmlab
+/// wrote it, it is empty or absent; else refused, see [`run_material_as`]).
 pub fn run_material(study: &MaterialStudy) -> Result<MaterialSummary, MaterialRunError> {
+    run_material_as(study, Replace::IfOurs)
+}
+
+/// [`run_material`] under the output contract's choice `replace`
+/// ([`crate::output::contract`]); the folder is checked before the loop runs.
+pub fn run_material_as(
+    study: &MaterialStudy,
+    replace: Replace,
+) -> Result<MaterialSummary, MaterialRunError> {
     let t0 = std::time::Instant::now();
+    crate::output::claim_folder(&study.output_dir, replace)?;
     let mut manifest = Manifest::new(&study.file, Some(study.seed));
     let r = manifest.time("material loop", || run_loop(&study.curve, &study.params))?;
-    let parent = study
-        .output_dir
-        .parent()
-        .map(|p| p.to_path_buf())
-        .unwrap_or_default();
-    let name = study
-        .output_dir
-        .file_name()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| study.name.clone());
-    let mut dir = ResultsDir::create(
-        if parent.as_os_str().is_empty() {
-            PathBuf::from(".")
-        } else {
-            parent
-        },
-        &name,
-    )?;
-    for t in tables::tables(study, &r)? {
-        dir.write_table(&t)?;
-    }
-    if study.figures {
-        figures::figures(&mut dir, study, &r)?;
-    }
-    dir.write_report(&markdown::report(study, &r, study.figures))?;
-    dir.write_manifest(&mut manifest)?;
+    crate::output::replace_dir_as(&study.output_dir, replace, |tmp| {
+        let parent = tmp.parent().map(Path::to_path_buf).unwrap_or_default();
+        let name = tmp
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let mut dir = ResultsDir::create(parent, &name)?;
+        for t in tables::tables(study, &r)? {
+            dir.write_table(&t)?;
+        }
+        if study.figures {
+            figures::figures(&mut dir, study, &r)?;
+        }
+        dir.write_report(&markdown::report(study, &r, study.figures))?;
+        dir.write_manifest(&mut manifest)?;
+        Ok::<_, MaterialRunError>(())
+    })?;
     let first = r.first_candidate();
     let last = r.final_candidate();
     Ok(MaterialSummary {
-        output_dir: dir.path().to_path_buf(),
+        output_dir: study.output_dir.clone(),
         seconds: t0.elapsed().as_secs_f64(),
         path: r
             .path
