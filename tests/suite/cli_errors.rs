@@ -4,19 +4,10 @@
 use crate::runner_common::*;
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn rfmlab(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_rfmlab"))
-        .args(args)
-        .env("CI", "1")
-        .output()
-        .expect("run rfmlab");
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    let (code, out, err) = rfmlab_cli(args);
+    (code.unwrap_or(-1), out, err)
 }
 
 struct Setup {
@@ -30,14 +21,7 @@ fn setup() -> Setup {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().to_path_buf();
     let data = root.join("d.uff");
-    let law = rfmlab::material::model_from_name("model1", None).unwrap();
-    write_data(
-        &data,
-        "L1",
-        law.as_ref(),
-        &[7e6, 1.5e6],
-        &lines_hz(10.0, 100.0, 10.0),
-    );
+    write_small_data(&data);
     let out = root.join("results");
     Setup {
         _dir: dir,

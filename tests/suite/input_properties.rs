@@ -1123,14 +1123,7 @@ fn generated_study_files_end_in_0_or_2_and_write_nothing() {
     let t0 = Instant::now();
     let mut h = Harness::new("studies");
     let data = h.work.join("d.uff");
-    let law = rfmlab::material::model_from_name("model1", None).unwrap();
-    write_data(
-        &data,
-        "L1",
-        law.as_ref(),
-        &[7e6, 1.5e6],
-        &lines_hz(10.0, 100.0, 10.0),
-    );
+    write_small_data(&data);
     let small = small_study(&h.work.join("results_small"), &data);
     let default = default_copy(&h.work.join("results_default"));
     // the single-lap joint (structure only; its mesh is one inline table)
@@ -1225,14 +1218,7 @@ fn generated_study_files_end_in_0_or_2_and_write_nothing() {
 /// ASCII, UFF58 binary and CSV.
 fn base_data(work: &Path) -> (PathBuf, PathBuf, PathBuf) {
     let raw = work.join("raw.uff");
-    let law = rfmlab::material::model_from_name("model1", None).unwrap();
-    write_data(
-        &raw,
-        "L1",
-        law.as_ref(),
-        &[7e6, 1.5e6],
-        &lines_hz(10.0, 100.0, 10.0),
-    );
+    write_small_data(&raw);
     let mut set = rfmlab::data::frf_set_from_uff(
         &[(raw.clone(), "L1".to_string())],
         &rfmlab::data::UffImportOptions::default(),
@@ -1798,14 +1784,7 @@ fn valid_study_written_differently_gives_the_same_parameters() {
     let t0 = Instant::now();
     let mut h = Harness::new("runs");
     let data = h.work.join("d.uff");
-    let law = rfmlab::material::model_from_name("model1", None).unwrap();
-    write_data(
-        &data,
-        "L1",
-        law.as_ref(),
-        &[7e6, 1.5e6],
-        &lines_hz(10.0, 100.0, 10.0),
-    );
+    write_small_data(&data);
     let base = small_study(&h.work.join("results_base"), &data);
     let base_file = h.write("base.toml", base.as_bytes());
     let o = h.exec(

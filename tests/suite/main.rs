@@ -13,6 +13,7 @@ mod base_springs;
 mod bayes_run;
 mod circle_fit;
 mod cli_errors;
+mod cli_flags;
 mod cli_inspect;
 mod cli_rom;
 mod cli_simulate;

@@ -151,14 +151,7 @@ fn force_and_rerun_replace_the_folder_whole(cmd: &Cmd, root: &Path) {
 /// A tiny study of the synthetic joint (Model 1, ten lines) in `root`.
 fn tiny_study(root: &Path, engine: &str, extra: &str) -> PathBuf {
     let data = root.join("d.uff");
-    let law = rfmlab::material::model_from_name("model1", None).unwrap();
-    write_data(
-        &data,
-        "L1",
-        law.as_ref(),
-        &[7e6, 1.5e6],
-        &lines_hz(10.0, 100.0, 10.0),
-    );
+    write_small_data(&data);
     let text = study_text(
         "s",
         &root.join("results").join("s"),

@@ -11,16 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 fn rfmlab(args: &[&str]) -> (Option<i32>, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_rfmlab"))
-        .args(args)
-        .env("CI", "1")
-        .output()
-        .expect("run rfmlab");
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    rfmlab_cli(args)
 }
 
 struct Setup {
@@ -34,14 +25,7 @@ fn setup() -> Setup {
     let dir = tempfile::tempdir().unwrap();
     let root = dir.path().to_path_buf();
     let data = root.join("d.uff");
-    let law = rfmlab::material::model_from_name("model1", None).unwrap();
-    write_data(
-        &data,
-        "L1",
-        law.as_ref(),
-        &[7e6, 1.5e6],
-        &lines_hz(10.0, 100.0, 10.0),
-    );
+    write_small_data(&data);
     let out = root.join("results");
     Setup {
         _dir: dir,

@@ -67,6 +67,34 @@ pub fn joint_spec() -> rfmlab::fe::joint::JointSpec {
     rfmlab::study::build::joint_spec(&study.structure).expect("a mesher structure")
 }
 
+/// Runs the binary as a user would (`CI` set: no progress bars): the exit code (None when a
+/// signal ended it), stdout and stderr.
+pub fn rfmlab_cli(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_rfmlab"))
+        .args(args)
+        .env("CI", "1")
+        .output()
+        .expect("run rfmlab");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The small data set of the command-line tests, written as UFF58 level L1 to `path`: Model 1
+/// at E* = 7 + 1.5j MPa, 10-100 Hz every 10 Hz.
+pub fn write_small_data(path: &Path) {
+    let law = rfmlab::material::model_from_name("model1", None).expect("model1");
+    write_data(
+        path,
+        "L1",
+        law.as_ref(),
+        &[7e6, 1.5e6],
+        &lines_hz(10.0, 100.0, 10.0),
+    );
+}
+
 /// Frequency lines of the test data (Hz).
 pub fn lines_hz(lo: f64, hi: f64, step: f64) -> Vec<f64> {
     let n = ((hi - lo) / step).round() as usize;
