@@ -193,4 +193,4 @@ pub fn claim_file(path: &Path, force: bool, ours: impl Fn(&Path) -> bool) -> any
 }
 
 /// The help of `--force`, the same on every command that writes.
-pub const FORCE_HELP: &str = "Replace the output even if rfmlab did not write it (a folder with other files, or a file): it is replaced as a whole. Without it, rfmlab replaces only a folder holding its own manifest.json, an empty folder or a new path (docs/outputs.md, Output contract)";
+pub const FORCE_HELP: &str = "Replace the output even if rfmlab did not write it (a folder with other files, or a file): it is replaced as a whole. Without it, rfmlab replaces only a folder holding its own manifest.json and nothing it does not list, an empty folder or a new path (docs/outputs.md, Output contract)";

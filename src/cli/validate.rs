@@ -140,7 +140,13 @@ pub fn run(a: &ValidateArgs, g: &Global) -> anyhow::Result<()> {
     let spec = load_validation(&a.file)?;
     let out = a.out.clone().unwrap_or_else(|| spec.output_dir.clone());
     // The output contract before anything is computed.
-    let replace = super::common::claim_folder(&out, a.force)?;
+    let replace = if (a.merge || shard.count > 1) && has_manifest(&out) {
+        // The shards of one run share the folder: its manifest marks it as rfmlab's, and the
+        // parts the other shards wrote into it since are rfmlab's too.
+        rfmlab::output::Replace::forced(a.force)
+    } else {
+        super::common::claim_folder(&out, a.force)?
+    };
     let log = Log::new(g);
     let cmd = std::env::args().collect::<Vec<_>>().join(" ");
     let mut units_run = None;

@@ -39,7 +39,7 @@ pub fn write_loop(
     }
     if figures {
         for (level, freq, ids, res, _) in &o.levels {
-            crate::plot::closed_loop::residual_figure(
+            let files = crate::plot::closed_loop::residual_figure(
                 dir.file_path(&format!("residuals_{level}")),
                 &format!(
                     "{study_name}: standardised residuals of {} at {level}, before and after",
@@ -50,6 +50,9 @@ pub fn write_loop(
                 &res.before.residuals.z,
                 &res.after.residuals.z,
             )?;
+            // Listed in the manifest, so that a rerun recognises the folder as rfmlab's.
+            dir.record(&files.png);
+            dir.record(&files.svg);
         }
     }
     dir.write_bytes("closed_loop.md", o.markdown.as_bytes())

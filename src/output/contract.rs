@@ -50,8 +50,11 @@ pub enum Found {
     Nothing,
     /// An empty folder (rfmlab's own temporary files aside).
     EmptyFolder,
-    /// A folder holding rfmlab's `manifest.json`.
+    /// A folder holding rfmlab's `manifest.json` and nothing it does not list.
     OursFolder,
+    /// A folder rfmlab wrote (it holds rfmlab's `manifest.json`) holding entries the manifest
+    /// does not list: files a user put there. How many, and one of their names.
+    OursWithOthers { entries: usize, example: String },
     /// A folder holding something else: how many entries, and one of their names.
     ForeignFolder { entries: usize, example: String },
     /// A regular file (or anything that is not a folder).
@@ -65,6 +68,11 @@ impl Found {
             Found::Nothing => "nothing".into(),
             Found::EmptyFolder => "an empty folder".into(),
             Found::OursFolder => "a results folder rfmlab wrote".into(),
+            Found::OursWithOthers { entries, example } => format!(
+                "a results folder rfmlab wrote, holding {entries} {} its {MANIFEST} does not list ('{example}'{}): files put there since",
+                if *entries == 1 { "entry" } else { "entries" },
+                if *entries > 1 { ", ..." } else { "" }
+            ),
             Found::ForeignFolder { entries, example } => format!(
                 "a folder rfmlab did not write (no rfmlab {MANIFEST}) holding {entries} {} ('{example}'{})",
                 if *entries == 1 { "entry" } else { "entries" },
@@ -81,6 +89,40 @@ pub fn has_manifest(dir: &Path) -> bool {
     p.is_file() && Manifest::read(&p).is_ok()
 }
 
+/// The entries of the folder `dir` (rfmlab's temporary files and the manifest aside) that its
+/// manifest does not list, as (count, first name); a listed `sub/file` covers the entry `sub`.
+fn unlisted_entries(dir: &Path) -> (usize, String) {
+    let listed: Vec<String> = Manifest::read(dir.join(MANIFEST))
+        .map(|m| m.files.into_iter().map(|f| f.name).collect())
+        .unwrap_or_default();
+    let covered = |name: &str| {
+        listed.iter().any(|l| {
+            l == name
+                || l.strip_prefix(name)
+                    .is_some_and(|rest| rest.starts_with('/') || rest.starts_with('\\'))
+        })
+    };
+    let mut count = 0usize;
+    let mut example = String::new();
+    if let Ok(rd) = std::fs::read_dir(dir) {
+        let mut names: Vec<String> = rd
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        for name in names {
+            if name == MANIFEST || crate::fs_atomic::is_temp_name(&name) || covered(&name) {
+                continue;
+            }
+            if count == 0 {
+                example = name;
+            }
+            count += 1;
+        }
+    }
+    (count, example)
+}
+
 /// What is at `path`, seen as a results folder.
 pub fn inspect_folder(path: &Path) -> Found {
     let Ok(meta) = std::fs::metadata(path) else {
@@ -94,7 +136,12 @@ pub fn inspect_folder(path: &Path) -> Found {
         return Found::File;
     }
     if has_manifest(path) {
-        return Found::OursFolder;
+        let (entries, example) = unlisted_entries(path);
+        return if entries == 0 {
+            Found::OursFolder
+        } else {
+            Found::OursWithOthers { entries, example }
+        };
     }
     let mut entries = 0usize;
     let mut example = String::new();
@@ -178,6 +225,13 @@ pub fn claim_folder(path: &Path, replace: Replace) -> Result<Found, OutputError>
     let found = inspect_folder(path);
     match (&found, replace) {
         (Found::Nothing | Found::EmptyFolder | Found::OursFolder, _) | (_, Replace::Force) => {}
+        (Found::OursWithOthers { .. }, _) => {
+            return Err(OutputError::Refused {
+                path: path.to_path_buf(),
+                found: found.describe(),
+                fix: "rfmlab replaces its own folder as a whole, which would delete them: move them out, pass --force to replace the folder anyway, or choose a new folder with -o/--output".into(),
+            })
+        }
         _ => {
             return Err(OutputError::Refused {
                 path: path.to_path_buf(),
@@ -276,9 +330,23 @@ mod tests {
         // A manifest.json that is not rfmlab's does not make the folder rfmlab's.
         std::fs::write(d.join(MANIFEST), "{\"name\": \"mine\"}").unwrap();
         assert!(claim_folder(&d, Replace::IfOurs).is_err());
-        Manifest::new("study.toml", None)
-            .write(d.join(MANIFEST))
-            .unwrap();
+        let mut m = Manifest::new("study.toml", None);
+        m.add_file("report.md", None);
+        m.add_file("closed_loop/residuals.parquet", None);
+        m.write(d.join(MANIFEST)).unwrap();
+        std::fs::write(d.join("report.md"), "ours").unwrap();
+        std::fs::create_dir(d.join("closed_loop")).unwrap();
+        // rfmlab's folder with a user's file put in it since: refused, the file named.
+        let e = claim_folder(&d, Replace::IfOurs).unwrap_err().to_string();
+        assert!(
+            e.contains("important.txt") && e.contains("rfmlab wrote") && e.contains("--force"),
+            "{e}"
+        );
+        assert!(matches!(
+            claim_folder(&d, Replace::Force).unwrap(),
+            Found::OursWithOthers { entries: 1, .. }
+        ));
+        std::fs::remove_file(d.join("important.txt")).unwrap();
         assert_eq!(
             claim_folder(&d, Replace::IfOurs).unwrap(),
             Found::OursFolder

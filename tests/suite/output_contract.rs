@@ -118,7 +118,9 @@ fn refuses_what_it_did_not_write(cmd: &Cmd, root: &Path) {
 }
 
 /// `--force` on a folder holding a user's file replaces it as a whole; a rerun into the folder
-/// rfmlab made replaces it again (a stray file in it is gone).
+/// rfmlab made replaces it again; a file put into rfmlab's folder since is not deleted by a
+/// rerun (exit 2, the file named and untouched) unless `--force`, which replaces the folder
+/// whole (the file is gone: not merged).
 fn force_and_rerun_replace_the_folder_whole(cmd: &Cmd, root: &Path) {
     let victim = root.join("forced");
     std::fs::create_dir_all(&victim).unwrap();
@@ -131,11 +133,29 @@ fn force_and_rerun_replace_the_folder_whole(cmd: &Cmd, root: &Path) {
         "{}: no manifest",
         cmd.name
     );
-    std::fs::write(victim.join("stale.txt"), b"from before").unwrap();
     let (code, err) = cmd.run(root, &victim, &[]);
     assert_eq!(code, 0, "{} rerun: exit {code}\n{err}", cmd.name);
+    std::fs::write(victim.join("notes.txt"), b"put there since").unwrap();
+    let (code, err) = cmd.run(root, &victim, &[]);
+    assert_eq!(
+        code, 2,
+        "{}: a rerun over a file the user put into rfmlab's folder: exit {code}\n{err}",
+        cmd.name
+    );
     assert!(
-        !victim.join("stale.txt").exists(),
+        err.contains("notes.txt") && err.contains("--force"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::read(victim.join("notes.txt")).unwrap(),
+        b"put there since",
+        "{}",
+        cmd.name
+    );
+    let (code, err) = cmd.run(root, &victim, &["--force"]);
+    assert_eq!(code, 0, "{} rerun --force: exit {code}\n{err}", cmd.name);
+    assert!(
+        !victim.join("notes.txt").exists(),
         "{}: the rerun merged into the folder instead of replacing it",
         cmd.name
     );
@@ -217,9 +237,9 @@ fn diagnose_refuses_a_user_s_folder_or_file_and_accepts_its_own() {
     // and it is left as it was.
     let ours = dir.path().join("ours");
     std::fs::create_dir(&ours).unwrap();
-    rfmlab::output::Manifest::new(&study, None)
-        .write(ours.join("manifest.json"))
-        .unwrap();
+    let mut manifest = rfmlab::output::Manifest::new(&study, None);
+    manifest.add_file("closed_loop.md", None);
+    manifest.write(ours.join("manifest.json")).unwrap();
     std::fs::write(ours.join("closed_loop.md"), b"earlier").unwrap();
     let before = tree(&ours);
     let (code, err) = cmd.run(dir.path(), &ours, &[]);
