@@ -189,9 +189,9 @@ mod tests {
         let target = root.path().join("res");
         std::fs::create_dir(&target).unwrap();
         std::fs::write(target.join("a"), "old").unwrap();
-        super::super::Manifest::new("s.toml", None)
-            .write(target.join("manifest.json"))
-            .unwrap();
+        let mut manifest = super::super::Manifest::new("s.toml", None);
+        manifest.add_file("a", None);
+        manifest.write(target.join("manifest.json")).unwrap();
         // A temporary folder and an old folder of a process that no longer runs.
         let dead = u32::MAX - 1;
         std::fs::create_dir(root.path().join(format!("res.tmp-{dead}"))).unwrap();
