@@ -136,13 +136,8 @@ pub fn load_material(path: &Path) -> Result<MaterialStudy, StudyError> {
 /// Validate the text of a material study file (`path` names it in errors and anchors relative
 /// paths) and read its data.
 pub fn parse_material(path: &Path, text: &str) -> Result<MaterialStudy, StudyError> {
-    let raw: RawMaterialStudy = toml::from_str(text).map_err(|e| {
-        err(
-            path,
-            "(toml)",
-            format!("{} (see the material study keys in README.md)", e.message()),
-        )
-    })?;
+    let raw: RawMaterialStudy =
+        toml::from_str(text).map_err(|e| super::toml_error(path, text, &e))?;
     if let Some(k) = &raw.study.kind {
         if k != "material" {
             return Err(err(path, "study.kind", format!("'{k}': a material study has kind = \"material\" (structural studies run with `rfmlab run`)")));

@@ -256,6 +256,7 @@ pub struct Study {
 
 mod ctx;
 mod validate;
+pub(crate) use validate::toml_error;
 
 pub use validate::{load, parse_str};
 

@@ -149,7 +149,7 @@ fn plain_type(t: &str) -> String {
 
 /// Turn a TOML / serde error into a StudyError with the line, the offending key, the value
 /// given, what is allowed and the fix, in plain words.
-pub(super) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyError {
+pub(crate) fn toml_error(path: &Path, text: &str, e: &toml::de::Error) -> StudyError {
     let line = e
         .span()
         .map(|s| text[..s.start.min(text.len())].matches('\n').count() + 1);

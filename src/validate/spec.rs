@@ -154,15 +154,8 @@ pub fn load_validation(path: &Path) -> Result<ValidationSpec, StudyError> {
     };
     let text = std::fs::read_to_string(path)
         .map_err(|e| err("(file)", format!("cannot read the validation file: {e}")))?;
-    let raw: RawFile = toml::from_str(&text).map_err(|e| {
-        err(
-            "(syntax)",
-            format!(
-                "{}; see validations/validate.toml for the keys",
-                e.message()
-            ),
-        )
-    })?;
+    let raw: RawFile =
+        toml::from_str(&text).map_err(|e| crate::study::toml_error(path, &text, &e))?;
     let base = path.parent().unwrap_or(Path::new(""));
     let v = raw.validation;
     let ex_path = base.join(&v.experiment);

@@ -462,3 +462,44 @@ fn the_rom_cache_follows_the_output_folder_and_the_manifest_holds_an_absolute_st
     assert!(p.is_absolute(), "{}", m.study_file);
     assert_eq!(p, root.join("s.toml").canonicalize().unwrap());
 }
+
+/// A wrong type in a material study or a validation file is worded as in a study file: the
+/// file and line, the key, the value, what the key takes (no serde wording), exit code 2.
+#[test]
+fn material_and_validation_files_name_the_key_and_value_of_a_wrong_type() {
+    let dir = tempfile::tempdir().unwrap();
+    let material = material_study(dir.path());
+    let text = std::fs::read_to_string(&material).unwrap();
+    assert!(text.contains("max_branches = 2"), "update this test");
+    std::fs::write(
+        &material,
+        text.replace("max_branches = 2", "max_branches = \"two\""),
+    )
+    .unwrap();
+    let validation = validation(dir.path());
+    let text = std::fs::read_to_string(&validation).unwrap();
+    std::fs::write(&validation, text.replace("seed = 5", "seed = \"five\"")).unwrap();
+    for (cmd, file, key, value) in [
+        ("material", &material, "max_branches", "\"two\""),
+        ("validate", &validation, "seed", "\"five\""),
+    ] {
+        let out = dir.path().join(format!("{cmd}_out"));
+        let (code, err) = rfmlab_in(
+            dir.path(),
+            &[cmd, file.to_str().unwrap(), "-o", out.to_str().unwrap()],
+        );
+        assert_eq!(code, 2, "{cmd}: {err}");
+        for needle in [
+            key,
+            value,
+            "takes",
+            file.file_name().unwrap().to_str().unwrap(),
+        ] {
+            assert!(err.contains(needle), "{cmd}: no {needle:?} in\n{err}");
+        }
+        for serde in ["invalid type", "expected", "(syntax)", "(toml)"] {
+            assert!(!err.contains(serde), "{cmd}: {serde:?} in\n{err}");
+        }
+        assert!(!out.exists(), "{cmd} wrote {}", out.display());
+    }
+}
