@@ -3,35 +3,12 @@
 
 use crate::runner_common::*;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 fn rfmlab(args: &[&str]) -> (i32, String, String) {
     let (code, out, err) = rfmlab_cli(args);
     (code.unwrap_or(-1), out, err)
 }
-
-struct Setup {
-    _dir: tempfile::TempDir,
-    root: PathBuf,
-    data: PathBuf,
-    out: PathBuf,
-}
-
-fn setup() -> Setup {
-    let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().to_path_buf();
-    let data = root.join("d.uff");
-    write_small_data(&data);
-    let out = root.join("results");
-    Setup {
-        _dir: dir,
-        root,
-        data,
-        out,
-    }
-}
-
-const ANALYSES: &str = "[analyses]\nper_line = false\nsensitivity = false\nfigures = false\n";
 
 fn good(s: &Setup) -> String {
     study_text(

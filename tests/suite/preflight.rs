@@ -14,29 +14,6 @@ fn rfmlab(args: &[&str]) -> (Option<i32>, String, String) {
     rfmlab_cli(args)
 }
 
-struct Setup {
-    _dir: tempfile::TempDir,
-    root: PathBuf,
-    data: PathBuf,
-    out: PathBuf,
-}
-
-fn setup() -> Setup {
-    let dir = tempfile::tempdir().unwrap();
-    let root = dir.path().to_path_buf();
-    let data = root.join("d.uff");
-    write_small_data(&data);
-    let out = root.join("results");
-    Setup {
-        _dir: dir,
-        root,
-        data,
-        out,
-    }
-}
-
-const ANALYSES: &str = "[analyses]\nper_line = false\nsensitivity = false\nfigures = false\n";
-
 fn study(s: &Setup, data: &Path) -> String {
     study_text(
         "s",

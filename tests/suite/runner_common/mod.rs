@@ -95,6 +95,33 @@ pub fn write_small_data(path: &Path) {
     );
 }
 
+/// A temporary folder with the small data set ([`write_small_data`]) for the command-line
+/// tests: `root`, the data file and a results folder inside it (not created).
+pub struct Setup {
+    _dir: tempfile::TempDir,
+    pub root: PathBuf,
+    pub data: PathBuf,
+    pub out: PathBuf,
+}
+
+/// A fresh [`Setup`].
+pub fn setup() -> Setup {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().to_path_buf();
+    let data = root.join("d.uff");
+    write_small_data(&data);
+    let out = root.join("results");
+    Setup {
+        _dir: dir,
+        root,
+        data,
+        out,
+    }
+}
+
+/// The `[analyses]` of the command-line tests' studies: global fits only, no figures.
+pub const ANALYSES: &str = "[analyses]\nper_line = false\nsensitivity = false\nfigures = false\n";
+
 /// Frequency lines of the test data (Hz).
 pub fn lines_hz(lo: f64, hi: f64, step: f64) -> Vec<f64> {
     let n = ((hi - lo) / step).round() as usize;
