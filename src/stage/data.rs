@@ -443,11 +443,17 @@ pub fn load_checked(
                 ),
             ));
         }
-        let source = |ch: &crate::data::Channel| {
-            ch.source
+        // A channel as the messages name it: "3+x/2+y (FILE dataset N)".
+        let label = |ch: &crate::data::Channel| {
+            let source = ch
+                .source
                 .as_ref()
                 .map(|(f, d)| format!("{f} dataset {d}"))
-                .unwrap_or_else(|| "its file".into())
+                .unwrap_or_else(|| "its file".into());
+            format!(
+                "{}{}/{}{} ({source})",
+                ch.response_id, ch.response_dir, ch.reference_id, ch.reference_dir
+            )
         };
         // Channels: reference = the excitation point along its axis (a reference along
         // another axis is another column of the FRF matrix), response = one of the model's
@@ -483,13 +489,9 @@ pub fn load_checked(
                 * f64::from(ch.reference_dir.sign * exc_point.direction.sign);
             if sign < 0.0 {
                 warnings.push(format!(
-                    "level {}: channel {}{}/{}{} ({}) is measured opposite to point {}{} / excitation {}{} of the study: its sign is flipped",
+                    "level {}: channel {} is measured opposite to point {}{} / excitation {}{} of the study: its sign is flipped",
                     level.name,
-                    ch.response_id,
-                    ch.response_dir,
-                    ch.reference_id,
-                    ch.reference_dir,
-                    source(ch),
+                    label(ch),
                     point.id,
                     point.direction,
                     exc_point.id,
@@ -515,13 +517,9 @@ pub fn load_checked(
                     file,
                     point_key(p.id, p.direction.axis),
                     format!(
-                        "level {}: channel {}{}/{}{} ({}) is measured along {} but point {} is declared {} (with no channel along that axis): a response along another axis cannot stand for it. Set the point's direction to the measured one (direction = \"{}\"), give the data measured along {}, or mark the point optional = true",
+                        "level {}: channel {} is measured along {} but point {} is declared {} (with no channel along that axis): a response along another axis cannot stand for it. Set the point's direction to the measured one (direction = \"{}\"), give the data measured along {}, or mark the point optional = true",
                         level.name,
-                        ch.response_id,
-                        ch.response_dir,
-                        ch.reference_id,
-                        ch.reference_dir,
-                        source(ch),
+                        label(ch),
                         ch.response_dir,
                         p.id,
                         p.direction,

@@ -91,7 +91,7 @@ fn log_normal(x: &[f64], m: &[f64], prec: &[f64], logdet: f64, grad: Option<&mut
 
 /// Prior `N(m0, S0)`, likelihood `N(y; x, R)`: the posterior is Gaussian with precision
 /// `S0^-1 + R^-1`, and the evidence is `N(y; m0, S0 + R)`.
-struct Gauss {
+pub(crate) struct Gauss {
     d: usize,
     m0: Vec<f64>,
     s0: Vec<f64>,
@@ -105,7 +105,7 @@ struct Gauss {
 }
 
 impl Gauss {
-    fn new(m0: Vec<f64>, s0: Vec<f64>, y: Vec<f64>, r: Vec<f64>) -> Self {
+    pub(crate) fn new(m0: Vec<f64>, s0: Vec<f64>, y: Vec<f64>, r: Vec<f64>) -> Self {
         let d = m0.len();
         Self {
             d,

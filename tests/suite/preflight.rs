@@ -6,7 +6,7 @@
 use crate::runner_common::*;
 
 use rfmlab::common::Direction;
-use rfmlab::data::{FrfSet, UffImportOptions};
+use rfmlab::data::{Channel, FrfSet, UffImportOptions};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
@@ -47,20 +47,25 @@ fn expect_2(cmd: &str, file: &Path, needles: &[&str]) -> String {
     err
 }
 
-/// A channel measured along x at a point the study declares +y: every command stops with
-/// exit 2 naming the data file, the channel, the point and the fix (it was fitted with its
-/// sign reversed).
-#[test]
-fn channel_along_another_axis_stops() {
-    let s = setup();
+/// The data of [`setup`] with the channel of point 3 changed by `change`, written as `name`.
+fn with_channel_3(s: &Setup, name: &str, change: impl FnOnce(&mut Channel)) -> PathBuf {
     let mut set = read_set(&s.data);
     let ch = set.levels[0]
         .channels
         .iter_mut()
         .find(|c| c.response_id == 3)
         .unwrap();
-    ch.response_dir = Direction::PX;
-    let data = write_set(&set, &s.root.join("x3.uff"));
+    change(ch);
+    write_set(&set, &s.root.join(name))
+}
+
+/// A channel measured along x at a point the study declares +y: every command stops with
+/// exit 2 naming the data file, the channel, the point and the fix (it was fitted with its
+/// sign reversed).
+#[test]
+fn channel_along_another_axis_stops() {
+    let s = setup();
+    let data = with_channel_3(&s, "x3.uff", |ch| ch.response_dir = Direction::PX);
     let file = write(&s.root.join("axis.toml"), &study(&s, &data));
     for cmd in ["run", "check"] {
         expect_2(
@@ -85,17 +90,12 @@ fn channel_along_another_axis_stops() {
 #[test]
 fn channel_with_opposite_sign_is_flipped_and_said() {
     let s = setup();
-    let mut set = read_set(&s.data);
-    let ch = set.levels[0]
-        .channels
-        .iter_mut()
-        .find(|c| c.response_id == 3)
-        .unwrap();
-    ch.response_dir = Direction::new(rfmlab::common::Axis::Y, -1);
-    for v in &mut ch.values {
-        *v = -*v;
-    }
-    let data = write_set(&set, &s.root.join("m3.uff"));
+    let data = with_channel_3(&s, "m3.uff", |ch| {
+        ch.response_dir = Direction::new(rfmlab::common::Axis::Y, -1);
+        for v in &mut ch.values {
+            *v = -*v;
+        }
+    });
     let file = write(&s.root.join("flip.toml"), &study(&s, &data));
     let (code, _, err) = rfmlab(&["--quiet", "check", file.to_str().unwrap()]);
     assert_eq!(code, Some(0), "{err}");

@@ -3,8 +3,8 @@
 //! (the loop's searches were seeded with 0 whatever the study said). The same seed gives the
 //! same results whatever the thread count; another seed gives other random streams.
 
+use crate::inference_samplers::Gauss;
 use rfmlab::inference::map::{find_map, MapResult};
-use rfmlab::inference::{DensityError, Posterior};
 use std::path::Path;
 
 /// studies/closed_loop_td.toml (inference + closed loop) with `seed`, parsed, not run.
@@ -36,36 +36,13 @@ fn the_plan_carries_the_study_seed_to_the_closed_loop() {
 }
 
 /// A 2-D Gaussian posterior: prior N(0, 2^2 I), likelihood N(x; (1, -1), I).
-struct Toy;
-
-impl Posterior for Toy {
-    fn dim(&self) -> usize {
-        2
-    }
-    fn names(&self) -> Vec<String> {
-        vec!["a".into(), "b".into()]
-    }
-    fn log_prior(&self, x: &[f64], grad: Option<&mut [f64]>) -> f64 {
-        if let Some(g) = grad {
-            g[0] = -x[0] / 4.0;
-            g[1] = -x[1] / 4.0;
-        }
-        -(x[0] * x[0] + x[1] * x[1]) / 8.0 - (2.0 * std::f64::consts::PI * 4.0).ln()
-    }
-    fn log_likelihood(&self, x: &[f64], grad: Option<&mut [f64]>) -> Result<f64, DensityError> {
-        let r = [x[0] - 1.0, x[1] + 1.0];
-        if let Some(g) = grad {
-            g[0] = -r[0];
-            g[1] = -r[1];
-        }
-        Ok(-(r[0] * r[0] + r[1] * r[1]) / 2.0 - (2.0 * std::f64::consts::PI).ln())
-    }
-    fn sample_prior(&self, _rng: &mut rand::rngs::StdRng) -> Vec<f64> {
-        vec![0.0, 0.0]
-    }
-    fn constrained(&self, x: &[f64]) -> Vec<f64> {
-        x.to_vec()
-    }
+fn toy() -> Gauss {
+    Gauss::new(
+        vec![0.0, 0.0],
+        vec![4.0, 0.0, 0.0, 4.0],
+        vec![1.0, -1.0],
+        vec![1.0, 0.0, 0.0, 1.0],
+    )
 }
 
 fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
@@ -93,7 +70,10 @@ fn the_loop_s_multistart_follows_the_seed_not_the_thread_count() {
             map.n_starts > 0,
             "the loop's searches have space-filling starts"
         );
-        in_pool(threads, || find_map(&Toy, Some(&[0.0, 0.0]), &map, &|| ())).unwrap()
+        in_pool(threads, || {
+            find_map(&toy(), Some(&[0.0, 0.0]), &map, &|| ())
+        })
+        .unwrap()
     };
     let (one, two) = (search(7, 1), search(7, 2));
     assert_eq!(design_starts(&one), design_starts(&two));
