@@ -180,7 +180,9 @@ fn parse_kv(ids: &[String; 5], key: &str) -> Option<f64> {
         .find_map(|t| t.strip_prefix(key)?.strip_prefix('=')?.parse().ok())
 }
 
-fn grids_match(a: &[f64], b: &[f64], rel: f64) -> bool {
+/// Whether two frequency grids hold the same lines: equal counts, every line within `rel` of
+/// the largest |f| of both.
+pub(crate) fn grids_match(a: &[f64], b: &[f64], rel: f64) -> bool {
     if a.len() != b.len() {
         return false;
     }

@@ -227,18 +227,9 @@ fn read_level_files(
         )
     })?;
     for p in parts {
-        let scale = lvl
-            .freq_hz
-            .iter()
-            .chain(&p.freq_hz)
-            .fold(0.0f64, |m, x| m.max(x.abs()))
-            .max(1e-300);
-        let same_grid = p.freq_hz.len() == lvl.freq_hz.len()
-            && p.freq_hz
-                .iter()
-                .zip(&lvl.freq_hz)
-                .all(|(a, b)| (a - b).abs() <= 1e-6 * scale);
-        if !same_grid {
+        // The tolerance the UFF58 import holds one level's datasets to.
+        let rel = crate::data::UffImportOptions::default().grid_rel_tol;
+        if !crate::data::uff_frf::grids_match(&p.freq_hz, &lvl.freq_hz, rel) {
             return Err(input_error(
                 file,
                 format!("measurements.levels[{li}].files"),

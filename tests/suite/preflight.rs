@@ -437,3 +437,37 @@ fn flags_are_checked_at_once() {
         "{err}"
     );
 }
+
+/// A UFF58 file and a CSV file of one level on different frequency grids: exit 2 naming the
+/// level's files and both grids.
+#[test]
+fn files_of_one_level_on_different_grids_stop() {
+    let s = setup();
+    let mut set = read_set(&s.data);
+    let level = &mut set.levels[0];
+    let n = level.freq_hz.len() - 1;
+    level.freq_hz.truncate(n);
+    for ch in &mut level.channels {
+        ch.values.truncate(n);
+        if let Some(c) = &mut ch.coherence {
+            c.truncate(n);
+        }
+    }
+    let csv = s.root.join("short.csv");
+    rfmlab::data::csv::write_csv(&set, &csv).unwrap();
+    let text = study(&s, &s.data).replace(
+        &format!("files = [\"{}\"]", s.data.display()),
+        &format!("files = [\"{}\", \"{}\"]", s.data.display(), csv.display()),
+    );
+    let file = write(&s.root.join("grids.toml"), &text);
+    expect_2(
+        "check",
+        &file,
+        &[
+            "measurements.levels[0].files",
+            "different frequency lines",
+            "10..100 Hz",
+            "10..90 Hz",
+        ],
+    );
+}
