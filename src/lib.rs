@@ -85,6 +85,7 @@ pub mod common;
 pub mod correlation;
 pub mod data;
 pub mod diagnose;
+pub mod discretisation;
 pub mod experiment;
 pub mod fe;
 pub mod forward;

@@ -171,6 +171,7 @@ pub fn deterministic_view<'a>(
             mesh: built.mesh.clone(),
             excitation: built.excitation,
             dof_axes: built.dof_axes.clone(),
+            discretisation: built.discretisation.clone(),
         },
     }))
 }

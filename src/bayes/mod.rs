@@ -18,6 +18,7 @@
 //! | [`basins`] | the MAP search and the RFM from space-filling starts, clustered into basins |
 //! | [`levels`] | the change of E', E'' between two levels; shared against separate parameters |
 //! | [`declared`] | the study's declared effects as forward-model effects of a level |
+//! | [`mesh_allowance`] | the mesh's remaining discretisation error marginalised in the posteriors |
 //!
 //! The report writers turn the stages' results into tables, figures and report sections.
 
@@ -28,6 +29,7 @@ pub mod declared;
 pub mod infer;
 pub mod levels;
 pub mod linearisation;
+pub mod mesh_allowance;
 mod params;
 pub mod posterior;
 pub mod redundancy;

@@ -103,6 +103,13 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
         ex = ex.rom_cache(rfmlab::stage::rom_cache_dir(&plan.output_dir));
     }
     let results = pipeline::run(&plan, &mut ex).map_err(wrap)?;
+    if !g.quiet && !a.json {
+        if let Some(d) = results.discretisation() {
+            if let Some(line) = rfmlab::stage::mesh_error::describe(d).first() {
+                eprintln!("{line}");
+            }
+        }
+    }
     // The pre-flight's warnings bear on the results: shown even with --quiet.
     for w in results.preflight_warnings() {
         eprintln!("warning: {w}");
@@ -155,7 +162,13 @@ pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
         study.output_dir = o.clone();
     }
     super::common::claim_folder(&study.output_dir, a.force)?;
-    let summary = rfmlab::pipeline::check_study(&study).map_err(wrap)?;
+    let quiet = g.quiet || a.json;
+    let summary = rfmlab::pipeline::check_study_with(&study, &|line| {
+        if !quiet {
+            eprintln!("  {line}");
+        }
+    })
+    .map_err(wrap)?;
     if a.json {
         print_json(&serde_json::to_value(&summary)?)?;
     } else if !g.quiet {
@@ -182,20 +195,9 @@ pub fn check(a: &CheckArgs, g: &Global) -> anyhow::Result<()> {
                 "  first y mode at the initial values {m:.2} Hz, data's first peak {p:.2} Hz"
             );
         }
-        if !pf.discretisation.is_empty() {
-            eprintln!(
-                "  mesh discretisation error (Richardson, mesh refined twice per direction, order {}):",
-                pf.discretisation[0].order
-            );
-            for d in &pf.discretisation {
-                eprintln!(
-                    "    mode {:>2} {:>10.4} Hz  refined {:>10.4} Hz  error {:+.2e} Hz ({:+.4} %)",
-                    d.mode,
-                    d.freq_hz,
-                    d.freq_refined_hz,
-                    d.error_hz,
-                    100.0 * d.rel_error
-                );
+        if let Some(d) = &pf.mesh {
+            for line in rfmlab::stage::mesh_error::describe(d) {
+                eprintln!("  {line}");
             }
         }
     }

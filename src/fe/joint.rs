@@ -91,6 +91,9 @@ pub struct MeshParams {
     /// Growth ratio of a mesh graded towards the bond line's edges ([`JointGrid::graded`]),
     /// with an element size only; None: equal cells per segment.
     pub grading: Option<f64>,
+    /// Cells at the bond line's edges of a graded mesh (m); None: [`GRADED_EDGE_FRACTION`] of
+    /// its thickness.
+    pub edge_m: Option<f64>,
     pub integration: Integration,
     pub point_mapping: PointMapping,
 }
@@ -100,6 +103,7 @@ impl Default for MeshParams {
         MeshParams {
             size: MeshSize::ElementSize(0.005),
             grading: None,
+            edge_m: None,
             integration: Integration::Full,
             point_mapping: PointMapping::Interpolate,
         }
@@ -408,7 +412,8 @@ fn resolve_grid(l: &JointLayout, mesh: &MeshParams) -> Result<JointGrid, FeError
     let grid = JointGrid::graded(
         l,
         h,
-        GRADED_EDGE_FRACTION * l.adhesive_thickness_m,
+        mesh.edge_m
+            .unwrap_or(GRADED_EDGE_FRACTION * l.adhesive_thickness_m),
         r,
         layer_divisions(l.beam_thickness_m, h),
     );

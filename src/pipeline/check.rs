@@ -31,11 +31,17 @@ pub struct CheckSummary {
 /// Validate a study without running it: data files, channels, excitation channel, band,
 /// model parameters, and the full model evaluated at every model's initial values.
 pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
+    check_with(plan, &|_| {})
+}
+
+/// [`check`] with a line per mesh of the refinement to `progress`.
+pub fn check_with(plan: &Plan, progress: &dyn Fn(&str)) -> Result<CheckSummary, RunError> {
     let study = plan.study();
     let (models, file) = (&plan.identification.models, study.file.as_path());
     preflight::check_settings(models, &plan.output_dir, file)?;
     let laws = crate::stage::model_laws(models, file)?;
-    let spec = crate::study::build::joint_spec(&study.structure);
+    let built = model::build_with(&study.structure, file, progress)?;
+    let spec = crate::study::build::chosen_spec(&study.structure, &file.display().to_string())?;
     let cost = match &spec {
         Some(spec) => Some(
             crate::fe::joint::joint_cost_estimate(spec)
@@ -43,7 +49,6 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
         ),
         None => None,
     };
-    let built = model::build(&study.structure, file)?;
     let id = &plan.identification;
     let loaded = preflight::check_data(
         &preflight::DataChecks {
@@ -69,23 +74,31 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
     preflight::check_channels(&built, &levels, &mut pf.warnings);
     let lines_checked = model::check_initial_values(models, file, &built, &levels, &laws)?;
     preflight::check_first_mode(models, &built, &levels, &laws, &mut pf)?;
-    match preflight::mesh_error_at_initial_values(
-        models,
-        &study.structure,
-        file,
-        &built,
-        &levels,
-        &laws,
-    ) {
-        Ok(d) => pf.discretisation = d,
-        // a refined mesh beyond the machine, or a solver that cannot resolve it, leaves the
-        // estimate out with a warning (the study's own mesh is fine)
-        Err(err) => pf.warnings.push(format!(
-            "structure.mesh: no discretisation-error estimate ({err})"
-        )),
+    let allowance_off = matches!(&study.structure.source, crate::study::StructureSource::Mesher(j) if !j.mesh_rule.allowance);
+    if built.discretisation.is_some() || !allowance_off || id.mesh_error {
+        match preflight::mesh_error_at_initial_values(
+            models,
+            &study.structure,
+            file,
+            &built,
+            &levels,
+            &laws,
+        ) {
+            Ok(d) => pf.mesh = d,
+            // a refined mesh beyond the machine, or a solver that cannot resolve it, leaves the
+            // estimate out with a warning (the study's own mesh is fine)
+            Err(err) => pf.warnings.push(format!(
+                "structure.mesh: no discretisation-error estimate ({err})"
+            )),
+        }
     }
+    pf.discretisation = pf
+        .mesh
+        .as_ref()
+        .map(|d| d.modes.clone())
+        .unwrap_or_default();
     pf.warnings
-        .extend(preflight::mesh_error_warnings(&pf.discretisation));
+        .extend(preflight::mesh_error_warnings(pf.mesh.as_ref()));
     Ok(CheckSummary {
         preflight: pf,
         study: study.name.clone(),
@@ -106,4 +119,9 @@ pub fn check(plan: &Plan) -> Result<CheckSummary, RunError> {
 /// [`check`] of the plan of `study`.
 pub fn check_study(study: &Study) -> Result<CheckSummary, RunError> {
     check(&study.plan()?)
+}
+
+/// [`check_with`] of the plan of `study`.
+pub fn check_study_with(study: &Study, progress: &dyn Fn(&str)) -> Result<CheckSummary, RunError> {
+    check_with(&study.plan()?, progress)
 }

@@ -32,7 +32,7 @@ mod stages;
 pub(crate) mod tables;
 
 pub use crate::stage::{Event, RunError};
-pub use check::{check, check_study, CheckSummary};
+pub use check::{check, check_study, check_study_with, check_with, CheckSummary};
 pub use executor::{Executor, Observer};
 pub use level_results::LevelResults;
 pub use plan::{
@@ -112,10 +112,29 @@ fn run_here(
     }
     stages::across_levels(plan, &bayes_run, &run, &mut levels, ex)?;
     let closed_loop = stages::closed_loop(plan, study, &run, &bayes_run, ex, &progress)?;
+    // The mesh's remaining error, after the comparisons across levels (which share the mesh).
+    if let Some(d) = &run.mesh {
+        let law_of: Vec<(&str, &dyn crate::material::ConstitutiveModel)> = plan
+            .identification
+            .models
+            .iter()
+            .zip(&run.laws)
+            .map(|(m, l)| (m.name.as_str(), l.as_ref()))
+            .collect();
+        for r in &mut levels {
+            crate::bayes::mesh_allowance::apply(
+                &mut r.posteriors,
+                d,
+                &law_of,
+                run.band_hz.1,
+                plan.seed,
+            );
+        }
+    }
     let stages::Prepared {
         data,
         engines,
-        mesh_error,
+        mesh,
         warnings,
         ..
     } = run;
@@ -130,7 +149,7 @@ fn run_here(
         plan.figures,
         plan.output_dir.clone(),
         closed_loop,
-        mesh_error,
+        mesh,
     )?;
     results.preflight_warnings = warnings;
     Ok(results)

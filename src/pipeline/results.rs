@@ -132,7 +132,7 @@ pub struct Results {
     pub(crate) figures: bool,
     pub(crate) output_dir: std::path::PathBuf,
     pub(crate) closed_loop: Option<LoopOutcome>,
-    pub(crate) mesh_error: Vec<crate::stage::preflight::ModeDiscretisation>,
+    pub(crate) mesh: Option<crate::discretisation::Discretisation>,
     /// The pre-flight's warnings that bear on the results (channels flipped, a level's file
     /// whose force level differs from the level's, bands beyond the data).
     pub(crate) preflight_warnings: Vec<String>,
@@ -153,10 +153,15 @@ impl Results {
         figures: bool,
         output_dir: std::path::PathBuf,
         closed_loop: Option<LoopOutcome>,
-        mesh_error: Vec<crate::stage::preflight::ModeDiscretisation>,
+        mesh: Option<crate::discretisation::Discretisation>,
     ) -> Result<Results, RunError> {
         let mut tables = Vec::new();
         for t in crate::pipeline::tables::all(&levels, &level_results)? {
+            let df = t.to_dataframe()?;
+            tables.push((t.name().to_string(), t, df));
+        }
+        if let Some(d) = &mesh {
+            let t = discretisation_table(d)?;
             let df = t.to_dataframe()?;
             tables.push((t.name().to_string(), t, df));
         }
@@ -177,7 +182,7 @@ impl Results {
             figures,
             output_dir,
             closed_loop,
-            mesh_error,
+            mesh,
             preflight_warnings: Vec::new(),
             tables,
         })
@@ -189,10 +194,15 @@ impl Results {
         &self.preflight_warnings
     }
 
-    /// The mesh's estimated discretisation error per low mode (`[analyses] mesh_error`;
-    /// empty when not asked for or not a meshed joint).
+    /// The mesh's estimated discretisation error per low mode (empty for imported models, lap
+    /// joints, and a fixed mesh whose data were made on it without `[analyses] mesh_error`).
     pub fn mesh_error(&self) -> &[crate::stage::preflight::ModeDiscretisation] {
-        &self.mesh_error
+        self.mesh.as_ref().map_or(&[], |d| d.modes.as_slice())
+    }
+
+    /// How the mesh was chosen and the error it leaves ([`crate::discretisation`]).
+    pub fn discretisation(&self) -> Option<&crate::discretisation::Discretisation> {
+        self.mesh.as_ref()
     }
 
     /// The study that ran (with the plan's parameters written in).
@@ -384,4 +394,54 @@ impl Results {
         }
         out
     }
+}
+
+/// The `discretisation` table: per mode on the mesh used, its estimated error and adhesive
+/// share, with the mesh and the allowance on every row.
+fn discretisation_table(d: &crate::discretisation::Discretisation) -> Result<Table, RunError> {
+    let n = d.modes.len();
+    let chosen = d.levels.get(d.chosen);
+    let rep = |v: f64| vec![v; n];
+    let mut t = Table::new("discretisation");
+    t.push_u32("mode", "", d.modes.iter().map(|m| m.mode as u32).collect())
+        .and_then(|t| t.push_f64("freq_hz", "Hz", d.modes.iter().map(|m| m.freq_hz).collect()))
+        .and_then(|t| {
+            t.push_f64(
+                "error_hz",
+                "Hz",
+                d.modes.iter().map(|m| m.error_hz).collect(),
+            )
+        })
+        .and_then(|t| {
+            t.push_f64(
+                "rel_error",
+                "1",
+                d.modes.iter().map(|m| m.rel_error).collect(),
+            )
+        })
+        .and_then(|t| t.push_f64("order", "1", d.modes.iter().map(|m| m.order).collect()))
+        .and_then(|t| {
+            t.push_f64(
+                "adhesive_share",
+                "1",
+                d.modes.iter().map(|m| m.adhesive_share).collect(),
+            )
+        })
+        .and_then(|t| {
+            t.push_f64(
+                "measured_share",
+                "1",
+                d.modes.iter().map(|m| m.measured_share).collect(),
+            )
+        })
+        .and_then(|t| t.push_str("rule", vec![d.rule.clone(); n]))
+        .and_then(|t| t.push_opt_f64("edge_m", "m", vec![chosen.map(|l| l.edge_m); n]))
+        .and_then(|t| t.push_opt_f64("n_dof", "1", vec![chosen.map(|l| l.n_dof as f64); n]))
+        .and_then(|t| t.push_f64("tolerance", "1", rep(d.tolerance)))
+        .and_then(|t| t.push_bool("reached", vec![d.reached; n]))
+        .and_then(|t| t.push_f64("stiffness_excess", "1", rep(d.stiffness_excess)))
+        .and_then(|t| t.push_f64("stiffness_excess_sd", "1", rep(d.stiffness_excess_sd)))
+        .and_then(|t| t.push_bool("allowance", vec![d.allowance; n]))
+        .map_err(RunError::Output)?;
+    Ok(t)
 }

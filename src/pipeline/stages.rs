@@ -8,7 +8,6 @@ use crate::bayes::{self, declared, levels as across, RunContext};
 use crate::frf::FrfEngine;
 use crate::material::ConstitutiveModel;
 use crate::stage::engine::{build_engine, Engines, ModelsAndData};
-use crate::stage::preflight::ModeDiscretisation;
 use crate::stage::LevelData;
 use crate::study::build::BuiltModel;
 use crate::study::Study;
@@ -20,7 +19,8 @@ pub(super) struct Prepared {
     pub built: BuiltModel,
     pub data: Vec<LevelData>,
     pub engines: Engines,
-    pub mesh_error: Vec<ModeDiscretisation>,
+    /// How the mesh was chosen and the error it leaves.
+    pub mesh: Option<crate::discretisation::Discretisation>,
     /// The term ROM of the study's declared degraded bonds, base springs and adherend damping
     /// (when it declares any and runs inference), over the likelihood's engine.
     pub declared_terms: Option<crate::rom::TermRom>,
@@ -82,7 +82,12 @@ pub(super) fn prepare(
         step: "assembling the FE model".into(),
         total: 0,
     });
-    let built = crate::stage::model::build(&study.structure, &study.file)?;
+    let built = crate::stage::model::build_with(&study.structure, &study.file, &|line| {
+        progress(Event::Start {
+            step: format!("assembling the FE model: {line}"),
+            total: 0,
+        })
+    })?;
     progress(Event::Finish);
     ex.lap("build model")?;
     // The pre-flight of the data, before anything is fitted.
@@ -102,7 +107,9 @@ pub(super) fn prepare(
     let band_hz = crate::stage::data::band_of(&data);
     crate::stage::model::check_initial_values(models, &study.file, &built, &data, &laws)?;
     ex.lap("load and check data")?;
-    let mesh_error = if plan.identification.mesh_error {
+    let mesh = if built.discretisation.is_some() {
+        built.discretisation.clone()
+    } else if plan.identification.mesh_error {
         progress(Event::Start {
             step: "estimating the mesh's discretisation error".into(),
             total: 0,
@@ -119,8 +126,10 @@ pub(super) fn prepare(
         ex.lap("mesh error")?;
         d
     } else {
-        Vec::new()
+        None
     };
+    let mut warnings = warnings;
+    warnings.extend(crate::stage::preflight::mesh_error_warnings(mesh.as_ref()));
     progress(Event::Start {
         step: "building the FRF engine".into(),
         total: 0,
@@ -147,7 +156,7 @@ pub(super) fn prepare(
         built,
         data,
         engines,
-        mesh_error,
+        mesh,
         declared_terms: None,
         band_hz,
         warnings,

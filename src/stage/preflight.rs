@@ -18,6 +18,9 @@ use std::path::Path;
 pub use super::data::first_peak_hz;
 pub use super::mesh_error::*;
 
+/// Complex modes computed for the first-mode check.
+pub const N_MODES_CHECKED: usize = 6;
+
 /// The model's first mode and the data's first peak are "far apart" beyond this ratio.
 pub const FIRST_MODE_RATIO_WARN: f64 = 1.5;
 
@@ -37,6 +40,8 @@ pub struct Preflight {
     pub cost: Option<CostSummary>,
     /// Per mode: the mesh's discretisation error (meshed structures only).
     pub discretisation: Vec<ModeDiscretisation>,
+    /// How the mesh was chosen and the error it leaves (meshed structures only).
+    pub mesh: Option<crate::discretisation::Discretisation>,
     /// The model's first y mode at the initial values and the data's first peak (Hz).
     pub first_mode_hz: Option<f64>,
     pub first_peak_hz: Option<f64>,

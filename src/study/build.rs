@@ -53,6 +53,7 @@ pub fn joint_spec(s: &Structure) -> Option<JointSpec> {
                 }),
             },
             grading: j.mesh_grading,
+            edge_m: None,
             integration: if j.full_integration {
                 crate::fe::element::Integration::Full
             } else {
@@ -85,19 +86,74 @@ pub struct BuiltModel {
     /// Axis (0 x, 1 y, 2 z) of each free DOF, for meshed models (the mesher numbers free
     /// DOFs node-major, three per free node).
     pub dof_axes: Option<Vec<u8>>,
+    /// How the mesher's joint was discretised and the error it leaves (meshed joints only;
+    /// [`crate::discretisation`]).
+    pub discretisation: Option<crate::discretisation::Discretisation>,
+}
+
+/// The mesher's input of the mesh a study's joint is built on: the refined one of
+/// `structure.mesh.refine` ([`crate::discretisation::select`], run once per process), else the
+/// study's (None for imported models and lap joints).
+pub fn chosen_spec(s: &Structure, file: &str) -> Result<Option<JointSpec>, StudyError> {
+    let (Some(spec), StructureSource::Mesher(j)) = (joint_spec(s), &s.source) else {
+        return Ok(None);
+    };
+    if !j.mesh_rule.refine {
+        return Ok(Some(spec));
+    }
+    let r = crate::discretisation::select(&spec, &refine_params(j), &|_| {})
+        .map_err(|e| fe_error(file, e))?;
+    Ok(Some(r.spec))
+}
+
+fn refine_params(j: &super::Joint) -> crate::discretisation::RefineParams {
+    crate::discretisation::RefineParams {
+        tolerance: j.mesh_rule.tolerance,
+        allowance: j.mesh_rule.allowance,
+        reference_modulus_pa: j.mesh_rule.reference_modulus_pa,
+    }
+}
+
+fn fe_error(file: &str, e: crate::fe::FeError) -> StudyError {
+    StudyError {
+        file: file.to_string(),
+        key: e.key().to_string(),
+        message: e.detail(),
+    }
 }
 
 /// Build the structural model of a study's structure section. `file` names the study in errors.
 pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> {
+    build_model_with(s, file, &|_| {})
+}
+
+/// [`build_model`] with a line per mesh of the refinement to `progress`.
+pub fn build_model_with(
+    s: &Structure,
+    file: &str,
+    progress: &dyn Fn(&str),
+) -> Result<BuiltModel, StudyError> {
+    let mut discretisation = None;
     let (model, mesh) = match &s.source {
-        StructureSource::Mesher(_) => {
+        StructureSource::Mesher(j) => {
             let spec = joint_spec(s).expect("mesher source");
-            let (m, info) = build_joint_model(&spec).map_err(|e| StudyError {
-                file: file.to_string(),
-                key: e.key().to_string(),
-                message: e.detail(),
-            })?;
-            (m, Some(info))
+            let p = refine_params(j);
+            if j.mesh_rule.refine {
+                let r = crate::discretisation::select(&spec, &p, progress)
+                    .map_err(|e| fe_error(file, e))?;
+                discretisation = Some(r.discretisation);
+                (r.model, Some(r.info))
+            } else {
+                let (mut m, info) = build_joint_model(&spec).map_err(|e| fe_error(file, e))?;
+                if j.mesh_rule.allowance {
+                    progress("estimating the mesh's discretisation error (the mesh refined twice per direction)");
+                    discretisation = Some(
+                        crate::discretisation::fixed(&spec, &mut m, &p)
+                            .map_err(|e| fe_error(file, e))?,
+                    );
+                }
+                (m, Some(info))
+            }
         }
         StructureSource::Lap(spec) => {
             let mut spec = spec.clone();
@@ -173,6 +229,7 @@ pub fn build_model(s: &Structure, file: &str) -> Result<BuiltModel, StudyError> 
         mesh,
         excitation,
         dof_axes,
+        discretisation,
     })
 }
 

@@ -71,6 +71,51 @@ pub struct Joint {
     pub snap_points: bool,
     /// Growth ratio of a mesh graded towards the bond line's edges (`structure.mesh.grading_ratio`).
     pub mesh_grading: Option<f64>,
+    /// How the mesh is chosen and what its remaining error does (`structure.mesh.refine`,
+    /// `tolerance`, `allowance`).
+    pub mesh_rule: MeshRule,
+}
+
+/// How a meshed joint's discretisation is chosen and what its remaining error does
+/// (docs/method.md, "The mesh's discretisation error").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeshRule {
+    /// Refine the mesh (grading towards the bond line's edges, halving the edge cells) until
+    /// the estimated error of every in-band mode is below `tolerance`; false: the mesh as
+    /// given (`divisions`, or `refine = false`).
+    pub refine: bool,
+    /// Largest estimated relative discretisation error of an in-band mode
+    /// (`structure.mesh.tolerance`, default [`MeshRule::DEFAULT_TOLERANCE`]).
+    pub tolerance: f64,
+    /// The remaining estimated error enters the results (the adhesive's stiffness corrected by
+    /// it and its uncertainty added to the intervals); false: the data were made on this very
+    /// discretisation (a simulation), so the mesh is the truth's.
+    pub allowance: bool,
+    /// Storage modulus of the adhesive at which the modes of the estimate are computed
+    /// (`structure.mesh.reference_modulus`, Pa; within a factor of a few of the adhesive's is
+    /// enough).
+    pub reference_modulus_pa: f64,
+}
+
+impl MeshRule {
+    /// Default `structure.mesh.tolerance`: 0.5 % of each in-band mode's frequency. What is left
+    /// of it is carried into the results, so the tolerance sets the cost of the mesh against
+    /// the width it adds to the intervals (docs/method.md).
+    pub const DEFAULT_TOLERANCE: f64 = 5e-3;
+    /// Default `structure.mesh.reference_modulus` (Pa): a flexible polyurethane adhesive's
+    /// storage modulus at tens of hertz (Sikaflex-252: 5-9 MPa).
+    pub const DEFAULT_REFERENCE_MODULUS_PA: f64 = 5e6;
+}
+
+impl Default for MeshRule {
+    fn default() -> Self {
+        MeshRule {
+            refine: true,
+            tolerance: Self::DEFAULT_TOLERANCE,
+            allowance: true,
+            reference_modulus_pa: Self::DEFAULT_REFERENCE_MODULUS_PA,
+        }
+    }
 }
 
 /// Matrix files of an externally assembled model (Matrix Market, Harwell-Boeing or Abaqus,

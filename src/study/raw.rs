@@ -104,6 +104,14 @@ pub struct RawMesh {
     pub point_mapping: Option<String>,
     /// Growth ratio of a mesh graded towards the bond line's edges.
     pub grading_ratio: Option<f64>,
+    /// Largest estimated discretisation error of an in-band mode (relative).
+    pub tolerance: Option<f64>,
+    /// Refine the mesh until the tolerance is met (default with an element size).
+    pub refine: Option<bool>,
+    /// The remaining discretisation error enters the results (default true).
+    pub allowance: Option<bool>,
+    /// Storage modulus of the adhesive for the estimate's modes (Pa).
+    pub reference_modulus: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -465,12 +465,8 @@ fn joint(
     }
     let anu = ctx.poisson("structure.adhesive.nu", a.nu)?;
     let arho = ctx.positive("structure.adhesive.rho", a.rho, "kg/m^3")?;
-    let m = mesh.ok_or_else(|| {
-        ctx.err(
-            "structure.mesh",
-            "missing: give element_size (m) or divisions",
-        )
-    })?;
+    let default_mesh = RawMesh::default();
+    let m = mesh.unwrap_or(&default_mesh);
     let size = match (&m.element_size, &m.divisions) {
         (Some(_), Some(_)) => {
             return Err(ctx.err(
@@ -478,12 +474,8 @@ fn joint(
                 "give either element_size or divisions, not both",
             ))
         }
-        (None, None) => {
-            return Err(ctx.err(
-                "structure.mesh",
-                "give element_size (m), e.g. 0.005, or divisions",
-            ))
-        }
+        // without a size: the default largest cell, refined to the tolerance
+        (None, None) => MeshSize::ElementSize(crate::discretisation::DEFAULT_ELEMENT_SIZE_M),
         (Some(h), None) => {
             let h = ctx.positive("structure.mesh.element_size", *h, "m")?;
             if h > bl.max(bt).max(bw) {
@@ -531,6 +523,7 @@ fn joint(
             }
         }
     };
+    let mesh_rule = mesh_rule(ctx, m, &size)?;
     let full_integration = match m.integration.as_deref().unwrap_or("full") {
         "full" => true,
         "reduced" => false,
@@ -568,6 +561,43 @@ fn joint(
         full_integration,
         snap_points,
         mesh_grading: m.grading_ratio,
+        mesh_rule,
+    })
+}
+
+/// `structure.mesh`'s refine, tolerance and allowance keys: refinement by default with an
+/// element size; `divisions` fix the mesh.
+fn mesh_rule(ctx: &Ctx, m: &RawMesh, size: &MeshSize) -> Result<MeshRule, StudyError> {
+    let fixed = matches!(size, MeshSize::Divisions { .. });
+    let refine = match (m.refine, fixed) {
+        (Some(true), true) => {
+            return Err(ctx.err(
+                "structure.mesh.refine",
+                "true, but divisions fix the mesh: give element_size (the largest cell) to let rfmlab refine, or drop refine",
+            ))
+        }
+        (Some(r), _) => r,
+        (None, f) => !f,
+    };
+    let tolerance = match m.tolerance {
+        Some(t) if t.is_finite() && t > 0.0 && t < 0.1 => t,
+        Some(t) => {
+            return Err(ctx.err(
+                "structure.mesh.tolerance",
+                format!("{t} is not a relative frequency error in (0, 0.1): give e.g. 0.005 (0.5 % of each in-band mode)"),
+            ))
+        }
+        None => MeshRule::DEFAULT_TOLERANCE,
+    };
+    let reference_modulus_pa = match m.reference_modulus {
+        Some(e) => ctx.positive("structure.mesh.reference_modulus", e, "Pa")?,
+        None => MeshRule::DEFAULT_REFERENCE_MODULUS_PA,
+    };
+    Ok(MeshRule {
+        refine,
+        tolerance,
+        allowance: m.allowance.unwrap_or(true),
+        reference_modulus_pa,
     })
 }
 

@@ -49,6 +49,8 @@ nu = 0.44
 rho = 1160.0
 [structure.mesh]
 element_size = 0.010
+refine = false
+allowance = false
 integration = "full"
 [[structure.points]]
 id = 1
