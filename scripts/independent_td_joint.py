@@ -6,7 +6,8 @@ numpy, scipy and scikit-fem only (no rfmlab import, no rfmlab formulas beyond th
 Model 4 law), 27-node triquadratic hexahedra instead of rfmlab's 20-node ones, a graded mesh,
 its own reduced basis and its own Welch H1 measurement chain.
 
-The joint (SI; x along the beam, y through the thickness = the excitation direction, z across):
+The default joint (SI; x along the beam, y through the thickness = the excitation direction, z
+across):
   steel beam 0.400 x 0.008 x 0.025 m (E 205 GPa, nu 0.29, rho 7850), x in [0, 0.4],
   y in [0, 0.008], z in [0, 0.025];
   adhesive bond line under the beam's end: x in [0, 0.030], y in [-0.003, 0], full width,
@@ -17,9 +18,15 @@ Adhesive law (rfmlab's Model 4, docs/method.md): E*(w) = E0 + j h + j w eta1 E1 
 truth E0 = 7.2e6 Pa, h = 1.1e6 Pa, E1 = 2.8e6 Pa, eta1 = 5.0e3 Pa s. Conventions: exp(+j w t),
 E* = E' + j E'' with E'' > 0, accelerance in (m/s^2)/N.
 
+Other joints (--joint FILE.json, see load_joint): the beam's size and material, the adhesive's
+length, thickness, start x_start (the bond line may lie anywhere along the beam, free beam on both
+sides), Poisson's ratio and density, the four points' x on the upper face centreline, the drive
+point, one or more levels (force RMS, Model 4 parameters, noise seed) and, optionally, graded mesh
+sizes replacing MESH's. Level i is written to level<i>.uff; the file is copied as joint.json.
+
 FE model. K(w) = K_b + E*(w) S - w^2 M, with K_b the beam's stiffness, S the adhesive's stiffness
 assembled at unit Young's modulus and M the consistent mass; 3x3x3 Gauss points (exact for these
-box elements). Two meshes (--mesh):
+box elements). Three meshes (--mesh):
 
   matched (default): the discretisation a study with rfmlab's default `element_size = 0.005`
     gets for this joint, built by this script's own code: a uniform grid of 20-node serendipity
@@ -32,23 +39,43 @@ box elements). Two meshes (--mesh):
   graded: 27-node triquadratic hexahedra (ElementHex2) on a tensor grid graded towards the edges
     of the bond line, where the nearly incompressible adhesive (nu 0.45) bonded to a rigid base
     and a stiff beam has singular corner fields: element sizes grow linearly with the distance
-    from x = 0 and 0.030, from both faces of the bond line and from the free side z = 0 (sizes
-    in MESH). The joint and its load are symmetric about z = 0.0125 and the points lie on that
+    from both ends of the bond line in x (here x = 0 and 0.030; on the free beam beside a bond
+    line that starts away from the beam's end, from that end too), from both faces of the bond
+    line and from the free side z = 0 (sizes in MESH). The joint and its load are symmetric about z = 0.0125 and the points lie on that
     plane, so the data come from the half z in [0, 0.0125] with u_z = 0 on the plane (the force
     halved); the antisymmetric modes (u_x = u_y = 0 on the plane) are computed for the mode
     lists. 31 388 free DOFs in the measured half, 80 s. The first y mode at 7.2 MPa (real)
-    under --refine-mesh 0.7 / 1 / 1.4: 15.4540 / 15.4130 / 15.3936 Hz (10 660 / 31 388 /
-    72 900 DOFs): second-order convergence in the refinement, an extrapolated 15.373 Hz. The
-    matched (rfmlab default) mesh's 15.6438 Hz is 1.8 % above it: the measure of what a 5 mm
-    mesh with two elements through a 3 mm bond line misses.
+    under --refine-mesh 0.7 / 1 / 1.41 / 2: 15.4540 / 15.4130 / 15.3936 / 15.3788 Hz (10 660 /
+    31 388 / 72 900 / 199 784 DOFs): slow convergence (observed order 0.8 from the last three),
+    an extrapolated 15.334 Hz (the three coarser meshes alone suggested second order and
+    15.373 Hz). The matched (rfmlab default) mesh's 15.6438 Hz is 2.0 % above it: the measure
+    of what a 5 mm mesh with two elements through a 3 mm bond line misses.
+  converged: the graded mesh refined along --refine-seq (e.g. 1, 1.41, 2: every size and growth
+    rate divided by the factor) until the lowest four modes of the measured half at 7.2 MPa
+    (real) and its first y mode at the level-1 truth move less than --conv-tol (1e-4) between
+    successive meshes. The corner singularities usually make that unreachable in memory; then
+    the last three meshes give a Richardson extrapolation with the observed order (h = 1 /
+    factor; with h = DOFs^(-1/3) too, as the element counts are rounded up) and the finest
+    mesh's estimated remaining error per mode, or "irregular" where the changes alternate in
+    sign or no order fits (with four meshes or more, the order and extrapolation of the three
+    before are recorded too, a check of their steadiness). The data are made on the finest
+    mesh, or on the mesh of --data-refine (one of the sequence) where the finest one's LUs for
+    the data would not fit in memory and it serves the extrapolation only. truth.json
+    (model.mesh_convergence) records every mesh's frequencies and DOFs, the orders, the
+    extrapolated values and the remaining error of the finest and of the data's mesh. On the
+    data's mesh the antisymmetric half's mode basis is built at one modulus only (memory).
 
 Reduced basis (for the FRF at every FFT bin of the record): a block Krylov basis at the real
-moduli E_r = 7.2 and 10 MPa (E'(w) runs from 7.2 to 9.9 MPa over 0-500 Hz): K_r^-1 f, then 14
+moduli E_r = 7.2 and 10 MPa (E'(w) runs from 7.2 to 9.9 MPa over 0-500 Hz; where another level's
+E'(w) leaves that span, its ends, e.g. 5.6 and 10 MPa; --ref-moduli gives others): K_r^-1 f, then 14
 frequency moments K_r^-1 M v and 4 modulus moments K_r^-1 S v each (K_r = K_b + E_r S),
 M-orthonormalised; the projected pencil is solved per bin. It is checked against direct sparse
-LU solves of the full model (scipy SuperLU) at --verify frequencies 1-500 Hz including the peaks;
+LU solves of the full model (scipy SuperLU) at --verify frequencies 1-500 Hz including the peaks
+(per level);
 the largest error relative to each FRF's peak is 6.6e-7 on the matched mesh and 5.4e-8 on the
-graded one (the run stops above 1e-6).
+graded one (the run stops above --rom-tol, 1e-6). On finer meshes the error has a floor that
+more basis vectors did not lower (round-off, it seems): 1.3e-6 at level 2 of the 3 mm bond
+line's 72 900-DOF mesh, unchanged by a third expansion modulus.
 
 Measurement chain (as the independent virtual experiments of docs/data.md): fs 2048 Hz; a
 record of N = 1024 (segments + 1) samples; the force is white Gaussian noise with its FFT bins outside
@@ -57,19 +84,26 @@ record's FFT times the FRF at every bin up to 500 Hz, zero above, inverse FFT); 
 noise 0.002 N RMS on the force and 0.002 m/s^2 RMS on each acceleration; Welch with periodic
 Hann 2048-sample (1 s) blocks at 50 % overlap: H1 = G_fa / G_ff, coherence
 |G_fa|^2 / (G_ff G_aa), lines 1-500 Hz. Random numbers: numpy default_rng(seed): the force
-record, then the force noise, then the noise of channels 1-4.
+record, then the force noise, then the noise of channels 1-4. Other levels: the force RMS of the
+level, seed + i - 1 for level i unless the joint file states its seed.
 
 Written into OUT_DIR:
   level1.uff   UFF58 ASCII: the 4 accelerances H1 (func type 4, response node i +Y, reference
-               node 2 +Y, (m/s^2)/N) then the 4 coherences (func type 6)
+               node 2 +Y, (m/s^2)/N) then the 4 coherences (func type 6); level2.uff ... for
+               further levels of a joint file
   truth.json   geometry, materials, law and parameters, E*(f), the modes, the mesh, its
                convergence, the reduced basis check, the chain's settings and statistics,
-               versions
+               versions; "levels": per level id, name, force_rms_N, law, params (the form
+               rfmlab's `[measurements] truth` reads), its modes, check and statistics
   exact.npz    freq_hz (1..500) and H_exact (4 x 500 complex): the noise-free accelerance at
-               the lines (no leakage), E_star at the lines; for checks only
+               the lines (no leakage), E_star at the lines, H_exact_L2 ... of further levels;
+               for checks only (not written with --no-exact)
+  joint.json   the joint file, with --joint
 
-Usage: independent_td_joint.py OUT_DIR [--mesh matched|graded] [--segments 200] [--seed 21]
-                               [--refine-mesh 1] [--check-mesh] [--verify 10] [--jobs 2]
+Usage: independent_td_joint.py OUT_DIR [--joint FILE.json] [--mesh matched|graded|converged]
+                               [--segments 200] [--seed 21] [--refine-mesh 1]
+                               [--refine-seq 1,1.41,2] [--conv-tol 1e-4] [--check-mesh]
+                               [--verify 10] [--no-exact] [--jobs 2]
 """
 import argparse
 import json
@@ -92,13 +126,18 @@ import pyuff
 
 VERSION = "1.0"
 
+# The joint (the default; --joint FILE.json replaces these, see load_joint)
+JOINT_NAME = "bond3"
 BEAM_L, BEAM_T, BEAM_W = 0.400, 0.008, 0.025
-BOND_L, BOND_T = 0.030, 0.003
+BOND_X0, BOND_L, BOND_T = 0.0, 0.030, 0.003  # the bond line spans x in [BOND_X0, BOND_X0 + BOND_L]
 STEEL = {"E": 205e9, "nu": 0.29, "rho": 7850.0}
 GLUE = {"nu": 0.45, "rho": 1250.0}
 POINTS_X = (0.120, 0.200, 0.280, 0.360)  # ids 1..4, upper face centreline, +y
 DRIVE = 2  # the force acts at point 2, +y
 TRUTH = {"E0": 7.2e6, "h": 1.1e6, "E1": 2.8e6, "eta1": 5.0e3}
+# Excitation levels: (name, force RMS in N, Model 4 parameters, noise seed or None for --seed);
+# the default is level 1 alone.
+LEVELS = [("L1", 3.3, TRUTH, None)]
 REF_MODULI = (7.2e6, 10.0e6)  # real moduli of the reduced basis's expansions
 KRYLOV_DEPTH = 14  # frequency moments per modulus
 KRYLOV_S_DEPTH = 4  # modulus moments per modulus
@@ -152,6 +191,64 @@ def model4(w, p):
     return p["E0"] + 1j * p["h"] + 1j * w * p["eta1"] * p["E1"] / (p["E1"] + 1j * w * p["eta1"])
 
 
+def load_joint(path):
+    """Replace the default joint by the one of a JSON file (SI):
+      {"name": "...",
+       "beam": {"length", "thickness", "width", "E", "nu", "rho"},
+       "adhesive": {"length", "thickness", "x_start", "nu", "rho"},
+       "points_x": [...],            # upper face centreline, +y, ids 1, 2, ...
+       "drive": 2,                   # the point id of the force
+       "levels": [{"name": "L1", "force_rms_n": 3.3,
+                   "params": {"E0", "h", "E1", "eta1"}, "seed": 21 (optional)}, ...],
+       "seed": 21,                   # optional: the noise seed of level 1 (else --seed);
+                                     # level i's is seed + i - 1 unless it states its own
+       "mesh": {...}}                # optional: entries of MESH to replace (graded sizes)
+    Returns the parsed file."""
+    global JOINT_NAME, BEAM_L, BEAM_T, BEAM_W, BOND_X0, BOND_L, BOND_T, STEEL, GLUE
+    global POINTS_X, DRIVE, TRUTH, LEVELS, MESH, MESH_MATCHED
+    with open(path) as fh:
+        cfg = json.load(fh)
+    b, a = cfg["beam"], cfg["adhesive"]
+    JOINT_NAME = cfg.get("name", os.path.splitext(os.path.basename(path))[0])
+    BEAM_L, BEAM_T, BEAM_W = float(b["length"]), float(b["thickness"]), float(b["width"])
+    BOND_X0, BOND_L, BOND_T = float(a.get("x_start", 0.0)), float(a["length"]), float(a["thickness"])
+    STEEL = {"E": float(b["E"]), "nu": float(b["nu"]), "rho": float(b["rho"])}
+    GLUE = {"nu": float(a["nu"]), "rho": float(a["rho"])}
+    POINTS_X = tuple(float(x) for x in cfg["points_x"])
+    DRIVE = int(cfg["drive"])
+    if len(POINTS_X) != 4:
+        raise SystemExit(f"{path}: four points expected, got {len(POINTS_X)}")
+    if not (0.0 <= BOND_X0 and BOND_X0 + BOND_L <= BEAM_L + 1e-12):
+        raise SystemExit(f"{path}: the bond line [{BOND_X0}, {BOND_X0 + BOND_L}] m leaves the beam")
+    LEVELS = []
+    for i, lv in enumerate(cfg["levels"]):
+        seed = lv.get("seed")
+        LEVELS.append((lv.get("name", f"L{i + 1}"), float(lv["force_rms_n"]),
+                       {k: float(lv["params"][k]) for k in ("E0", "h", "E1", "eta1")}, seed))
+    TRUTH = LEVELS[0][2]
+    MESH = {**MESH, **{k: (tuple(v) if isinstance(v, list) else v)
+                       for k, v in cfg.get("mesh", {}).items()}}
+    # the matched mesh of another joint: a uniform grid of about 5 mm, two elements through the
+    # bond line and two through the beam
+    cells = lambda length: max(1, int(round(length / 0.005)))  # noqa: E731
+    MESH_MATCHED = {"element": "hex20",
+                    "uniform": {"x_before": cells(BOND_X0), "x_bond": cells(BOND_L),
+                                "x_beam": cells(BEAM_L - BOND_X0 - BOND_L), "y_bond": 2,
+                                "y_beam": 2, "z": cells(BEAM_W)}}
+    return cfg
+
+
+def ref_moduli():
+    """Real moduli of the reduced basis's expansions: the default (7.2, 10) MPa when they span
+    E'(w) of every level over 0-500 Hz, else that span's ends."""
+    w = 2 * np.pi * np.linspace(0.0, CHAIN["lines_hz"][1], 501)
+    lo = min(float(model4(w, p).real.min()) for _, _, p, _ in LEVELS)
+    hi = max(float(model4(w, p).real.max()) for _, _, p, _ in LEVELS)
+    if lo >= REF_MODULI[0] * (1 - 1e-9) and hi <= REF_MODULI[1]:
+        return REF_MODULI
+    return (min(lo, REF_MODULI[0]), max(hi, REF_MODULI[1]))
+
+
 # ----------------------------------------------------------------------------------- mesh
 
 def graded_nodes(a, b, h_a, h_b, grow, h_max):
@@ -184,20 +281,30 @@ def grid_axes(spec, refine=1.0, half=True):
     """Node coordinates along x, y and z; `refine` divides every size and growth rate (or
     multiplies the counts of a uniform spec)."""
     r = float(refine)
+    x0, x1 = BOND_X0, BOND_X0 + BOND_L
     if "uniform" in spec:
         n = {k: int(round(v * r)) for k, v in spec["uniform"].items()}
-        x = join(np.linspace(0.0, BOND_L, n["x_bond"] + 1),
-                 np.linspace(BOND_L, BEAM_L, n["x_beam"] + 1))
+        parts = [np.linspace(x0, x1, n["x_bond"] + 1), np.linspace(x1, BEAM_L, n["x_beam"] + 1)]
+        if x0 > 0.0:
+            parts.insert(0, np.linspace(0.0, x0, n["x_before"] + 1))
+        x = join(*parts)
         y = join(np.linspace(-BOND_T, 0.0, n["y_bond"] + 1), np.linspace(0.0, BEAM_T, n["y_beam"] + 1))
         z = np.linspace(0.0, BEAM_W, n["z"] + 1)
         return x, y, z, n["y_bond"]
+    # x: the bond line graded towards both its ends; the free beam on either side broken at
+    # the points and graded towards the bond line's end it touches
     he, g, hm = spec["x_bond"]
-    x = [graded_nodes(0.0, BOND_L, he / r, he / r, g / r, hm / r)]
+    x = [(x0, graded_nodes(x0, x1, he / r, he / r, g / r, hm / r))]
     he, g, hm = spec["x_beam"]
-    breaks = (BOND_L,) + POINTS_X + (BEAM_L,)
-    for i, (a, b) in enumerate(zip(breaks[:-1], breaks[1:])):
-        x.append(graded_nodes(a, b, he / r if i == 0 else None, None, g / r, hm / r))
-    x = join(*x)
+    ends = [e for e in (x0, x1) if 0.0 < e < BEAM_L]
+    cuts = sorted(set([0.0, BEAM_L, x0, x1] + [p for p in POINTS_X if not x0 < p < x1]))
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        if a >= x0 and b <= x1:
+            continue
+        ha = he / r if any(np.isclose(a, e) for e in ends) else None
+        hb = he / r if any(np.isclose(b, e) for e in ends) else None
+        x.append((a, graded_nodes(a, b, ha, hb, g / r, hm / r)))
+    x = join(*[nodes for _, nodes in sorted(x, key=lambda t: t[0])])
     he, g = spec["y_bond"]
     y_bond = graded_nodes(-BOND_T, 0.0, he / r, he / r, g / r, BOND_T)
     y_beam = np.linspace(0.0, BEAM_T, int(round(spec["y_beam"] * r)) + 1)
@@ -214,7 +321,8 @@ def joint_mesh(spec, refine=1.0, half=True):
     x, y, z, ny_bond = grid_axes(spec, refine, half)
     m = MeshHex.init_tensor(x, y, z)
     c = m.p[:, m.t].mean(axis=1)
-    m = m.remove_elements(np.nonzero((c[1] < 0.0) & (c[0] > BOND_L))[0])
+    outside = (c[0] < BOND_X0) | (c[0] > BOND_X0 + BOND_L)
+    m = m.remove_elements(np.nonzero((c[1] < 0.0) & outside)[0])
     c = m.p[:, m.t].mean(axis=1)
     counts = {"x": len(x) - 1, "y_bond": ny_bond, "y_beam": len(y) - 1 - ny_bond, "z": len(z) - 1}
     return m, np.nonzero(c[1] > 0.0)[0], np.nonzero(c[1] < 0.0)[0], counts
@@ -540,8 +648,10 @@ def hann_periodic(n):
     return 0.5 - 0.5 * np.cos(2.0 * np.pi * np.arange(n) / n)
 
 
-def measure(rom, law, segments, seed):
-    """Simulate the record and return lines, H1 (4 x L), coherence (4 x L) and statistics."""
+def measure(rom, law, segments, seed, force_rms_n=None):
+    """Simulate the record (force RMS force_rms_n, CHAIN's by default) and return lines, H1
+    (4 x L), coherence (4 x L) and statistics."""
+    force_rms_n = CHAIN["force_rms_n"] if force_rms_n is None else force_rms_n
     fs, nb = CHAIN["fs_hz"], CHAIN["block"]
     step = int(nb * (1.0 - CHAIN["overlap"]))
     N = nb + step * (segments - 1)
@@ -551,7 +661,7 @@ def measure(rom, law, segments, seed):
     band = (fk > CHAIN["force_band_hz"][0]) & (fk <= CHAIN["force_band_hz"][1] * (1 + 1e-12))
     F[~band] = 0.0
     force = np.fft.irfft(F, N)
-    scale = CHAIN["force_rms_n"] / np.sqrt(np.mean(force ** 2))
+    scale = force_rms_n / np.sqrt(np.mean(force ** 2))
     force *= scale
     F *= scale
     t0 = time.time()
@@ -597,7 +707,8 @@ def measure(rom, law, segments, seed):
 
 # ----------------------------------------------------------------------------------- output
 
-def write_uff(path, lines, H1, coh, segments):
+def write_uff(path, lines, H1, coh, segments, level=1, force_rms_n=None):
+    force_rms_n = CHAIN["force_rms_n"] if force_rms_n is None else force_rms_n
     common = {
         "type": 58, "binary": 0, "func_id": 0, "ver_num": 0, "load_case_id": 0,
         "rsp_ent_name": "BEAM", "rsp_dir": 2, "ref_ent_name": "BEAM", "ref_node": DRIVE,
@@ -608,7 +719,7 @@ def write_uff(path, lines, H1, coh, segments):
         "abscissa_axis_lab": "Frequency", "abscissa_axis_units_lab": "Hz",
         "z_axis_spec_data_type": 0, "z_axis_len_unit_exp": 0, "z_axis_force_unit_exp": 0,
         "z_axis_temp_unit_exp": 0, "z_axis_axis_lab": "NONE", "z_axis_axis_units_lab": "NONE",
-        "id2": f"Level 1: random excitation {CHAIN['force_rms_n']} N rms at point {DRIVE} +Y",
+        "id2": f"Level {level}: random excitation {force_rms_n} N rms at point {DRIVE} +Y",
         "id3": f"H1 estimator, {segments} averages, Hann, 1 Hz lines",
         "id5": "NONE",
         "x": lines,
@@ -665,89 +776,149 @@ def check_mesh(spec, r0, refine):
     return res
 
 
-def main(argv):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("out", help="output folder")
-    ap.add_argument("--segments", type=int, default=200, help="Welch segments (50 %% overlap)")
-    ap.add_argument("--seed", type=int, default=21)
-    ap.add_argument("--mesh", choices=("matched", "graded"), default="matched",
-                    help="matched: rfmlab's default discretisation of this joint, built here "
-                         "(20-node, uniform 5 mm); graded: 27-node, graded towards the bond "
-                         "line's edges (the mesh-convergence reference)")
-    ap.add_argument("--refine-mesh", type=float, default=1.0,
-                    help="divide every element size and growth rate of MESH by this")
-    ap.add_argument("--check-mesh", action="store_true",
-                    help="also solve the mesh refined by --refine and print the convergence "
-                         "(slow: minutes, ~13 GB)")
-    ap.add_argument("--refine", type=float, default=2.0, help="refinement of --check-mesh")
-    ap.add_argument("--verify", type=int, default=10,
-                    help="frequencies of the reduced basis's check against direct solves")
-    ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
-                    help="processes for the direct solves of the check")
-    args = ap.parse_args(argv[1:])
-    t_start = time.time()
-    os.makedirs(args.out, exist_ok=True)
-    law = lambda w: model4(w, TRUTH)  # noqa: E731
+def observed_order(h, f):
+    """Richardson extrapolation from the last three meshes (sizes h, values f): the observed
+    order p from (f1 - f2) / (f2 - f3) = (h1^p - h2^p) / (h2^p - h3^p), then
+    f_inf = f3 - (f2 - f3) h3^p / (h2^p - h3^p). None where the differences change sign or no
+    order in [0.2, 12] fits (irregular convergence)."""
+    (h1, h2, h3), (f1, f2, f3) = h[-3:], f[-3:]
+    d1, d2 = f1 - f2, f2 - f3
+    if d2 == 0.0:
+        return {"order": None, "extrapolated": f3, "regular": True}
+    if d1 * d2 <= 0.0:
+        return {"order": None, "extrapolated": None, "regular": False}
+    g = lambda q: (h1 ** q - h2 ** q) / (h2 ** q - h3 ** q) - d1 / d2  # noqa: E731
+    if g(0.2) * g(12.0) > 0.0:
+        return {"order": None, "extrapolated": None, "regular": False}
+    from scipy.optimize import brentq
+    q = brentq(g, 0.2, 12.0, xtol=1e-12)
+    return {"order": q, "extrapolated": f3 - d2 * h3 ** q / (h2 ** q - h3 ** q), "regular": True}
 
-    matched = args.mesh == "matched"
-    spec = MESH_MATCHED if matched else MESH
-    joint = Joint(spec, refine=args.refine_mesh, half=not matched)
-    if matched:
-        sym, anti = Half(joint, "full"), None
-        mesh_info = {"elements_whole_width": joint.counts, "elements": joint.n_elements,
-                     "free_dofs": int(len(sym.free))}
+
+def converge(refines, tol, law, data_refine=None, n_modes=4):
+    """The graded mesh refined along `refines` (each factor divides every size and growth rate)
+    until the lowest n_modes modes of the measured half at 7.2 MPa (real) and its first y mode at
+    the level-1 truth (self-consistent) move less than tol between successive meshes; returns the
+    joint of the data (the finest mesh, or the mesh of refinement data_refine, one of
+    `refines`), its measured half and the record."""
+    E = REF_MODULI[0]
+    rows, joint, sym = [], None, None
+    for r in refines:
+        del joint, sym
+        t0 = time.time()
+        joint = Joint(MESH, refine=r, half=True)
+        sym = Half(joint, "sym")
+        proj = modal_basis(sym, (E,))
+        modes = mode_list(proj, E, np.inf, "sym")[:n_modes]
+        y_sc = self_consistent(proj, law, 560.0)
+        first = min((m for m in y_sc if m["energy_xyz"][1] > 0.5), key=lambda m: m["f_hz"])
+        row = {"refine": r, "free_dofs_sym_half": int(len(sym.free)), "elements": joint.counts,
+               "f_hz_real_7.2MPa": [m["f_hz"] for m in modes],
+               "energy_y": [m["energy_xyz"][1] for m in modes],
+               "max_residual": max(m["residual"] for m in modes),
+               "first_y_mode_at_truth_hz": first["f_hz"], "first_y_mode_eta": first["eta"],
+               "time_s": round(time.time() - t0, 1)}
+        rows.append(row)
+        del proj
+        change = None
+        if len(rows) > 1:
+            prev = rows[-2]
+            vals = row["f_hz_real_7.2MPa"] + [row["first_y_mode_at_truth_hz"]]
+            old = prev["f_hz_real_7.2MPa"] + [prev["first_y_mode_at_truth_hz"]]
+            change = max(abs(a - b) / a for a, b in zip(vals, old))
+            row["max_rel_change_from_previous"] = change
+        print(f"  refine {r:g}: elements {joint.counts}, {row['free_dofs_sym_half']} DOFs, "
+              f"modes at 7.2 MPa " + ", ".join(f"{v:.4f}" for v in row["f_hz_real_7.2MPa"])
+              + f" Hz, first y mode at the truth {first['f_hz']:.5f} Hz"
+              + ("" if change is None else f", largest change {change:.1e}")
+              + f" ({row['time_s']:.0f} s)", flush=True)
+        if change is not None and change < tol:
+            break
+    tried = [rw["refine"] for rw in rows]
+    if data_refine is None or data_refine == tried[-1]:
+        data_refine, k_data = tried[-1], len(rows) - 1
     else:
-        sym, anti = Half(joint, "sym"), Half(joint, "anti")
-        mesh_info = {"elements_half_width": joint.counts, "elements": joint.n_elements,
-                     "free_dofs_sym_half": int(len(sym.free)),
-                     "free_dofs_anti_half": int(len(anti.free))}
-    print(f"{args.mesh} mesh (refinement {args.refine_mesh:g}): elements {joint.counts} "
-          f"({joint.n_elements['beam']} beam, {joint.n_elements['bond']} bond line), "
-          f"{len(sym.free)} free DOFs ({'whole joint' if matched else 'symmetric half'}); "
-          f"assembled in {joint.assembly_s:.1f} s", flush=True)
+        if data_refine not in tried:
+            raise SystemExit(f"--data-refine {data_refine:g} is not one of the meshes {tried}")
+        k_data = tried.index(data_refine)
+        del joint, sym
+        joint = Joint(MESH, refine=data_refine, half=True)
+        sym = Half(joint, "sym")
+    rec = {"modulus_pa": E, "tolerance": tol, "meshes": rows, "data_mesh_refine": data_refine,
+           "converged": bool(len(rows) > 1 and rows[-1]["max_rel_change_from_previous"] < tol),
+           "h": "1 / refine (every size and growth rate of the graded spec divided by refine)"}
+    per_mode = []
+    names = [f"sym mode {k + 1} at 7.2 MPa (real)" for k in range(n_modes)] \
+        + ["first y mode, self-consistent at the level-1 truth"]
+    for k, name in enumerate(names):
+        key = (lambda rw: rw["f_hz_real_7.2MPa"][k]) if k < n_modes \
+            else (lambda rw: rw["first_y_mode_at_truth_hz"])
+        f = [key(rw) for rw in rows if (k >= n_modes or len(rw["f_hz_real_7.2MPa"]) > k)]
+        if len(f) != len(rows):
+            continue
+        h = [1.0 / rw["refine"] for rw in rows]
+        m = {"mode": name, "f_hz": f, "free_dofs": [rw["free_dofs_sym_half"] for rw in rows]}
+        if k < n_modes:
+            m["energy_y_finest"] = rows[-1]["energy_y"][k]
+        if len(f) >= 3:
+            m.update(observed_order(h, f))
+        if len(f) >= 3:  # the same with h = DOFs^(-1/3): the element counts are rounded up
+            hd = [n ** (-1.0 / 3.0) for n in m["free_dofs"]]
+            alt = observed_order(hd, f)
+            m["order_h_from_dofs"] = alt["order"]
+            m["extrapolated_h_from_dofs"] = alt["extrapolated"]
+        if len(f) >= 4:  # the same from the three meshes before: how steady the order is
+            prev = observed_order(h[:-1], f[:-1])
+            m["order_previous_three"] = prev["order"]
+            m["extrapolated_previous_three"] = prev["extrapolated"]
+        else:
+            m.update({"order": None, "extrapolated": None, "regular": None})
+        m["data_mesh_f_hz"] = f[k_data]
+        if m["extrapolated"] is not None:
+            m["finest_rel_error"] = (f[-1] - m["extrapolated"]) / m["extrapolated"]
+            m["data_mesh_rel_error"] = (f[k_data] - m["extrapolated"]) / m["extrapolated"]
+            m["error_estimate"] = "Richardson extrapolation with the observed order"
+        else:
+            m["finest_rel_error"] = None
+            m["data_mesh_rel_error"] = None
+            m["error_estimate"] = ("irregular: no extrapolation; the last change "
+                                   f"{(f[-1] - f[-2]) / f[-1]:+.2e} bounds its size only roughly"
+                                   if len(f) > 1 else "one mesh only")
+        m["last_rel_change"] = (f[-1] - f[-2]) / f[-1] if len(f) > 1 else None
+        ex, ex_d = m.get("extrapolated"), m.get("extrapolated_h_from_dofs")
+        m["extrapolation_spread_rel"] = abs(ex - ex_d) / ex if ex and ex_d else None
+        po, pp = m.get("order"), m.get("order_previous_three")
+        if ex is None:
+            m["assessment"] = "irregular: no order fits the last three meshes"
+        elif po is not None and pp is not None and abs(pp / po - 1.0) > 0.3:
+            m["assessment"] = (f"order not steady ({pp:.2f} from the three meshes before, "
+                               f"{po:.2f} from the last three): the coarser meshes are not yet "
+                               "in the asymptotic range, the extrapolation is an estimate; "
+                               "extrapolation_spread_rel compares h = 1 / refine with "
+                               "h = DOFs^(-1/3)")
+        elif (len(f) >= 4 and pp is None) or ex_d is None:
+            m["assessment"] = ("no order fits the three meshes before or h = DOFs^(-1/3): "
+                               "the extrapolation is an estimate")
+        else:
+            m["assessment"] = "regular"
+        per_mode.append(m)
+    rec["modes"] = per_mode
+    return joint, sym, rec
 
-    # the reduced basis of the measured (symmetric) half
+
+def verify_rom(rom, sym, law, y_modes, n_verify, jobs, tol=1e-6):
+    """The reduced basis against direct sparse LU solves of the full half at 1 and 500 Hz, the y
+    modes' peaks and log-spaced frequencies up to n_verify in all."""
     t0 = time.time()
-    rom = Projected(sym, krylov(sym, REF_MODULI, [sym.f], KRYLOV_DEPTH, KRYLOV_S_DEPTH))
-    print(f"reduced basis: {rom.V.shape[1]} vectors ({time.time() - t0:.1f} s)", flush=True)
-
-    # modes: real modulus 7.2 MPa (whole joint), self-consistent (measured half), all modes
-    # below 520 Hz at E*(first y mode) (both halves)
-    t0 = time.time()
-    msym = modal_basis(sym, REF_MODULI)
-    manti = modal_basis(anti, REF_MODULI) if anti is not None else None
-
-    def both(E, fmax):
-        rows = mode_list(msym, E, fmax, sym.kind)
-        if manti is not None:
-            rows += mode_list(manti, E, fmax, "anti")
-        return sorted(rows, key=lambda m: m["f_hz"])
-
-    real72 = both(7.2e6, 1000.0)[:8]
-    y_modes = self_consistent(msym, law, 560.0)
-    first = min((m for m in y_modes if m["energy_xyz"][1] > 0.5), key=lambda m: m["f_hz"])
-    E1st = complex(first["E_storage_pa"], first["E_loss_pa"])
-    at_first = both(E1st, 520.0)
-    print(f"modes ({time.time() - t0:.1f} s). Whole joint at E = 7.2 MPa real: "
-          + ", ".join(f"{m['f_hz']:.4f} Hz ({m['symmetry']})" for m in real72)
-          + f"; largest residual {max(m['residual'] for m in real72):.1e}", flush=True)
-    print("self-consistent modes at the truth (measured half): "
-          + ", ".join(f"{m['f_hz']:.3f} Hz eta {m['eta']:.4f}" for m in y_modes), flush=True)
-
-    # the reduced basis against direct solves
-    t0 = time.time()
-    lines = np.arange(1.0, 501.0)
-    w_lines = 2 * np.pi * lines
-    H_lines = rom.accelerance(w_lines, law(w_lines))
     wd = 2 * np.pi * np.linspace(1.0, 500.0, 20001)
     peak = np.abs(rom.accelerance(wd, law(wd))).max(axis=1)
     f_peaks = [round(m["f_hz"], 3) for m in y_modes if m["f_hz"] <= 500.0]
-    n_more = max(args.verify - 2 - len(f_peaks), 0)
+    n_more = max(n_verify - 2 - len(f_peaks), 0)
     f_check = sorted(set([1.0, 500.0] + f_peaks
                          + [round(float(v), 3) for v in np.geomspace(4.0, 470.0, n_more)]))
     wE = [(2 * np.pi * fc, complex(law(2 * np.pi * fc))) for fc in f_check]
     errs, resids = [], []
-    for (w, E), (xd, resid) in zip(wE, direct_receptances(sym, wE, args.jobs)):
+    for (w, E), (xd, resid) in zip(wE, direct_receptances(sym, wE, jobs)):
         hr = rom.accelerance(np.array([w]), np.array([E]))[:, 0]
         errs.append(np.abs(hr - (-w ** 2 * xd)) / peak)
         resids.append(resid)
@@ -768,28 +939,168 @@ def main(argv):
           + ", ".join(f"{v:.1e}" for v in romcheck["max_rel_error_per_frf"])
           + f"); direct residual <= {romcheck['direct_relative_residual_max']:.0e} "
           f"({romcheck['time_s']:.1f} s)", flush=True)
-    if romcheck["max_rel_error"] > 1e-6:
-        raise SystemExit("reduced basis check failed (> 1e-6 of a peak)")
+    if romcheck["max_rel_error"] > tol:
+        raise SystemExit(f"reduced basis check failed (> {tol:g} of a peak)")
+    return romcheck
 
-    # the measurement
-    freq, H1, coh, stats = measure(rom, law, args.segments, args.seed)
-    print(f"record: {stats['N']} samples ({stats['record_s']} s), {stats['n_bins_in_band']} "
-          f"FFT bins in (0, 500] Hz (FRF in {stats['frf_eval_s']:.1f} s); force "
-          f"{stats['force_rms_n']:.4f} N RMS; coherence min {stats['coherence_min']:.4f}, "
-          f"median {stats['coherence_median']:.6f}", flush=True)
-    write_uff(os.path.join(args.out, "level1.uff"), freq, H1, coh, args.segments)
-    np.savez(os.path.join(args.out, "exact.npz"), freq_hz=lines, H_exact=H_lines,
-             E_star=law(w_lines), points=np.arange(1, 5))
+
+def main(argv):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("out", help="output folder")
+    ap.add_argument("--joint", help="JSON file of the joint (see load_joint); default: the "
+                                    "400 x 8 x 25 mm beam on a 3 mm bond line at its end")
+    ap.add_argument("--segments", type=int, default=200, help="Welch segments (50 %% overlap)")
+    ap.add_argument("--seed", type=int, default=21)
+    ap.add_argument("--mesh", choices=("matched", "graded", "converged"), default="matched",
+                    help="matched: rfmlab's default discretisation of this joint, built here "
+                         "(20-node, uniform 5 mm); graded: 27-node, graded towards the bond "
+                         "line's edges (the mesh-convergence reference); converged: the graded "
+                         "mesh refined along --refine-seq, data on the finest or --data-refine")
+    ap.add_argument("--refine-mesh", type=float, default=1.0,
+                    help="divide every element size and growth rate of MESH by this")
+    ap.add_argument("--refine-seq", default="1,1.41,2",
+                    help="--mesh converged: the refinements tried, coarsest first")
+    ap.add_argument("--data-refine", type=float,
+                    help="--mesh converged: the refinement of the data's mesh, one of "
+                         "--refine-seq (default the finest; a finer mesh may serve the "
+                         "extrapolation only where the data's LUs would not fit in memory)")
+    ap.add_argument("--conv-tol", type=float, default=1e-4,
+                    help="--mesh converged: stop when the modes move less than this")
+    ap.add_argument("--check-mesh", action="store_true",
+                    help="also solve the mesh refined by --refine and print the convergence "
+                         "(slow: minutes, ~13 GB)")
+    ap.add_argument("--refine", type=float, default=2.0, help="refinement of --check-mesh")
+    ap.add_argument("--verify", type=int, default=10,
+                    help="frequencies of the reduced basis's check against direct solves")
+    ap.add_argument("--ref-moduli",
+                    help="real moduli (Pa, comma separated) of the reduced basis's expansions "
+                         "instead of the automatic two (see ref_moduli), e.g. 5.6e6,7.2e6,10e6 "
+                         "where a level's check against direct solves fails with two")
+    ap.add_argument("--krylov-depth", type=int,
+                    help=f"frequency moments of the reduced basis per modulus ({KRYLOV_DEPTH})")
+    ap.add_argument("--modulus-moments", type=int,
+                    help=f"modulus moments of the reduced basis per modulus ({KRYLOV_S_DEPTH})")
+    ap.add_argument("--rom-tol", type=float, default=1e-6,
+                    help="largest error of the reduced basis against the direct solves, "
+                         "relative to each FRF's peak (the run stops above it)")
+    ap.add_argument("--no-exact", action="store_true", help="do not write exact.npz")
+    ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
+                    help="processes for the direct solves of the check")
+    args = ap.parse_args(argv[1:])
+    t_start = time.time()
+    joint_cfg = load_joint(args.joint) if args.joint else None
+    os.makedirs(args.out, exist_ok=True)
+    law = lambda w: model4(w, TRUTH)  # noqa: E731
+    base_seed = joint_cfg.get("seed", args.seed) if joint_cfg else args.seed
+    ref = (tuple(float(v) for v in args.ref_moduli.split(",")) if args.ref_moduli
+           else ref_moduli())
+
+    matched = args.mesh == "matched"
+    spec = MESH_MATCHED if matched else MESH
+    conv = None
+    if args.mesh == "converged":
+        refines = [float(v) for v in args.refine_seq.split(",")]
+        print(f"mesh convergence of joint {JOINT_NAME} along refinements {refines}:", flush=True)
+        joint, sym, conv = converge(refines, args.conv_tol, law, args.data_refine)
+        conv["source"] = "computed by this run"
+        if REF_MODULI[0] not in ref:
+            sym._lu.clear()  # the convergence's LU is not one of the reduced basis's
+        anti = Half(joint, "anti")
+        refine_used = conv["data_mesh_refine"]
+    else:
+        joint = Joint(spec, refine=args.refine_mesh, half=not matched)
+        refine_used = args.refine_mesh
+        if matched:
+            sym, anti = Half(joint, "full"), None
+        else:
+            sym, anti = Half(joint, "sym"), Half(joint, "anti")
+    if matched:
+        mesh_info = {"elements_whole_width": joint.counts, "elements": joint.n_elements,
+                     "free_dofs": int(len(sym.free))}
+    else:
+        mesh_info = {"elements_half_width": joint.counts, "elements": joint.n_elements,
+                     "free_dofs_sym_half": int(len(sym.free)),
+                     "free_dofs_anti_half": int(len(anti.free))}
+    print(f"{args.mesh} mesh (refinement {refine_used:g}): elements {joint.counts} "
+          f"({joint.n_elements['beam']} beam, {joint.n_elements['bond']} bond line), "
+          f"{len(sym.free)} free DOFs ({'whole joint' if matched else 'symmetric half'}); "
+          f"assembled in {joint.assembly_s:.1f} s", flush=True)
+
+    # the reduced basis of the measured (symmetric) half
+    t0 = time.time()
+    rom = Projected(sym, krylov(sym, ref, [sym.f], args.krylov_depth or KRYLOV_DEPTH,
+                                args.modulus_moments or KRYLOV_S_DEPTH))
+    print(f"reduced basis: {rom.V.shape[1]} vectors ({time.time() - t0:.1f} s)", flush=True)
+
+    # modes: real modulus 7.2 MPa (whole joint), self-consistent (measured half), all modes
+    # below 520 Hz at E*(first y mode) (both halves)
+    t0 = time.time()
+    msym = modal_basis(sym, ref)
+    # (the finest mesh of --mesh converged: the antisymmetric half's basis at one modulus only,
+    # to spare the memory of a second LU; its modes' residuals are recorded)
+    manti = (modal_basis(anti, ref[:1] if args.mesh == "converged" else ref)
+             if anti is not None else None)
+
+    def both(E, fmax):
+        rows = mode_list(msym, E, fmax, sym.kind)
+        if manti is not None:
+            rows += mode_list(manti, E, fmax, "anti")
+        return sorted(rows, key=lambda m: m["f_hz"])
+
+    real72 = both(7.2e6, 1000.0)[:8]
+    print(f"modes ({time.time() - t0:.1f} s). Whole joint at E = 7.2 MPa real: "
+          + ", ".join(f"{m['f_hz']:.4f} Hz ({m['symmetry']})" for m in real72)
+          + f"; largest residual {max(m['residual'] for m in real72):.1e}", flush=True)
+
+    lines = np.arange(1.0, 501.0)
+    w_lines = 2 * np.pi * lines
+    levels = []
+    for i, (name, force_rms_n, params, seed) in enumerate(LEVELS):
+        law_i = lambda w, p=params: model4(w, p)  # noqa: E731
+        seed = base_seed + i if seed is None else int(seed)
+        y_modes = self_consistent(msym, law_i, 560.0)
+        first = min((m for m in y_modes if m["energy_xyz"][1] > 0.5), key=lambda m: m["f_hz"])
+        E1st = complex(first["E_storage_pa"], first["E_loss_pa"])
+        print(f"{name}: self-consistent modes at the truth (measured half): "
+              + ", ".join(f"{m['f_hz']:.3f} Hz eta {m['eta']:.4f}" for m in y_modes), flush=True)
+        H_lines = rom.accelerance(w_lines, law_i(w_lines))
+        romcheck = verify_rom(rom, sym, law_i, y_modes, args.verify, args.jobs, args.rom_tol)
+        freq, H1, coh, stats = measure(rom, law_i, args.segments, seed, force_rms_n)
+        print(f"{name} record: {stats['N']} samples ({stats['record_s']} s), "
+              f"{stats['n_bins_in_band']} FFT bins in (0, 500] Hz (FRF in "
+              f"{stats['frf_eval_s']:.1f} s); force {stats['force_rms_n']:.4f} N RMS; coherence "
+              f"min {stats['coherence_min']:.4f}, median {stats['coherence_median']:.6f}",
+              flush=True)
+        write_uff(os.path.join(args.out, f"level{i + 1}.uff"), freq, H1, coh, args.segments,
+                  level=i + 1, force_rms_n=force_rms_n)
+        levels.append({"id": i + 1, "name": name, "force_rms_N": force_rms_n, "law": "model4",
+                       "params": params, "seed": seed, "file": f"level{i + 1}.uff",
+                       "y_modes": y_modes, "first_y_mode": first, "E_star_first_y_mode_pa":
+                       [E1st.real, E1st.imag], "rom_check": romcheck,
+                       "measurement": {**CHAIN, "force_rms_n": force_rms_n, "seed": seed,
+                                       **stats},
+                       "_H_lines": H_lines})
+    L1 = levels[0]
+    y_modes, first, romcheck = L1["y_modes"], L1["first_y_mode"], L1["rom_check"]
+    E1st = complex(*L1["E_star_first_y_mode_pa"])
+    at_first = both(E1st, 520.0)
+    if not args.no_exact:
+        extra = {f"H_exact_L{lv['id']}": lv["_H_lines"] for lv in levels[1:]}
+        np.savez(os.path.join(args.out, "exact.npz"), freq_hz=lines, H_exact=L1["_H_lines"],
+                 E_star=law(w_lines), points=np.arange(1, 5), **extra)
+    for lv in levels:
+        del lv["_H_lines"]
 
     if args.check_mesh:
         del rom, msym, manti, sym, anti, joint
         print("mesh convergence (E = 7 MPa real, first six modes of the whole joint):", flush=True)
         conv = check_mesh(spec, args.refine_mesh, args.refine)
         conv["source"] = "computed by this run"
-    else:
+    elif conv is None:
         conv = dict(CONVERGENCE_RECORDED if args.refine_mesh == 1.0 and not matched else {})
         conv["source"] = "recorded by --check-mesh" if conv else "not computed"
 
+    files = ", ".join(lv["file"] for lv in levels)
     truth = {
         "note": "Truth of an independent time-domain virtual experiment (scripts/"
                 "independent_td_joint.py): not rfmlab's code, not the paper's joint.",
@@ -800,9 +1111,10 @@ def main(argv):
             "pyuff": pyuff.__version__,
             "command": " ".join(["independent_td_joint.py"] + argv[1:]),
         },
+        "joint": JOINT_NAME,
         "geometry": {
             "beam_length_m": BEAM_L, "beam_thickness_m": BEAM_T, "beam_width_m": BEAM_W,
-            "adhesive_x_start_m": 0.0, "adhesive_length_m": BOND_L,
+            "adhesive_x_start_m": BOND_X0, "adhesive_length_m": BOND_L,
             "adhesive_thickness_m": BOND_T, "base": "adhesive lower face fixed",
             "points": [{"id": i + 1, "position_m": [x, BEAM_T, BEAM_W / 2], "direction": "+y"}
                        for i, x in enumerate(POINTS_X)],
@@ -819,19 +1131,20 @@ def main(argv):
         },
         "conventions": "exp(+j w t); E* = E' + j E'' (E'' > 0); accelerance (m/s^2)/N; modes: "
                        "lambda = w_r^2 (1 + j eta); energy_xyz: kinetic-energy shares; "
-                       "symmetry about z = 0.0125 (sym modes are the measured ones); residual = "
-                       "||(K - lambda M) phi|| / ||K phi|| on the full half model",
+                       f"symmetry about z = {BEAM_W / 2:g} (sym modes are the measured ones); "
+                       "residual = ||(K - lambda M) phi|| / ||K phi|| on the full half model",
         "model": {
             "element": ("20-node serendipity hexahedron (scikit-fem ElementHexS2), 3x3x3 Gauss"
                         if matched else
                         "27-node triquadratic hexahedron (scikit-fem ElementHex2), 3x3x3 Gauss"),
-            "mesh": args.mesh, "mesh_spec": spec, "mesh_refinement": args.refine_mesh,
+            "mesh": args.mesh, "mesh_spec": spec, "mesh_refinement": refine_used,
             **mesh_info,
             "symmetry": ("none: the whole width" if matched else
-                         "half width z in [0, 0.0125]; data from the symmetric half (u_z = 0 on "
-                         "the plane, force halved)"),
-            "reduced_basis": {"reference_moduli_pa": list(REF_MODULI),
-                              "krylov_depth": KRYLOV_DEPTH, "modulus_moments": KRYLOV_S_DEPTH,
+                         f"half width z in [0, {BEAM_W / 2:g}]; data from the symmetric half "
+                         "(u_z = 0 on the plane, force halved)"),
+            "reduced_basis": {"reference_moduli_pa": list(ref),
+                              "krylov_depth": args.krylov_depth or KRYLOV_DEPTH,
+                              "modulus_moments": args.modulus_moments or KRYLOV_S_DEPTH,
                               "vectors": romcheck["vectors"]},
             "rom_check": romcheck,
             "mesh_convergence": conv,
@@ -843,15 +1156,19 @@ def main(argv):
             "at_first_y_mode_modulus": {"E_star_pa": [E1st.real, E1st.imag],
                                         "below_520_hz": at_first},
         },
-        "level": {"name": "L1", "force_rms_n": CHAIN["force_rms_n"], "law": "model4",
+        "level": {"name": "L1", "force_rms_n": L1["force_rms_N"], "law": "model4",
                   "params": TRUTH},
-        "measurement": {**CHAIN, "seed": args.seed, **stats},
+        "levels": levels,
+        "measurement": L1["measurement"],
         "runtime_s": round(time.time() - t_start, 1),
     }
     with open(os.path.join(args.out, "truth.json"), "w") as fh:
         json.dump(truth, fh, indent=1)
-    print(f"wrote {os.path.join(args.out, 'level1.uff')}, truth.json, exact.npz "
-          f"({time.time() - t_start:.1f} s)")
+    if joint_cfg is not None:
+        with open(os.path.join(args.out, "joint.json"), "w") as fh:
+            json.dump(joint_cfg, fh, indent=1)
+    print(f"wrote {os.path.join(args.out, files)}, truth.json"
+          f"{'' if args.no_exact else ', exact.npz'} ({time.time() - t_start:.1f} s)")
     return 0
 
 

@@ -101,7 +101,8 @@ enum Command {
 
 /// `rfmlab run --help`: what it writes (tests/suite/docs.rs checks the tables against docs/outputs.md).
 const RUN_HELP: &str = "Writes results/<name>/ (or [study] output_dir): report.md, manifest.json, figures fig_*.png/.svg and parquet tables:
-  frf, parameters, iterations, correlation, correlation_curves, modulus, svd, modal, sensitivity;
+  frf, parameters, iterations, correlation, correlation_curves, modulus, svd, modal, sensitivity,
+  discretisation (a meshed joint's estimated mesh error per mode);
   with [inference]: draws, summary, starts, laplace, sampler_runs, evidence, model_comparison, ppc, predictive,
   pointwise_loglik, level_change, level_evidence, redundancy, basins;
   with [closed_loop]: closed_loop/ (residuals, candidates, closed_loop, verdict, signatures, closed_loop.md).

@@ -126,6 +126,7 @@ pub fn run(a: &RunArgs, g: &Global) -> anyhow::Result<()> {
         files,
         models: results.model_summaries(),
         flagged: results.flagged(),
+        warnings: results.preflight_warnings().to_vec(),
         seconds: results.seconds() + written.seconds,
     };
     if a.json {

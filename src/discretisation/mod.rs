@@ -13,9 +13,9 @@
 //! `h` away from the edges, growth ratio `r` (`grading_ratio`, default
 //! [`DEFAULT_GRADING_RATIO`]) and edge cells `e_k = e_0 / 2^k`, `e_0 = min(h, t_a / 2)` (level 0
 //! is the uniform mesh where the bond line is at least two cells thick). Each level adds a few
-//! cells per edge, so the DOFs grow slowly (the paper's block: 10 248, 13 ..., 27 360 DOFs for
-//! levels 0-3). From level 2 on, the estimate of the finest level's error (below) is compared
-//! with the tolerance; refinement stops when every mode's estimate is below it, or when the
+//! cells per edge, so the DOFs grow slowly (the paper's block: 10 248, 16 482, 27 360 and
+//! 45 918 DOFs for levels 0-3). From level 1 on, the estimate of the finest level's error
+//! (below) is compared with the tolerance; refinement stops when every mode's estimate is below it, or when the
 //! next level would exceed [`MAX_AUTO_DOFS`] or the machine's memory (the estimate then says
 //! how far the mesh is from the tolerance).
 //!
@@ -23,7 +23,8 @@
 //! mode on level k, the error of level k is its step from level k - 1 extrapolated at order
 //! [`ORDER`] = 1: e_k = (f_{k-1} - f_k) / (2^1 - 1). The observed order
 //! p = log2((f_{k-2} - f_{k-1}) / (f_{k-1} - f_k)) is reported; where the three meshes do not
-//! converge monotonically the estimate is twice the last step. Why order 1: the observed order
+//! converge monotonically, or only two meshes fit under [`MAX_AUTO_DOFS`] (a thin bond line
+//! whose first mesh is already large), the estimate is twice the last step. Why order 1: the observed order
 //! of these graded families is irregular while the edge cells are larger than about a quarter
 //! of the bond line's thickness (0.3-0.5) and 1.2-1.6 after, and the singular corners bound it
 //! near 1. Measured against finer meshes and independent 27-node references, order 1 gives
@@ -265,15 +266,19 @@ pub fn stiffness_excess(modes: &[ModeError]) -> (f64, f64) {
     (delta, (0.25 * delta * delta + scatter).sqrt())
 }
 
-/// The error of every mode on level `k` of `levels` (k >= 2), with the adhesive shares of
-/// level `k`.
+/// The error of every mode on level `k` of `levels` (k >= 1), with the shares of level `k`:
+/// the last step at order [`ORDER`], twice it when the last three levels do not converge
+/// monotonically or only two levels exist.
 fn estimate(levels: &[MeshLevel], k: usize, shares: &[f64], seen: &[f64]) -> Vec<ModeError> {
-    let (a, b, c) = (&levels[k - 2], &levels[k - 1], &levels[k]);
-    let n = a.freqs_hz.len().min(b.freqs_hz.len()).min(c.freqs_hz.len());
+    let (b, c) = (&levels[k - 1], &levels[k]);
+    let a = (k >= 2).then(|| &levels[k - 2]);
+    let n = b.freqs_hz.len().min(c.freqs_hz.len());
     (0..n)
         .map(|i| {
-            let (fa, fb, fc) = (a.freqs_hz[i], b.freqs_hz[i], c.freqs_hz[i]);
-            let p = observed_order(fa - fb, fb - fc);
+            let (fb, fc) = (b.freqs_hz[i], c.freqs_hz[i]);
+            let p = a
+                .and_then(|a| a.freqs_hz.get(i))
+                .map_or(f64::NAN, |&fa| observed_order(fa - fb, fb - fc));
             // the finest level's error: its step from the previous level, extrapolated
             let err = extrapolated_error(fb - fc, p);
             ModeError {
@@ -353,7 +358,7 @@ pub fn select(
         let s = level_spec(spec, k);
         let cost = match joint_cost_estimate(&s) {
             Ok(c) => c,
-            Err(e) if k >= 3 => {
+            Err(e) if k >= 2 => {
                 note = format!(
                     "the next mesh (edge cells {:.3} mm) is beyond this machine: {}",
                     1e3 * s.mesh.edge_m.unwrap_or(0.0),
@@ -363,7 +368,7 @@ pub fn select(
             }
             Err(e) => return Err(e),
         };
-        if k >= 3 && cost.n_dof > MAX_AUTO_DOFS {
+        if k >= 2 && cost.n_dof > MAX_AUTO_DOFS {
             note = format!(
                 "the next mesh (edge cells {:.3} mm) would have about {} DOFs, more than the {MAX_AUTO_DOFS} the refinement goes to",
                 1e3 * s.mesh.edge_m.unwrap_or(0.0),
@@ -391,7 +396,7 @@ pub fn select(
             freqs_hz: freqs,
             seconds: t0.elapsed().as_secs_f64(),
         });
-        let estimate_now = (k >= 2).then(|| estimate(&levels, k, &shares, &seen));
+        let estimate_now = (k >= 1).then(|| estimate(&levels, k, &shares, &seen));
         let worst = estimate_now
             .as_ref()
             .map(|m| m.iter().map(|e| e.rel_error.abs()).fold(0.0, f64::max));

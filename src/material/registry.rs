@@ -18,6 +18,9 @@ pub const MODEL_NAMES: [&str; 7] = [
 /// The constitutive model called `name` (one of [`MODEL_NAMES`]; surrounding blanks and
 /// upper case are tolerated). `n_branches` is required for "generalized_maxwell" (>= 1)
 /// and must be `None` for every other model.
+/// Most branches of a generalized Maxwell law (as the material loop's `max_branches`).
+pub const MAX_BRANCHES: usize = 200;
+
 pub fn model_from_name(
     name: &str,
     n_branches: Option<usize>,
@@ -30,6 +33,11 @@ pub fn model_from_name(
                 model: key,
                 n: 0,
                 hint: "use at least one branch".into(),
+            }),
+            Some(n) if n > MAX_BRANCHES => Err(MaterialError::BadBranches {
+                model: key,
+                n,
+                hint: format!("use at most {MAX_BRANCHES} branches (a few per decade of the band)"),
             }),
             Some(n) => Ok(Box::new(GeneralizedMaxwell::new(n))),
         };

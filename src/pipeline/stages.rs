@@ -130,6 +130,10 @@ pub(super) fn prepare(
     };
     let mut warnings = warnings;
     warnings.extend(crate::stage::preflight::mesh_error_warnings(mesh.as_ref()));
+    // the model's first y mode against the data's first peak, as `rfmlab check` says it
+    let mut first = crate::stage::preflight::Preflight::default();
+    crate::stage::preflight::check_first_mode(models, &built, &data, &laws, &mut first)?;
+    warnings.extend(first.warnings);
     progress(Event::Start {
         step: "building the FRF engine".into(),
         total: 0,

@@ -49,6 +49,10 @@ pub struct RunSummary {
     /// The fits that are not results (global RFM and MAP), with their reasons: `rfmlab run`
     /// exits with code 3 when this is not empty.
     pub flagged: Vec<crate::pipeline::FlaggedFit>,
+    /// The pre-flight's warnings that bear on the results (the mesh's remaining error, the
+    /// first mode far from the data's peak, channels flipped, ...), as the report's first
+    /// lines give them.
+    pub warnings: Vec<String>,
     pub seconds: f64,
 }
 
@@ -121,6 +125,7 @@ pub fn run_study(
         files: written.files,
         models: results.model_summaries(),
         flagged: results.flagged(),
+        warnings: results.preflight_warnings().to_vec(),
         seconds: results.seconds() + written.seconds,
     })
 }

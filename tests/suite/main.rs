@@ -54,6 +54,7 @@ mod material;
 mod material_fit;
 mod matrix_market;
 mod measurement_model;
+mod mesh_tolerance;
 mod model_comparison;
 mod modes;
 mod output;
