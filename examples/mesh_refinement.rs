@@ -100,16 +100,7 @@ fn main() {
         times.push(secs);
         let d = &r.discretisation;
         // the y mode nearest the reference's
-        let Some(m) = d
-            .modes
-            .iter()
-            .filter(|m| m.measured_share > 0.5)
-            .min_by(|a, b| {
-                (a.freq_hz - f_ref)
-                    .abs()
-                    .total_cmp(&(b.freq_hz - f_ref).abs())
-            })
-        else {
+        let Some(m) = d.measured_mode_near(f_ref) else {
             continue;
         };
         let lvl = &d.levels[d.chosen];

@@ -20,19 +20,18 @@
 //!    posterior's own precision of ln f_k, R its diagonal) against the rest of the FRFs (the
 //!    posterior's precision Sigma^-1), b = -A eps, A = Sigma G^T (G Sigma G^T + R)^-1, Sigma the
 //!    law's Laplace covariance. (Exact matching, R = 0, overstates the offset where the law can
-//!    hardly move two modes apart: a 17 % interval on the paper block's eta1.) With eps ~ N(0, diag((c r_k)^2 + (MODE_SD eps_k)^2)), each draw gets A eps
-//!    and the Laplace covariance gains A Cov(eps) A^T. This is what lets a viscosity, set by
+//!    hardly move two modes apart: a 17 % interval on the paper block's eta1.) With
+//!    eps ~ N(0, diag((c r_k)^2 + (MODE_SD eps_k)^2)), each draw gets A eps and the Laplace
+//!    covariance gains A Cov(eps) A^T. This is what lets a viscosity, set by
 //!    the dispersion between modes, carry a mesh error that differs from mode to mode.
 //!
 //! The effects and the noise scales are unchanged.
 
 use super::PosteriorResult;
-use crate::discretisation::Discretisation;
+use crate::discretisation::{Discretisation, ESTIMATE_SHARE_CENTRE, ESTIMATE_SHARE_SD};
 use crate::material::ConstitutiveModel;
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
-
-use crate::discretisation::{ESTIMATE_SHARE_CENTRE, ESTIMATE_SHARE_SD};
 
 /// Whether a law parameter of `unit` scales E*(w) (module doc).
 pub fn scales_modulus(unit: &str) -> bool {
@@ -52,32 +51,6 @@ struct Map {
     a: Vec<Vec<f64>>,
     /// Per mode: the sd of its error after the common correction.
     sd: Vec<f64>,
-}
-
-/// Solve the small dense system `m x = b` (Gaussian elimination with partial pivoting).
-fn solve(mut m: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
-    let n = b.len();
-    for c in 0..n {
-        let p = (c..n).max_by(|&i, &j| m[i][c].abs().total_cmp(&m[j][c].abs()))?;
-        if m[p][c].abs() < 1e-300 {
-            return None;
-        }
-        m.swap(c, p);
-        b.swap(c, p);
-        for r in c + 1..n {
-            let f = m[r][c] / m[c][c];
-            for k in c..n {
-                m[r][k] -= f * m[c][k];
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = vec![0.0; n];
-    for r in (0..n).rev() {
-        let s: f64 = (r + 1..n).map(|k| m[r][k] * x[k]).sum();
-        x[r] = (b[r] - s) / m[r][r];
-    }
-    Some(x)
 }
 
 /// A for one posterior (module doc), None when no measured in-band mode has an error.
@@ -141,27 +114,26 @@ fn map_of(
                 .collect()
         })
         .collect();
-    let mut gsg: Vec<Vec<f64>> = (0..k)
-        .map(|r| {
-            (0..k)
-                .map(|s| (0..nl).map(|i| g[r][i] * sg[i][s]).sum())
-                .collect()
-        })
+    let mut gsg: Vec<f64> = (0..k)
+        .flat_map(|r| (0..k).map(move |s| (r, s)))
+        .map(|(r, s)| (0..nl).map(|i| g[r][i] * sg[i][s]).sum())
         .collect();
     // the frequencies are matched as well as the data know them, not exactly (module doc): a
     // mismatch of mode k costs 1 / (g_k^T Sigma g_k), the posterior's own precision of ln f_k
-    for (r, row) in gsg.iter_mut().enumerate() {
-        let v = row[r];
+    for r in 0..k {
+        let v = gsg[r * k + r];
         if !(v > 0.0 && v.is_finite()) {
             return None;
         }
-        row[r] += MATCH_RIDGE * v;
+        gsg[r * k + r] += MATCH_RIDGE * v;
     }
-    // A = Sigma G^T (G Sigma G^T + R)^-1: column s of A^T solves (G Sigma G^T + R) x = row i of
-    // Sigma G^T
-    let a: Vec<Vec<f64>> = (0..nl)
-        .map(|i| solve(gsg.clone(), sg[i].clone()))
-        .collect::<Option<_>>()?;
+    // A = Sigma G^T (G Sigma G^T + R)^-1, the matrix symmetric positive definite: row i of A
+    // solves (G Sigma G^T + R) x = row i of Sigma G^T
+    let l = crate::linalg::dense::cholesky(&gsg, k)?;
+    let a: Vec<Vec<f64>> = sg
+        .iter()
+        .map(|row| crate::linalg::dense::chol_solve(&l, k, row))
+        .collect();
     Some(Map { a, sd })
 }
 
@@ -254,7 +226,7 @@ pub fn apply(
                 format!(
                     "{} {:.2} %",
                     post.names.get(i).map_or("?", |s| s.as_str()),
-                    100.0 * add[i][i].max(0.0).sqrt() / lap_value(post, i).abs()
+                    100.0 * add[i][i].max(0.0).sqrt() / post.map.laplace.physical[i].abs()
                 )
             })
             .collect();
@@ -266,8 +238,4 @@ pub fn apply(
             sd_rel.join(", ")
         ));
     }
-}
-
-fn lap_value(post: &PosteriorResult, i: usize) -> f64 {
-    post.map.laplace.physical[i]
 }

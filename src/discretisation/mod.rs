@@ -140,11 +140,26 @@ pub struct Discretisation {
 impl Discretisation {
     /// The largest estimated relative error over the modes.
     pub fn worst_rel_error(&self) -> f64 {
+        worst_rel_error(&self.modes)
+    }
+
+    /// The mode the points see (most of its kinetic energy along the measured axes) nearest
+    /// `f_hz`.
+    pub fn measured_mode_near(&self, f_hz: f64) -> Option<&ModeError> {
         self.modes
             .iter()
-            .map(|m| m.rel_error.abs())
-            .fold(0.0, f64::max)
+            .filter(|m| m.measured_share > 0.5)
+            .min_by(|a, b| {
+                (a.freq_hz - f_hz)
+                    .abs()
+                    .total_cmp(&(b.freq_hz - f_hz).abs())
+            })
     }
+}
+
+/// The largest estimated relative error of `modes`.
+fn worst_rel_error(modes: &[ModeError]) -> f64 {
+    modes.iter().map(|m| m.rel_error.abs()).fold(0.0, f64::max)
 }
 
 /// The refinement's settings.
@@ -162,7 +177,9 @@ pub type ModeShares = (Vec<f64>, Vec<f64>, Vec<f64>);
 
 /// The lowest `n` modes of a mesher's model at the storage modulus `e`: frequencies (Hz),
 /// adhesive shares of the strain energy and shares of the kinetic energy along the axes in
-/// `measured` (the mesher numbers free DOFs three per node, x, y, z).
+/// `measured` (the mesher numbers free DOFs three per node, x, y, z, as
+/// [`crate::study::build::BuiltModel::dof_axes`] says; with every axis measured the share is 1
+/// whatever the numbering).
 pub fn modes_with_shares(
     model: &StructuralModel,
     e: f64,
@@ -314,6 +331,18 @@ fn memo_get(spec: &JointSpec, p: &RefineParams) -> Option<(JointSpec, Discretisa
         .map(|(_, _, c, d)| (c.clone(), d.clone()))
 }
 
+/// The spec [`select`] chooses, without building its model when this process already chose it.
+pub fn select_spec(
+    spec: &JointSpec,
+    p: &RefineParams,
+    progress: &dyn Fn(&str),
+) -> Result<JointSpec, FeError> {
+    match memo_get(spec, p) {
+        Some((chosen, _)) => Ok(chosen),
+        None => Ok(select(spec, p, progress)?.spec),
+    }
+}
+
 /// `spec` on level `k` of the refined family (module doc).
 pub fn level_spec(spec: &JointSpec, k: usize) -> JointSpec {
     let h = match spec.mesh.size {
@@ -340,9 +369,7 @@ pub fn select(
 ) -> Result<Refined, FeError> {
     if let Some((chosen, d)) = memo_get(spec, p) {
         let (mut model, info) = build_joint_model(&chosen)?;
-        if d.allowance {
-            correct(&mut model, d.stiffness_excess);
-        }
+        correct(&mut model, &d);
         return Ok(Refined {
             spec: chosen,
             model,
@@ -397,9 +424,7 @@ pub fn select(
             seconds: t0.elapsed().as_secs_f64(),
         });
         let estimate_now = (k >= 1).then(|| estimate(&levels, k, &shares, &seen));
-        let worst = estimate_now
-            .as_ref()
-            .map(|m| m.iter().map(|e| e.rel_error.abs()).fold(0.0, f64::max));
+        let worst = estimate_now.as_deref().map(worst_rel_error);
         progress(&match worst {
             Some(w) => format!(
                 "mesh level {k}: edge cells {:.3} mm, {} DOFs, estimated error {:.3} % (tolerance {:.3} %)",
@@ -425,9 +450,6 @@ pub fn select(
         note = format!("{MAX_LEVELS} levels of refinement did not reach it");
     }
     let (delta, sd) = stiffness_excess(&modes);
-    if p.allowance {
-        correct(&mut model, delta);
-    }
     let d = Discretisation {
         rule: "refined".into(),
         tolerance: p.tolerance,
@@ -441,6 +463,7 @@ pub fn select(
         reference_modulus_pa: p.reference_modulus_pa,
         note,
     };
+    correct(&mut model, &d);
     if let Ok(mut m) = MEMO.lock() {
         m.push((spec.clone(), *p, chosen.clone(), d.clone()));
     }
@@ -453,10 +476,11 @@ pub fn select(
 }
 
 /// The estimate of a fixed mesh: the study's mesh against it refined twice per direction
-/// (eight times the DOFs), at the order [`ORDER`] of the singular corners (module doc).
+/// (eight times the DOFs), at the order [`ORDER`] of the singular corners (module doc). The
+/// model is not changed: [`correct`] applies the allowance.
 pub fn fixed(
     spec: &JointSpec,
-    model: &mut StructuralModel,
+    model: &StructuralModel,
     p: &RefineParams,
 ) -> Result<Discretisation, FeError> {
     let (fine, _) = crate::fe::joint::build_joint_model_refined(spec, 2)?;
@@ -489,10 +513,7 @@ pub fn fixed(
         })
         .collect();
     let (delta, sd) = stiffness_excess(&modes);
-    if p.allowance {
-        correct(model, delta);
-    }
-    let worst = modes.iter().map(|m| m.rel_error.abs()).fold(0.0, f64::max);
+    let worst = worst_rel_error(&modes);
     Ok(Discretisation {
         rule: "fixed".into(),
         tolerance: p.tolerance,
@@ -508,9 +529,13 @@ pub fn fixed(
     })
 }
 
-/// Divide the model's adhesive stiffness by (1 + [`ESTIMATE_SHARE_CENTRE`] delta).
-fn correct(model: &mut StructuralModel, delta: f64) {
-    let f = 1.0 / (1.0 + ESTIMATE_SHARE_CENTRE * delta);
+/// With the allowance of `d`, divide the model's adhesive stiffness by
+/// (1 + [`ESTIMATE_SHARE_CENTRE`] delta).
+pub fn correct(model: &mut StructuralModel, d: &Discretisation) {
+    if !d.allowance {
+        return;
+    }
+    let f = 1.0 / (1.0 + ESTIMATE_SHARE_CENTRE * d.stiffness_excess);
     for v in model.s.val_mut() {
         *v *= f;
     }

@@ -15,12 +15,12 @@ pub const MODEL_NAMES: [&str; 7] = [
     "generalized_maxwell",
 ];
 
-/// The constitutive model called `name` (one of [`MODEL_NAMES`]; surrounding blanks and
-/// upper case are tolerated). `n_branches` is required for "generalized_maxwell" (>= 1)
-/// and must be `None` for every other model.
 /// Most branches of a generalized Maxwell law (as the material loop's `max_branches`).
 pub const MAX_BRANCHES: usize = 200;
 
+/// The constitutive model called `name` (one of [`MODEL_NAMES`]; surrounding blanks and
+/// upper case are tolerated). `n_branches` is required for "generalized_maxwell" (1 to
+/// [`MAX_BRANCHES`]) and must be `None` for every other model.
 pub fn model_from_name(
     name: &str,
     n_branches: Option<usize>,

@@ -72,10 +72,11 @@ pub fn check_with(plan: &Plan, progress: &dyn Fn(&str)) -> Result<CheckSummary, 
         ..Default::default()
     };
     preflight::check_channels(&built, &levels, &mut pf.warnings);
-    let lines_checked = model::check_initial_values(models, file, &built, &levels, &laws)?;
+    let lines_checked = model::check_initial_values(models, file, &levels, &laws)?;
     preflight::check_first_mode(models, &built, &levels, &laws, &mut pf)?;
-    let allowance_off = matches!(&study.structure.source, crate::study::StructureSource::Mesher(j) if !j.mesh_rule.allowance);
-    if built.discretisation.is_some() || !allowance_off || id.mesh_error {
+    // the refinement's or the fixed mesh's record; an estimate of a mesh declared exact
+    // (`allowance = false`) only when `[analyses] mesh_error` asks for it
+    if built.discretisation.is_some() || id.mesh_error {
         match preflight::mesh_error_at_initial_values(
             models,
             &study.structure,

@@ -105,7 +105,7 @@ pub(super) fn prepare(
         &built,
     )?;
     let band_hz = crate::stage::data::band_of(&data);
-    crate::stage::model::check_initial_values(models, &study.file, &built, &data, &laws)?;
+    crate::stage::model::check_initial_values(models, &study.file, &data, &laws)?;
     ex.lap("load and check data")?;
     let mesh = if built.discretisation.is_some() {
         built.discretisation.clone()

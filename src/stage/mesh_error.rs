@@ -60,8 +60,7 @@ pub fn mesh_error_at_initial_values(
         allowance: false,
         reference_modulus_pa: e,
     };
-    let mut model = built.model.clone();
-    crate::discretisation::fixed(&spec, &mut model, &p)
+    crate::discretisation::fixed(&spec, &built.model, &p)
         .map(Some)
         .map_err(|e| input_error(file, e.key().to_string(), e.detail()))
 }

@@ -34,11 +34,9 @@ pub fn build_with(
 pub fn check_initial_values(
     models: &[ModelSpec],
     file: &Path,
-    built: &BuiltModel,
     levels: &[LevelData],
     laws: &[Box<dyn crate::material::ConstitutiveModel>],
 ) -> Result<usize, RunError> {
-    let _ = built;
     let mut n_checked = 0;
     for level in levels {
         for (i, (m, law)) in models.iter().zip(laws).enumerate() {

@@ -197,34 +197,23 @@ pub fn check_first_mode(
     };
     let e: C64 = law.modulus(&spec.initial, std::f64::consts::TAU * peak);
     // real modes at the storage modulus (a Cholesky and a Lanczos run, seconds on a refined
-    // mesh; the loss modulus moves the frequencies far less than the factor checked here)
-    let k = crate::modes::real::sp_add(&built.model.k_b, &built.model.s, e.re).map_err(|err| {
-        RunError::Engine(format!("the model's modes at the initial values: {err}"))
-    })?;
-    let n = N_MODES_CHECKED.min(built.model.n_dof() / 3).max(1);
-    let (lam, x) =
-        crate::modes::real_modes(&k, &built.model.m, n, &crate::modes::EigenParams::default())
+    // mesh; the loss modulus moves the frequencies far less than the factor checked here); the
+    // first with most of its kinetic energy along y (every mode counts without DOF axes)
+    let y_only = if built.dof_axes.is_some() {
+        [false, true, false]
+    } else {
+        [true; 3]
+    };
+    let (freqs, _, y_share) =
+        crate::discretisation::modes_with_shares(&built.model, e.re, N_MODES_CHECKED, &y_only)
             .map_err(|err| {
                 RunError::Engine(format!("the model's modes at the initial values: {err}"))
             })?;
-    // y-dominant: most of the kinetic energy along y (every mode counts without DOF axes)
-    let nd = built.model.n_dof();
-    let mut mv = vec![0.0; nd];
-    let first = (0..lam.len())
-        .find(|&j| {
-            let Some(axes) = built.dof_axes.as_deref() else {
-                return true;
-            };
-            let v: Vec<f64> = (0..nd).map(|i| x[(i, j)]).collect();
-            crate::linalg::spmv_real(&built.model.m, &v, &mut mv);
-            let total: f64 = v.iter().zip(&mv).map(|(a, b)| a * b).sum();
-            let y: f64 = (0..nd)
-                .filter(|&i| axes[i] == 1)
-                .map(|i| v[i] * mv[i])
-                .sum();
-            total > 0.0 && y / total > 0.5
-        })
-        .map(|j| lam[j].max(0.0).sqrt() / std::f64::consts::TAU);
+    let first = freqs
+        .iter()
+        .zip(&y_share)
+        .find(|(_, &s)| s > 0.5)
+        .map(|(&f, _)| f);
     out.first_peak_hz = Some(peak);
     out.first_mode_hz = first;
     if let Some(f) = first {

@@ -101,9 +101,9 @@ pub fn chosen_spec(s: &Structure, file: &str) -> Result<Option<JointSpec>, Study
     if !j.mesh_rule.refine {
         return Ok(Some(spec));
     }
-    let r = crate::discretisation::select(&spec, &refine_params(j), &|_| {})
+    let chosen = crate::discretisation::select_spec(&spec, &refine_params(j), &|_| {})
         .map_err(|e| fe_error(file, e))?;
-    Ok(Some(r.spec))
+    Ok(Some(chosen))
 }
 
 fn refine_params(j: &super::Joint) -> crate::discretisation::RefineParams {
@@ -147,10 +147,10 @@ pub fn build_model_with(
                 let (mut m, info) = build_joint_model(&spec).map_err(|e| fe_error(file, e))?;
                 if j.mesh_rule.allowance {
                     progress("estimating the mesh's discretisation error (the mesh refined twice per direction)");
-                    discretisation = Some(
-                        crate::discretisation::fixed(&spec, &mut m, &p)
-                            .map_err(|e| fe_error(file, e))?,
-                    );
+                    let d = crate::discretisation::fixed(&spec, &m, &p)
+                        .map_err(|e| fe_error(file, e))?;
+                    crate::discretisation::correct(&mut m, &d);
+                    discretisation = Some(d);
                 }
                 (m, Some(info))
             }

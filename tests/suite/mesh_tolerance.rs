@@ -86,16 +86,7 @@ fn the_paper_block_s_refined_mesh_against_the_independent_continuum() {
         d.reached,
         "the default tolerance is reached on the paper's block"
     );
-    let m = d
-        .modes
-        .iter()
-        .filter(|m| m.measured_share > 0.5)
-        .min_by(|a, b| {
-            (a.freq_hz - f_ref)
-                .abs()
-                .total_cmp(&(b.freq_hz - f_ref).abs())
-        })
-        .unwrap();
+    let m = d.measured_mode_near(f_ref).unwrap();
     let actual = (m.freq_hz - f_ref) / f_ref;
     let level0 = (d.levels[0].freqs_hz[m.mode - 1] - f_ref) / f_ref;
     eprintln!(
