@@ -58,7 +58,7 @@ def cli_binary() -> Path:
 BAYES_EDITS = {
     'models = ["model3", "model4", "model5"]': 'models = ["model4"]',
     'levels = ["L1", "L2"]': 'levels = ["L1"]',
-    'samplers = ["nuts", "tmcmc", "stepping_stone"]': 'samplers = ["nuts"]',
+    'samplers = ["nuts", "stepping_stone"]': 'samplers = ["nuts"]',
     "band_hz = [1.0, 500.0]": "band_hz = [10.0, 60.0]",
     "tune = 1000": "tune = 300",
     "draws = 1000": "draws = 500",

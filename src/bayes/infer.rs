@@ -51,6 +51,10 @@ pub struct PosteriorResult {
     pub redundancy: Result<super::redundancy::Redundancy, super::redundancy::RedundancyError>,
     /// The basin study (`[inference.basins]`), filled in after the level's inference.
     pub basins: Option<super::basins::BasinStudy>,
+    /// Wall time of each step (the MAP search, each sampler, the linearisation check, the
+    /// comparison with its evidence estimators and predictive criteria, the redundancy), s:
+    /// the run's manifest lists them under the level's inference.
+    pub step_seconds: Vec<(String, f64)>,
 }
 
 /// The support of a prior (physical values; ends may be infinite).
@@ -228,9 +232,14 @@ pub fn infer_level(
             model: name,
             seed,
         };
+        let mut step_seconds = vec![("MAP".to_string(), map_seconds)];
         let mut samplers =
             super::sample::run_samplers(&run.checkpoints, inf, &post, &map, &at, progress)?;
+        step_seconds.extend(samplers.iter().map(|s| (s.sampler.to_string(), s.seconds)));
+        let t_step = Instant::now();
         let linearisation_check = super::linearisation::to_exact(&mut post, &mut samplers, nl);
+        step_seconds.push(("linearisation check".into(), t_step.elapsed().as_secs_f64()));
+        let t_step = Instant::now();
         let lin_shift = linearisation_check.map_or(0.0, |r| r.2);
         let compare = super::compare::compare(
             &run.checkpoints,
@@ -242,7 +251,10 @@ pub fn infer_level(
             &at,
             progress,
         )?;
+        step_seconds.push(("comparison".into(), t_step.elapsed().as_secs_f64()));
+        let t_step = Instant::now();
         let redundancy = super::redundancy::analyse(&post, &map, &samplers);
+        step_seconds.push(("redundancy".into(), t_step.elapsed().as_secs_f64()));
         let mut units = law.param_units();
         units.extend(std::iter::repeat_n(
             "1".to_string(),
@@ -264,6 +276,7 @@ pub fn infer_level(
             compare,
             redundancy,
             basins: None,
+            step_seconds,
         });
     }
     Ok(out)

@@ -140,7 +140,16 @@ pub fn build_model(
     study: &rfmlab::study::Study,
 ) -> anyhow::Result<rfmlab::study::build::BuiltModel> {
     let sp = spinner(g, "assembling the FE model");
-    let b = rfmlab::study::build::build_model(&study.structure, &study.file.display().to_string())?;
+    let quiet = g.quiet;
+    let b = rfmlab::study::build::build_model_with(
+        &study.structure,
+        &study.file.display().to_string(),
+        &|line| {
+            if !quiet {
+                sp.suspend(|| eprintln!("{line}"));
+            }
+        },
+    )?;
     sp.finish_and_clear();
     Ok(b)
 }

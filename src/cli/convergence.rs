@@ -60,8 +60,17 @@ pub fn run(a: &ConvergenceArgs, g: &Global) -> anyhow::Result<()> {
     for &h in &sizes {
         let mut s = study.structure.clone();
         match &mut s.source {
-            StructureSource::Mesher(j) => j.mesh = MeshSize::ElementSize(h),
-            StructureSource::Lap(l) => l.mesh.element_size_m = h,
+            // each size as given: the comparison is the user's, not the refinement's
+            StructureSource::Mesher(j) => {
+                j.mesh = MeshSize::ElementSize(h);
+                j.mesh_rule.refine = false;
+                j.mesh_rule.allowance = false;
+            }
+            StructureSource::Lap(l, rule) => {
+                l.mesh.element_size_m = h;
+                rule.refine = false;
+                rule.allowance = false;
+            }
             StructureSource::MatrixMarket(_) => {
                 return Err(InputError(
                     "convergence needs a meshed structure (structure.source = \"mesher\")".into(),

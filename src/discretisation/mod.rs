@@ -41,7 +41,9 @@
 //! posteriors carry the uncertainty of that correction and what one delta leaves of each
 //! mode's error ([`crate::bayes::mesh_allowance`]).
 
+use crate::fe::cost::CostEstimate;
 use crate::fe::joint::{build_joint_model, joint_cost_estimate, JointSpec, MeshInfo, MeshSize};
+use crate::fe::lap::{build_lap_model, lap_cost_estimate, LapSpec};
 use crate::fe::{FeError, StructuralModel};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -229,16 +231,137 @@ pub fn modes_with_shares(
     Ok((freqs, shares, seen))
 }
 
-/// The axes the points of `spec` measure.
-fn measured_axes(spec: &JointSpec) -> [bool; 3] {
+/// The axes `points` measure (every axis when there are none).
+fn measured_axes(points: &[crate::fe::joint::PointSpec]) -> [bool; 3] {
     let mut a = [false; 3];
-    for p in &spec.points {
+    for p in points {
         a[p.direction.axis as usize] = true;
     }
     if !a.iter().any(|&b| b) {
         a = [true; 3];
     }
     a
+}
+
+/// A mesher's joint whose mesh the refinement chooses: its family of meshes (module doc).
+pub trait Meshed: Clone + PartialEq + Sized {
+    /// The joint on level `k` of its refined family (level 0: the study's mesh, graded where
+    /// the family grades).
+    fn level(&self, k: usize) -> Self;
+    /// Size of the cells at the bond line's edges (m).
+    fn edge_m(&self) -> f64;
+    /// Size and cost before anything is allocated.
+    fn cost(&self) -> Result<CostEstimate, FeError>;
+    fn build(&self) -> Result<(StructuralModel, MeshInfo), FeError>;
+    /// The model on this mesh with every cell split in two per direction (the estimate of a
+    /// fixed mesh), its memory checked first.
+    fn build_split(&self) -> Result<(StructuralModel, MeshInfo), FeError>;
+    /// The axes its points measure.
+    fn measured_axes(&self) -> [bool; 3];
+    /// The joint as a key of the process's memo.
+    fn key(&self) -> Family;
+    fn from_key(f: &Family) -> Option<Self>;
+}
+
+/// The joints the mesher refines.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Family {
+    /// A beam on an adhesive block or bond line ([`crate::fe::joint`]).
+    Block(JointSpec),
+    /// A single-lap joint ([`crate::fe::lap`]).
+    Lap(LapSpec),
+}
+
+impl Meshed for JointSpec {
+    fn level(&self, k: usize) -> Self {
+        level_spec(self, k)
+    }
+    fn edge_m(&self) -> f64 {
+        self.mesh.edge_m.unwrap_or(0.0)
+    }
+    fn cost(&self) -> Result<CostEstimate, FeError> {
+        joint_cost_estimate(self)
+    }
+    fn build(&self) -> Result<(StructuralModel, MeshInfo), FeError> {
+        build_joint_model(self)
+    }
+    fn build_split(&self) -> Result<(StructuralModel, MeshInfo), FeError> {
+        crate::fe::joint::build_joint_model_refined(self, 2)
+    }
+    fn measured_axes(&self) -> [bool; 3] {
+        measured_axes(&self.points)
+    }
+    fn key(&self) -> Family {
+        Family::Block(self.clone())
+    }
+    fn from_key(f: &Family) -> Option<Self> {
+        match f {
+            Family::Block(s) => Some(s.clone()),
+            Family::Lap(_) => None,
+        }
+    }
+}
+
+/// The lap joint's family: level k has 2^k times the study's elements through the bond line
+/// (`y_adhesive`), so the cells at the overlap ends (`end_aspect` bond-line elements long) and
+/// the longest adhesive cells (`max_aspect`) halve with it; the strips' through-thickness and
+/// width divisions stay the study's (the strips' bending converges long before the bond
+/// line's corners).
+impl Meshed for LapSpec {
+    fn level(&self, k: usize) -> Self {
+        let mut s = self.clone();
+        s.mesh.y_adhesive = self.mesh.y_adhesive << k.min(16);
+        s
+    }
+    fn edge_m(&self) -> f64 {
+        let ta = self.geometry.adhesive_thickness_m;
+        (self.mesh.end_aspect * ta / self.mesh.y_adhesive as f64).min(self.mesh.element_size_m)
+    }
+    fn cost(&self) -> Result<CostEstimate, FeError> {
+        lap_cost_estimate(self)
+    }
+    fn build(&self) -> Result<(StructuralModel, MeshInfo), FeError> {
+        build_lap_model(self)
+    }
+    fn build_split(&self) -> Result<(StructuralModel, MeshInfo), FeError> {
+        let mut s = self.clone();
+        let h = self.mesh.element_size_m;
+        s.mesh.z = Some(
+            2 * self
+                .mesh
+                .z
+                .unwrap_or_else(|| crate::fe::mesh::segment_divisions(self.geometry.width_m, h)),
+        );
+        s.mesh.element_size_m = 0.5 * h;
+        s.mesh.y_adhesive *= 2;
+        s.mesh.y_strip *= 2;
+        let cost = lap_cost_estimate(&s)?;
+        if let Err(msg) = crate::fe::cost::check_memory(
+            cost.memory_bytes,
+            crate::fe::cost::available_memory_bytes(),
+        ) {
+            return Err(FeError::InvalidMesh {
+                key: "structure.lap.mesh".into(),
+                detail: format!(
+                    "the mesh refined twice per direction for the discretisation-error estimate ({:.2e} DOFs) {msg}",
+                    cost.n_dof as f64
+                ),
+            });
+        }
+        build_lap_model(&s)
+    }
+    fn measured_axes(&self) -> [bool; 3] {
+        measured_axes(&self.points)
+    }
+    fn key(&self) -> Family {
+        Family::Lap(self.clone())
+    }
+    fn from_key(f: &Family) -> Option<Self> {
+        match f {
+            Family::Lap(s) => Some(s.clone()),
+            Family::Block(_) => None,
+        }
+    }
 }
 
 /// The observed order of three successive differences (coarse to fine), NaN when they do not
@@ -313,30 +436,31 @@ fn estimate(levels: &[MeshLevel], k: usize, shares: &[f64], seen: &[f64]) -> Vec
 }
 
 /// A model of the refinement and its size.
-pub struct Refined {
-    pub spec: JointSpec,
+pub struct Refined<S = JointSpec> {
+    pub spec: S,
     pub model: StructuralModel,
     pub info: MeshInfo,
     pub discretisation: Discretisation,
 }
 
-type Memo = Vec<(JointSpec, RefineParams, JointSpec, Discretisation)>;
+type Memo = Vec<(Family, RefineParams, Family, Discretisation)>;
 static MEMO: Mutex<Memo> = Mutex::new(Vec::new());
 
 /// The chosen spec and the record of a refinement already run in this process.
-fn memo_get(spec: &JointSpec, p: &RefineParams) -> Option<(JointSpec, Discretisation)> {
+fn memo_get<S: Meshed>(spec: &S, p: &RefineParams) -> Option<(S, Discretisation)> {
     let m = MEMO.lock().ok()?;
+    let key = spec.key();
     m.iter()
-        .find(|(s, q, _, _)| s == spec && q == p)
-        .map(|(_, _, c, d)| (c.clone(), d.clone()))
+        .find(|(s, q, _, _)| *s == key && q == p)
+        .and_then(|(_, _, c, d)| Some((S::from_key(c)?, d.clone())))
 }
 
 /// The spec [`select`] chooses, without building its model when this process already chose it.
-pub fn select_spec(
-    spec: &JointSpec,
+pub fn select_spec<S: Meshed>(
+    spec: &S,
     p: &RefineParams,
     progress: &dyn Fn(&str),
-) -> Result<JointSpec, FeError> {
+) -> Result<S, FeError> {
     match memo_get(spec, p) {
         Some((chosen, _)) => Ok(chosen),
         None => Ok(select(spec, p, progress)?.spec),
@@ -362,13 +486,13 @@ pub fn level_spec(spec: &JointSpec, k: usize) -> JointSpec {
 /// next mesh would be too large (module doc). `progress` receives one line per mesh. Repeated calls
 /// with the same spec and settings reuse the choice (the same mesh in every command of a
 /// process).
-pub fn select(
-    spec: &JointSpec,
+pub fn select<S: Meshed>(
+    spec: &S,
     p: &RefineParams,
     progress: &dyn Fn(&str),
-) -> Result<Refined, FeError> {
+) -> Result<Refined<S>, FeError> {
     if let Some((chosen, d)) = memo_get(spec, p) {
-        let (mut model, info) = build_joint_model(&chosen)?;
+        let (mut model, info) = chosen.build()?;
         correct(&mut model, &d);
         return Ok(Refined {
             spec: chosen,
@@ -378,17 +502,17 @@ pub fn select(
         });
     }
     let mut levels: Vec<MeshLevel> = Vec::new();
-    let mut best: Option<(JointSpec, StructuralModel, MeshInfo, Vec<ModeError>)> = None;
+    let mut best: Option<(S, StructuralModel, MeshInfo, Vec<ModeError>)> = None;
     let mut note = String::new();
     let mut reached = false;
     for k in 0..MAX_LEVELS {
-        let s = level_spec(spec, k);
-        let cost = match joint_cost_estimate(&s) {
+        let s = spec.level(k);
+        let cost = match s.cost() {
             Ok(c) => c,
             Err(e) if k >= 2 => {
                 note = format!(
                     "the next mesh (edge cells {:.3} mm) is beyond this machine: {}",
-                    1e3 * s.mesh.edge_m.unwrap_or(0.0),
+                    1e3 * s.edge_m(),
                     e.detail()
                 );
                 break;
@@ -398,18 +522,18 @@ pub fn select(
         if k >= 2 && cost.n_dof > MAX_AUTO_DOFS {
             note = format!(
                 "the next mesh (edge cells {:.3} mm) would have about {} DOFs, more than the {MAX_AUTO_DOFS} the refinement goes to",
-                1e3 * s.mesh.edge_m.unwrap_or(0.0),
+                1e3 * s.edge_m(),
                 cost.n_dof
             );
             break;
         }
         let t0 = Instant::now();
-        let (model, info) = build_joint_model(&s)?;
+        let (model, info) = s.build()?;
         let (freqs, shares, seen) = modes_with_shares(
             &model,
             p.reference_modulus_pa,
             N_MODES,
-            &measured_axes(spec),
+            &spec.measured_axes(),
         )
         .map_err(|m| FeError::InvalidMesh {
             key: "structure.mesh".into(),
@@ -417,7 +541,7 @@ pub fn select(
         })?;
         levels.push(MeshLevel {
             level: k,
-            edge_m: s.mesh.edge_m.unwrap_or(0.0),
+            edge_m: s.edge_m(),
             n_dof: info.n_dof,
             n_elements: info.n_elements,
             freqs_hz: freqs,
@@ -428,14 +552,14 @@ pub fn select(
         progress(&match worst {
             Some(w) => format!(
                 "mesh level {k}: edge cells {:.3} mm, {} DOFs, estimated error {:.3} % (tolerance {:.3} %)",
-                1e3 * s.mesh.edge_m.unwrap_or(0.0),
+                1e3 * s.edge_m(),
                 info.n_dof,
                 100.0 * w,
                 100.0 * p.tolerance
             ),
             None => format!(
                 "mesh level {k}: edge cells {:.3} mm, {} DOFs",
-                1e3 * s.mesh.edge_m.unwrap_or(0.0),
+                1e3 * s.edge_m(),
                 info.n_dof
             ),
         });
@@ -465,7 +589,7 @@ pub fn select(
     };
     correct(&mut model, &d);
     if let Ok(mut m) = MEMO.lock() {
-        m.push((spec.clone(), *p, chosen.clone(), d.clone()));
+        m.push((spec.key(), *p, chosen.key(), d.clone()));
     }
     Ok(Refined {
         spec: chosen,
@@ -478,17 +602,17 @@ pub fn select(
 /// The estimate of a fixed mesh: the study's mesh against it refined twice per direction
 /// (eight times the DOFs), at the order [`ORDER`] of the singular corners (module doc). The
 /// model is not changed: [`correct`] applies the allowance.
-pub fn fixed(
-    spec: &JointSpec,
+pub fn fixed<S: Meshed>(
+    spec: &S,
     model: &StructuralModel,
     p: &RefineParams,
 ) -> Result<Discretisation, FeError> {
-    let (fine, _) = crate::fe::joint::build_joint_model_refined(spec, 2)?;
+    let (fine, _) = spec.build_split()?;
     let fail = |m: String| FeError::InvalidMesh {
         key: "structure.mesh".into(),
         detail: format!("the discretisation-error estimate: {m}"),
     };
-    let axes = measured_axes(spec);
+    let axes = spec.measured_axes();
     let (coarse, shares, seen) =
         modes_with_shares(model, p.reference_modulus_pa, N_MODES, &axes).map_err(fail)?;
     let (refined, _, _) =

@@ -373,6 +373,17 @@ pub fn adhesive_aspect_ratio(mesh: &HexMesh) -> (f64, f64) {
     (xy, any)
 }
 
+/// The lap joint's size and estimated cost (free DOFs, memory and time of the engine's
+/// factorisation), from its mesh's nodes before any matrix is allocated.
+pub fn lap_cost_estimate(spec: &LapSpec) -> Result<super::cost::CostEstimate, FeError> {
+    let mesh = lap_mesh(spec)?;
+    let n_free = mesh.fixed.iter().filter(|&&f| !f).count();
+    let [_, ny, nz] = mesh.grid.n_cells();
+    // one element slab: two lattice planes across the section
+    let band = (3 * 2 * super::cost::serendipity_nodes([0, ny, nz])) as f64;
+    Ok(super::cost::cost_of(3 * n_free, mesh.n_elements(), band))
+}
+
 /// Build the lap joint's structural model.
 pub fn build_lap_model(spec: &LapSpec) -> Result<(StructuralModel, MeshInfo), FeError> {
     let mesh = lap_mesh(spec)?;

@@ -124,6 +124,11 @@ impl Executor {
         self.lap = Instant::now();
         self.check()
     }
+    /// Record a part of the step the next [`Executor::lap`] closes (its time is already in
+    /// that lap; the manifest lists it for the breakdown).
+    pub(crate) fn detail(&mut self, step: impl Into<String>, seconds: f64) {
+        self.timings.push((format!("  {}", step.into()), seconds));
+    }
     /// Add `n` to the counter `name`.
     pub(crate) fn count(&mut self, name: &str, n: u64) {
         match self.counters.iter_mut().find(|c| c.0 == name) {

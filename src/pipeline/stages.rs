@@ -243,6 +243,11 @@ pub(super) fn level(
     let lik = run.inference_engine()?;
     r.posteriors = bayes::infer_level(bayes_run, &stages, lik.get(), level, &fits, progress)?;
     ex.lap(format!("inference {}", level.name))?;
+    for p in &r.posteriors {
+        for (step, s) in &p.step_seconds {
+            ex.detail(format!("inference {} {}: {step}", level.name, p.model), *s);
+        }
+    }
     if let Some(settings) = &plan.basins {
         bayes::basins_of_level(
             bayes_run,

@@ -65,16 +65,20 @@ pub fn joint_spec(s: &Structure) -> Option<JointSpec> {
                 PointMapping::Interpolate
             },
         },
-        points: s
-            .points
-            .iter()
-            .map(|p| PointSpec {
-                id: p.id,
-                position_m: p.position_m,
-                direction: p.direction,
-            })
-            .collect(),
+        points: point_specs(s),
     })
+}
+
+/// The mesher's points of a study's structure.
+pub fn point_specs(s: &Structure) -> Vec<PointSpec> {
+    s.points
+        .iter()
+        .map(|p| PointSpec {
+            id: p.id,
+            position_m: p.position_m,
+            direction: p.direction,
+        })
+        .collect()
 }
 
 /// A built model and, for meshed models, its size and timing.
@@ -155,23 +159,29 @@ pub fn build_model_with(
                 (m, Some(info))
             }
         }
-        StructureSource::Lap(spec) => {
+        StructureSource::Lap(spec, rule) => {
             let mut spec = spec.clone();
-            spec.points = s
-                .points
-                .iter()
-                .map(|p| PointSpec {
-                    id: p.id,
-                    position_m: p.position_m,
-                    direction: p.direction,
-                })
-                .collect();
-            let (m, info) = crate::fe::lap::build_lap_model(&spec).map_err(|e| StudyError {
-                file: file.to_string(),
-                key: e.key().to_string(),
-                message: e.detail(),
-            })?;
-            (m, Some(info))
+            spec.points = point_specs(s);
+            let lap_err = |e| fe_error(file, e);
+            let p = crate::discretisation::RefineParams {
+                tolerance: rule.tolerance,
+                allowance: rule.allowance,
+                reference_modulus_pa: rule.reference_modulus_pa,
+            };
+            if rule.refine {
+                let r = crate::discretisation::select(&spec, &p, progress).map_err(lap_err)?;
+                discretisation = Some(r.discretisation);
+                (r.model, Some(r.info))
+            } else {
+                let (mut m, info) = crate::fe::lap::build_lap_model(&spec).map_err(lap_err)?;
+                if rule.allowance {
+                    progress("estimating the mesh's discretisation error (the mesh refined twice per direction)");
+                    let d = crate::discretisation::fixed(&spec, &m, &p).map_err(lap_err)?;
+                    crate::discretisation::correct(&mut m, &d);
+                    discretisation = Some(d);
+                }
+                (m, Some(info))
+            }
         }
         StructureSource::MatrixMarket(im) => {
             let files = crate::fe::foreign::ImportFiles {

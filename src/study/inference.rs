@@ -4,7 +4,9 @@
 //! [inference]
 //! models = ["model3", "model4", "model5"]   # default: those of [[models]] among Models 3-5
 //! levels = ["L1", "L2"]                     # default: every level
-//! samplers = ["nuts", "tmcmc"]              # default: both
+//! samplers = ["nuts", "stepping_stone"]     # default: NUTS, and the evidence by the stepping-stone
+//!                                           # and importance sampling from NUTS's draws; add "tmcmc"
+//!                                           # for a sampler that needs no gradient (multimodal posteriors)
 //!
 //! [inference.noise]
 //! model = "coherence"          # "coherence" (default), "inferred" or "student_t"
@@ -304,7 +306,7 @@ pub(super) fn inference(
     let samplers = r
         .samplers
         .clone()
-        .unwrap_or_else(|| vec!["nuts".into(), "tmcmc".into()]);
+        .unwrap_or_else(|| vec!["nuts".into(), "stepping_stone".into()]);
     for (i, s) in samplers.iter().enumerate() {
         if !matches!(s.as_str(), "nuts" | "tmcmc" | "stepping_stone") {
             return Err(ctx.err(

@@ -16,7 +16,8 @@
 //! adhesive = { thickness = 0.001, nu = 0.44, rho = 1160.0 }
 //! # damping = { rayleigh_alpha = 0.0, rayleigh_beta = 0.0, structural = 0.0 }
 //! # mesh = { element_size = 0.005, y_adhesive = 2, y_strip = 2, z = 5, end_aspect = 4.0,
-//! #          max_aspect = 10.0, grading_ratio = 1.5, integration = "full", point_mapping = "interpolate" }
+//! #          max_aspect = 10.0, grading_ratio = 1.5, integration = "full", point_mapping = "interpolate",
+//! #          refine = true, tolerance = 0.005, allowance = true, reference_modulus = 5e6 }
 //! ```
 //!
 //! Points lie on either strip's surface: the lower strip is x in [0, L], y in [0, t1]; the
@@ -24,7 +25,8 @@
 
 use super::ctx::Ctx;
 use super::raw::{RawLap, RawLapMesh};
-use super::StudyError;
+use super::validate::{mesh_rule, MeshRuleKeys};
+use super::{MeshRule, StudyError};
 use crate::fe::element::Integration;
 use crate::fe::joint::{AdherendDamping, IsoMaterial};
 use crate::fe::lap::{LapGeometry, LapMeshParams, LapSpec, LapSupport};
@@ -32,7 +34,7 @@ use crate::fe::points::PointMapping;
 
 /// Validate `[structure.lap]` into a [`LapSpec`] without points (the study's points are
 /// added when the model is built).
-pub(super) fn lap(ctx: &Ctx, l: &RawLap) -> Result<LapSpec, StudyError> {
+pub(super) fn lap(ctx: &Ctx, l: &RawLap) -> Result<(LapSpec, MeshRule), StudyError> {
     let k = |s: &str| format!("structure.lap.{s}");
     let t1 = ctx.positive(&k("thickness"), l.thickness, "m")?;
     let geometry = LapGeometry {
@@ -169,7 +171,18 @@ pub(super) fn lap(ctx: &Ctx, l: &RawLap) -> Result<LapSpec, StudyError> {
             }
         },
     };
-    Ok(LapSpec {
+    let rule = mesh_rule(
+        ctx,
+        "structure.lap.mesh",
+        MeshRuleKeys {
+            refine: m.and_then(|m| m.refine),
+            tolerance: m.and_then(|m| m.tolerance),
+            allowance: m.and_then(|m| m.allowance),
+            reference_modulus: m.and_then(|m| m.reference_modulus),
+        },
+        false,
+    )?;
+    let spec = LapSpec {
         geometry,
         support,
         adherend,
@@ -178,5 +191,6 @@ pub(super) fn lap(ctx: &Ctx, l: &RawLap) -> Result<LapSpec, StudyError> {
         damping,
         mesh,
         points: Vec::new(),
-    })
+    };
+    Ok((spec, rule))
 }

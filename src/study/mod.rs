@@ -139,7 +139,7 @@ pub enum StructureSource {
     Mesher(Joint),
     /// A single-lap joint built by the mesher (`structure.joint = "single_lap"`); its points
     /// are the study's, added when the model is built.
-    Lap(crate::fe::lap::LapSpec),
+    Lap(crate::fe::lap::LapSpec, MeshRule),
     MatrixMarket(Import),
 }
 

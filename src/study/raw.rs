@@ -270,6 +270,14 @@ pub struct RawLapAdhesive {
 #[serde(deny_unknown_fields)]
 pub struct RawLapMesh {
     pub element_size: Option<f64>,
+    /// Refine the bond line until the tolerance is met (default true).
+    pub refine: Option<bool>,
+    /// Largest estimated discretisation error of an in-band mode (relative).
+    pub tolerance: Option<f64>,
+    /// The remaining discretisation error enters the results (default true).
+    pub allowance: Option<bool>,
+    /// Storage modulus of the adhesive for the estimate's modes (Pa).
+    pub reference_modulus: Option<f64>,
     pub y_adhesive: Option<usize>,
     pub y_strip: Option<usize>,
     pub z: Option<usize>,

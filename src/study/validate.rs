@@ -229,7 +229,8 @@ pub(super) fn structure(ctx: &Ctx, s: &RawStructure) -> Result<Structure, StudyE
                     "joint = \"single_lap\" needs [structure.lap] with length, thickness, width, overlap, material and adhesive",
                 )
             })?;
-            StructureSource::Lap(super::lap::lap(ctx, l)?)
+            let (spec, rule) = super::lap::lap(ctx, l)?;
+            StructureSource::Lap(spec, rule)
         }
         "mesher" => {
             if let Some(j) = s.joint.as_deref().filter(|j| *j != "beam_on_block") {
@@ -523,7 +524,17 @@ fn joint(
             }
         }
     };
-    let mesh_rule = mesh_rule(ctx, m, &size)?;
+    let mesh_rule = mesh_rule(
+        ctx,
+        "structure.mesh",
+        MeshRuleKeys {
+            refine: m.refine,
+            tolerance: m.tolerance,
+            allowance: m.allowance,
+            reference_modulus: m.reference_modulus,
+        },
+        matches!(size, MeshSize::Divisions { .. }),
+    )?;
     let full_integration = match m.integration.as_deref().unwrap_or("full") {
         "full" => true,
         "reduced" => false,
@@ -565,14 +576,26 @@ fn joint(
     })
 }
 
-/// `structure.mesh`'s refine, tolerance and allowance keys: refinement by default with an
-/// element size; `divisions` fix the mesh.
-fn mesh_rule(ctx: &Ctx, m: &RawMesh, size: &MeshSize) -> Result<MeshRule, StudyError> {
-    let fixed = matches!(size, MeshSize::Divisions { .. });
+/// The mesh's refine, tolerance, allowance and reference_modulus keys as given.
+pub(super) struct MeshRuleKeys {
+    pub refine: Option<bool>,
+    pub tolerance: Option<f64>,
+    pub allowance: Option<bool>,
+    pub reference_modulus: Option<f64>,
+}
+
+/// A mesh table's (`table`) refine, tolerance and allowance keys: refinement by default with
+/// an element size; `divisions` (`fixed`) fix the mesh.
+pub(super) fn mesh_rule(
+    ctx: &Ctx,
+    table: &str,
+    m: MeshRuleKeys,
+    fixed: bool,
+) -> Result<MeshRule, StudyError> {
     let refine = match (m.refine, fixed) {
         (Some(true), true) => {
             return Err(ctx.err(
-                "structure.mesh.refine",
+                format!("{table}.refine"),
                 "true, but divisions fix the mesh: give element_size (the largest cell) to let rfmlab refine, or drop refine",
             ))
         }
@@ -583,14 +606,14 @@ fn mesh_rule(ctx: &Ctx, m: &RawMesh, size: &MeshSize) -> Result<MeshRule, StudyE
         Some(t) if t.is_finite() && t > 0.0 && t < 0.1 => t,
         Some(t) => {
             return Err(ctx.err(
-                "structure.mesh.tolerance",
+                format!("{table}.tolerance"),
                 format!("{t} is not a relative frequency error in (0, 0.1): give e.g. 0.005 (0.5 % of each in-band mode)"),
             ))
         }
         None => MeshRule::DEFAULT_TOLERANCE,
     };
     let reference_modulus_pa = match m.reference_modulus {
-        Some(e) => ctx.positive("structure.mesh.reference_modulus", e, "Pa")?,
+        Some(e) => ctx.positive(&format!("{table}.reference_modulus"), e, "Pa")?,
         None => MeshRule::DEFAULT_REFERENCE_MODULUS_PA,
     };
     Ok(MeshRule {

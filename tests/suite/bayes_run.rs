@@ -233,7 +233,7 @@ fn bad_inference_input_exits_2_naming_the_key() {
         ("n_averages = 189.5", "n_averages = -3", "inference.noise.n_averages"),
         ("chains = 2", "chains = 0", "inference.nuts.chains"),
         ("[inference.nuts]", "[inference.nuts]\ntarget_accept = 1.5", "inference.nuts.target_accept"),
-        ("samplers = [\"nuts\", \"tmcmc\", \"stepping_stone\"]", "samplers = [\"gibbs\"]", "inference.samplers[0]"),
+        ("samplers = [\"nuts\", \"stepping_stone\"]", "samplers = [\"gibbs\"]", "inference.samplers[0]"),
         ("path = \"reference\"", "path = \"bridge\"", "inference.stepping_stone.path"),
         ("replicas = 8", "replicas = 8\nwiden = 0.5", "inference.stepping_stone.widen"),
         ("model = \"coherence\"", "model = \"laplace\"", "inference.noise.model"),

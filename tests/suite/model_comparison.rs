@@ -143,7 +143,7 @@ fn loo_and_waic_equal_arviz_and_evidence_estimators_agree() {
         (r.log_evidence, r.se)
     };
     for (model, d) in [("model3", 3.0), ("model4", 4.0)] {
-        for est in ["laplace", "tmcmc", "tmcmc_is", "stepping_stone"] {
+        for est in ["laplace", "tmcmc", "tmcmc_is", "nuts_is", "stepping_stone"] {
             let a = get(model, est, "declared").0;
             let b = get(model, est, "widened_10x").0;
             close(&format!("{model} {est} widening"), b - a, -d * 10f64.ln());
@@ -167,6 +167,15 @@ fn loo_and_waic_equal_arviz_and_evidence_estimators_agree() {
         assert!(
             (r - s).abs() <= 3.5 * sr.hypot(ss),
             "{model}: TMCMC reweighted {r} +- {sr} vs stepping-stone {s} +- {ss}"
+        );
+        // Importance sampling from a reference fitted to NUTS's draws: the default route's
+        // second estimator beside the stepping-stone.
+        let (n, sn) = get(model, "nuts_is", "declared");
+        eprintln!("{model}: NUTS reweighted {n:.3} +- {sn:.3}");
+        assert!(sn > 0.0 && sn < 0.1, "{model}: nuts_is se {sn}");
+        assert!(
+            (n - s).abs() <= 3.5 * sn.hypot(ss),
+            "{model}: NUTS reweighted {n} +- {sn} vs stepping-stone {s} +- {ss}"
         );
     }
     let p = results

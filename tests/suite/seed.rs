@@ -103,7 +103,7 @@ fn bayes_study(seed: u64) -> rfmlab::Study {
         )
         .replace("levels = [\"L1\", \"L2\"]", "levels = [\"L1\"]")
         .replace(
-            "samplers = [\"nuts\", \"tmcmc\", \"stepping_stone\"]",
+            "samplers = [\"nuts\", \"stepping_stone\"]",
             "samplers = [\"nuts\"]",
         )
         .replace("chains = 4", "chains = 2")

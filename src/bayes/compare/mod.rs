@@ -1,8 +1,8 @@
 //! Model comparison at one level and model, computed while the posterior is alive (called
 //! from [`super::infer_level`] after the samplers): the evidence per estimator (Laplace, the
 //! samplers', the stepping-stone of `stepping_stone.rs`, by default from a reference fitted to
-//! the posterior draws, [`mod@reference`], and TMCMC's final importance reweighting `tmcmc_is`,
-//! with the stepping-stone only), the evidence under priors widened ten-fold ([`widening`]),
+//! the posterior draws, [`mod@reference`], and the importance reweightings of TMCMC's particles
+//! `tmcmc_is` and NUTS's draws `nuts_is`, with the stepping-stone only), the evidence under priors widened ten-fold ([`widening`]),
 //! and the predictive criteria on thinned posterior draws (`criteria.rs`: the pointwise log
 //! likelihood per line with PSIS-LOO and WAIC, FRAC per FRF, SCC(w), ACC(w), standardised
 //! residuals and a chi-square test per channel at the MAP). Across models (Bayes factors,
@@ -33,7 +33,7 @@ pub const MAX_DRAWS: usize = 400;
 /// One evidence estimate.
 #[derive(Clone, Debug)]
 pub struct EvidenceRow {
-    /// "laplace", "tmcmc", "stepping_stone" or "tmcmc_is".
+    /// "laplace", "tmcmc", "stepping_stone", "tmcmc_is" or "nuts_is".
     pub estimator: String,
     /// "declared" or "widened_10x".
     pub prior: String,
@@ -141,22 +141,26 @@ pub fn compare(
         c.evidence.push(row);
         c.notes.extend(notes);
     }
-    // TMCMC's final importance reweighting, with the comparison part (stepping-stone) only.
+    // Importance reweightings of TMCMC's particles and NUTS's draws, with the comparison part
+    // (stepping-stone) only: each a second estimator beside the stepping-stone.
     if let Some(ss) = &inf.stepping_stone {
-        match reference::tmcmc_reweighted(post, samplers, ss.widen, ss.nu, at.seed) {
-            Some(Ok(r)) => {
-                c.evidence.push(EvidenceRow {
-                    estimator: "tmcmc_is".into(),
-                    prior: "declared".into(),
-                    log_evidence: r.log_evidence + lin_shift,
-                    se: r.se,
-                    n_loglik: r.n_loglik,
-                    seconds: r.seconds,
-                });
-                c.notes.push(r.note);
+        for sampler in [Sampler::Tmcmc, Sampler::Nuts] {
+            let est = format!("{}_is", sampler.name());
+            match reference::reweighted(sampler, post, samplers, ss.widen, ss.nu, at.seed) {
+                Some(Ok(r)) => {
+                    c.evidence.push(EvidenceRow {
+                        estimator: est,
+                        prior: "declared".into(),
+                        log_evidence: r.log_evidence + lin_shift,
+                        se: r.se,
+                        n_loglik: r.n_loglik,
+                        seconds: r.seconds,
+                    });
+                    c.notes.push(r.note);
+                }
+                Some(Err(e)) => c.notes.push(format!("{est} not computed: {e}")),
+                None => {}
             }
-            Some(Err(e)) => c.notes.push(format!("tmcmc_is not computed: {e}")),
-            None => {}
         }
     }
     // The posterior draws of the criteria: NUTS's when it ran, else TMCMC's.

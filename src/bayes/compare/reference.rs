@@ -1,9 +1,10 @@
 //! The reference density of the generalized stepping-stone evidence
 //! ([`crate::inference::reference`]) for one model at one level: a Student-t fitted to the
 //! posterior draws in the samplers' unconstrained coordinates (NUTS's when it ran, else
-//! TMCMC's), or to the Laplace mode and covariance when there are no draws; and TMCMC's
-//! evidence by a final importance reweighting from a Student-t fitted to its particles
-//! (`Z = E_q[L p / q]`, [`crate::inference::importance_evidence`]). Checked by the suite's
+//! TMCMC's), or to the Laplace mode and covariance when there are no draws; and the evidence
+//! by importance sampling from a Student-t fitted to a sampler's draws (TMCMC's final
+//! particles, `tmcmc_is`; NUTS's draws, `nuts_is`; `Z = E_q[L p / q]`,
+//! [`crate::inference::importance_evidence`]). Checked by the suite's
 //! `evidence_quadrature` (both estimators against quadrature) and `model_comparison` tests.
 
 use crate::bayes::posterior::SamplerResult;
@@ -76,14 +77,18 @@ pub struct Reweighted {
     pub note: String,
 }
 
-/// Independent draws of TMCMC's final importance reweighting.
-pub const TMCMC_IS_DRAWS: usize = 4000;
+/// Independent draws of a sampler's importance reweighting.
+pub const IS_DRAWS: usize = 4000;
 
-/// TMCMC's evidence by a final importance reweighting: a Student-t reference fitted to its
-/// final particles (in the unconstrained coordinates, widened `widen`, `nu` degrees of
-/// freedom) and [`TMCMC_IS_DRAWS`] independent draws from it
-/// ([`crate::inference::importance_evidence`]). `None` when TMCMC did not run.
-pub fn tmcmc_reweighted(
+/// The evidence by importance sampling from `sampler`'s draws (TMCMC's final particles, or
+/// NUTS's draws): a Student-t reference fitted to them (in the unconstrained coordinates,
+/// widened `widen`, `nu` degrees of freedom) and [`IS_DRAWS`] independent draws from it
+/// ([`crate::inference::importance_evidence`], `Z = E_q[L p / q]`). Its error differs from
+/// the stepping-stone's (one importance step from the reference instead of a tempered path
+/// through it), which makes the pair a check of each other at the cost of [`IS_DRAWS`]
+/// likelihood evaluations. `None` when the sampler did not run.
+pub fn reweighted(
+    sampler: Sampler,
     post: &FrfPosterior<'_>,
     samplers: &[SamplerResult],
     widen: f64,
@@ -92,17 +97,14 @@ pub fn tmcmc_reweighted(
 ) -> Option<Result<Reweighted, EvidenceRefError>> {
     let s = samplers
         .iter()
-        .find(|s| s.sampler == Sampler::Tmcmc && !s.draws.lp.is_empty())?;
+        .find(|s| s.sampler == sampler && !s.draws.lp.is_empty())?;
     let t0 = std::time::Instant::now();
     let x = unconstrained_draws(post, s);
     let run = Reference::from_draws(&x, widen, nu)
         .map_err(EvidenceRefError::from)
         .and_then(|q| {
             Ok(crate::inference::importance_evidence(
-                post,
-                &q,
-                TMCMC_IS_DRAWS,
-                seed,
+                post, &q, IS_DRAWS, seed,
             )?)
         });
     Some(run.map(|r| Reweighted {
@@ -111,9 +113,11 @@ pub fn tmcmc_reweighted(
         n_loglik: r.n_loglik,
         seconds: t0.elapsed().as_secs_f64(),
         note: format!(
-            "tmcmc_is: TMCMC's {} particles fit a Student-t reference (nu {nu}, sd {widen} x theirs); {} independent draws from it, weights' effective sample size {:.0} %",
+            "{}_is: {}'s {} draws fit a Student-t reference (nu {nu}, sd {widen} x theirs); {} independent draws from it, weights' effective sample size {:.0} %",
+            sampler.name(),
+            sampler.name().to_uppercase(),
             x.len(),
-            TMCMC_IS_DRAWS,
+            IS_DRAWS,
             100.0 * r.ess
         ),
     }))

@@ -2,7 +2,7 @@
 //!
 //! | table | columns (unit) |
 //! |---|---|
-//! | `evidence` | level, model, estimator (laplace / tmcmc / tmcmc_is (TMCMC's final importance reweighting) / stepping_stone), prior (declared / widened_10x), log_evidence, se (nats; NaN for Laplace), n_loglik, seconds (s; NaN for Laplace), inside_sd (1) |
+//! | `evidence` | level, model, estimator (laplace / tmcmc / tmcmc_is (TMCMC's final importance reweighting) / nuts_is (importance sampling from a reference fitted to NUTS's draws) / stepping_stone), prior (declared / widened_10x), log_evidence, se (nats; NaN for Laplace), n_loglik, seconds (s; NaN for Laplace), inside_sd (1) |
 //! | `model_comparison` | level, model, log_evidence_<estimator>, se_<estimator> (nats), estimator (the one the next columns use), log_bf_vs_best (nats), probability, log_bf_widened_10x, probability_widened_10x, max_estimator_gap (nats), elpd_loo, elpd_loo_se, p_loo, max_pareto_k, elpd_waic, elpd_waic_se, p_waic, n_draws, frac_<channel>_map, _median, _lo, _hi (95 %) |
 //! | `ppc` | level, model, channel, line, freq_hz (Hz), residual_re, residual_im (standardised, 1), chi2, dof, p_value (per channel, repeated) |
 //! | `predictive` | level, model, criterion (scc / acc), freq_hz (Hz), map, median, lo, hi (95 %) |
@@ -17,10 +17,11 @@ use crate::output::{Columns as Cols, Table};
 use crate::stage::RunError;
 
 /// Estimators in order of preference for the Bayes factors.
-pub(crate) const PREFERENCE: [&str; 4] = ["stepping_stone", "tmcmc_is", "tmcmc", "laplace"];
+pub(crate) const PREFERENCE: [&str; 5] =
+    ["stepping_stone", "tmcmc_is", "nuts_is", "tmcmc", "laplace"];
 
 /// Estimators that a sampler's disagreement check compares.
-const SAMPLED: [&str; 3] = ["tmcmc", "tmcmc_is", "stepping_stone"];
+const SAMPLED: [&str; 4] = ["tmcmc", "tmcmc_is", "nuts_is", "stepping_stone"];
 
 pub(crate) fn evidence_of(p: &PosteriorResult, estimator: &str, prior: &str) -> Option<(f64, f64)> {
     p.compare
