@@ -98,8 +98,15 @@ fn map_of(
                 .map(|j| 0.5 * m.adhesive_share * j.re / e)
                 .collect(),
         );
-        let left = m.rel_error - 0.5 * m.adhesive_share * d.stiffness_excess;
-        sd.push((ESTIMATE_SHARE_CENTRE * left).hypot(MODE_SD * m.rel_error));
+        let left = m.rel_error - d.explained(m);
+        // the adherends' correction is not a factor on the law: its uncertainty stays with the
+        // mode
+        let adherend = 0.5 * (1.0 - m.adhesive_share) * ESTIMATE_SHARE_SD * d.adherend_excess;
+        sd.push(
+            (ESTIMATE_SHARE_CENTRE * left)
+                .hypot(MODE_SD * m.rel_error)
+                .hypot(adherend),
+        );
     }
     let k = g.len();
     if k == 0 {

@@ -441,6 +441,8 @@ fn discretisation_table(d: &crate::discretisation::Discretisation) -> Result<Tab
         .and_then(|t| t.push_bool("reached", vec![d.reached; n]))
         .and_then(|t| t.push_f64("stiffness_excess", "1", rep(d.stiffness_excess)))
         .and_then(|t| t.push_f64("stiffness_excess_sd", "1", rep(d.stiffness_excess_sd)))
+        .and_then(|t| t.push_f64("adherend_excess", "1", rep(d.adherend_excess)))
+        .and_then(|t| t.push_f64("adherend_excess_sd", "1", rep(d.adherend_excess_sd)))
         .and_then(|t| t.push_bool("allowance", vec![d.allowance; n]))
         .map_err(RunError::Output)?;
     Ok(t)

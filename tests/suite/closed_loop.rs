@@ -3,10 +3,12 @@
 //! * a 12 g mass at point 4, a 4 % gain on channel 3, a beam modulus 4 % high: the loop names
 //!   the injected effect first, identifies its size within 15 % and within 2 sd, brings the
 //!   law's parameters back within 3 sd of the truth, and leaves normalised chi-square <= 1.2;
-//! * null data (no effect, 1 seed; 20 with RFMLAB_LONG=1): nothing is accepted in at least 95 %
-//!   of seeds.
+//! * null data (no effect): nothing is accepted in at least 95 % of seeds.
 //!
-//! The gain and beam cases run with RFMLAB_LONG=1 (about 2 min on 2 busy cores).
+//! The default suite runs the mass and 3 null seeds. Ignored tests run the full sets
+//! (`cargo test --release --test suite -- --ignored NAME`): `the_loop_finds_each_injected_effect`
+//! adds the gain and beam cases (about 2 min more on 2 busy cores),
+//! `null_data_accept_nothing_in_19_of_20_seeds` runs 20 null seeds.
 
 use crate::spring_model::{measured_engine, Normal};
 use rfmlab::closed_loop::{default_candidates, run_closed_loop, ClosedLoopParams};
@@ -81,10 +83,6 @@ pub(crate) fn posterior<'a>(eng: &'a DenseEngine, x: Vec<C64>, v: Vec<f64>) -> F
     FrfPosterior::new(lik, priors).unwrap()
 }
 
-pub(crate) fn long() -> bool {
-    std::env::var("RFMLAB_LONG").is_ok_and(|v| v == "1")
-}
-
 fn candidates() -> Vec<Effect> {
     default_candidates(&[1, 2, 3, 4], &[(0, 1), (1, 2), (2, 3), (3, 4)])
 }
@@ -94,15 +92,27 @@ fn x0(post: &FrfPosterior<'_>) -> Vec<f64> {
     post.unconstrained(&[TRUTH[0] * 1.2, TRUTH[1] * 0.8, TRUTH[2] * 1.2])
 }
 
+/// A 12 g mass at point 4.
 #[test]
+fn the_loop_finds_an_injected_mass() {
+    loop_finds_each_injected_effect(vec![(Effect::PointMass { point: 3, id: 4 }, 0.012)]);
+}
+
+/// The mass, a 4 % gain on channel 3 and a beam modulus 4 % high (known wrong, see below).
+#[test]
+#[ignore = "slow: the mass, gain and beam cases, about 2 min more than the mass alone on 2 busy cores; run with --ignored"]
 fn the_loop_finds_each_injected_effect() {
+    loop_finds_each_injected_effect(vec![
+        (Effect::PointMass { point: 3, id: 4 }, 0.012),
+        (Effect::Gain { channel: 2, id: 3 }, 0.04),
+        (Effect::BeamModulus, 0.04),
+    ]);
+}
+
+/// Data with each of `cases` (effect, size) in turn, seed 7: the loop must name the effect
+/// first and meet the criteria of the module's doc.
+fn loop_finds_each_injected_effect(cases: Vec<(Effect, f64)>) {
     let eng = measured_engine();
-    // The mass by default; the gain and the beam modulus too with RFMLAB_LONG=1.
-    let mut cases = vec![(Effect::PointMass { point: 3, id: 4 }, 0.012)];
-    if long() {
-        cases.push((Effect::Gain { channel: 2, id: 3 }, 0.04));
-        cases.push((Effect::BeamModulus, 0.04));
-    }
     for (effect, value) in cases {
         // KNOWN WRONG (not asserted beyond the honest report): on the dense
         // chain a +4 % beam modulus drives Model 3's starting fit to two prior edges (E1 and
@@ -228,12 +238,18 @@ fn the_loop_finds_each_injected_effect() {
 
 #[test]
 fn null_data_accept_nothing() {
+    null_data_accept_nothing_in(3);
+}
+
+#[test]
+#[ignore = "slow: the loop on 20 null seeds; run time not measured; run with --ignored"]
+fn null_data_accept_nothing_in_19_of_20_seeds() {
+    null_data_accept_nothing_in(20);
+}
+
+/// Null data at seeds 100 .. 100 + n: false alarms on at most 5 % of them.
+fn null_data_accept_nothing_in(n: u64) {
     let eng = measured_engine();
-    let n = if std::env::var("RFMLAB_LONG").is_ok_and(|v| v == "1") {
-        20
-    } else {
-        3
-    };
     let mut false_alarms = 0;
     for seed in 0..n {
         let (x, v) = simulate(&eng, None, 100 + seed);
@@ -253,7 +269,7 @@ fn null_data_accept_nothing() {
         }
         assert!(res.before.residuals.chi2_normalised < 1.2);
     }
-    // At most 5 % of seeds (0 of 3 by default).
+    // At most 5 % of seeds (0 of 3, 1 of 20).
     assert!(
         false_alarms as f64 <= 0.05 * n as f64,
         "{false_alarms} of {n}"

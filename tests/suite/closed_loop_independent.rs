@@ -14,8 +14,11 @@
 //!
 //! The verdict: `nothing_missing` on the null, `explained` with the injected effect.
 //!
-//! By default level L1 (null and a 4 % gain on channel 3); RFMLAB_LONG=1 adds level L2's null
-//! and a 50 us delay on channel 4 at L1.
+//! The default suite runs level L1 (null and a 4 % gain on channel 3). Ignored tests
+//! (`cargo test --release --test suite -- --ignored NAME`) run the full sets:
+//! `independent_null_data_at_both_levels_accept_nothing_and_recover_the_truth` (L1 and L2) and
+//! `independent_data_with_each_channel_error_name_it` (the gain and a 50 us delay on channel 4
+//! at L1).
 
 use crate::closed_loop_td::judge;
 use rfmlab::common::C64;
@@ -25,10 +28,6 @@ use std::path::{Path, PathBuf};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn long() -> bool {
-    std::env::var("RFMLAB_LONG").is_ok_and(|v| v == "1")
 }
 
 /// What to apply to response channel `id`'s H1 before the loop sees it.
@@ -141,9 +140,19 @@ fn null_failures(l: &DiagnoseLevel) -> Vec<String> {
 }
 
 #[test]
-fn independent_null_data_accept_nothing_and_recover_the_truth() {
+fn independent_null_data_at_l1_accept_nothing_and_recover_the_truth() {
+    null_data_accept_nothing_at(&["L1"]);
+}
+
+#[test]
+#[ignore = "slow: the closed loop on the independent null data at L1 and L2; run time not measured; run with --ignored"]
+fn independent_null_data_at_both_levels_accept_nothing_and_recover_the_truth() {
+    null_data_accept_nothing_at(&["L1", "L2"]);
+}
+
+/// The null criteria ([`null_failures`]) at each of `levels`.
+fn null_data_accept_nothing_at(levels: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
-    let levels: &[&str] = if long() { &["L1", "L2"] } else { &["L1"] };
     let mut failures = Vec::new();
     for level in levels {
         let l = run(dir.path(), level, Inject::Nothing);
@@ -156,20 +165,33 @@ fn independent_null_data_accept_nothing_and_recover_the_truth() {
     assert!(failures.is_empty(), "failures:\n{}", failures.join("\n"));
 }
 
+/// A 4 % gain on channel 3.
 #[test]
 fn independent_data_with_a_channel_error_name_it() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut cases = vec![(Inject::Gain { id: 3, g: 0.04 }, "gain_ch3", 0.04)];
-    if long() {
-        cases.push((
+    channel_errors_are_named(vec![(Inject::Gain { id: 3, g: 0.04 }, "gain_ch3", 0.04)]);
+}
+
+/// The gain and a 50 us delay on channel 4.
+#[test]
+#[ignore = "slow: the closed loop on the independent L1 data twice, with a gain and with a delay; run time not measured; run with --ignored"]
+fn independent_data_with_each_channel_error_name_it() {
+    channel_errors_are_named(vec![
+        (Inject::Gain { id: 3, g: 0.04 }, "gain_ch3", 0.04),
+        (
             Inject::Delay {
                 id: 4,
                 tau_s: 50e-6,
             },
             "delay_ch4",
             50e-6,
-        ));
-    }
+        ),
+    ]);
+}
+
+/// Each of `cases` (injection, expected name, size) applied to the L1 data: `explained` with
+/// the injected effect named first and sized ([`judge`]).
+fn channel_errors_are_named(cases: Vec<(Inject, &str, f64)>) {
+    let dir = tempfile::tempdir().unwrap();
     let mut failures = Vec::new();
     for (inject, name, size) in cases {
         let l = run(dir.path(), "L1", inject);

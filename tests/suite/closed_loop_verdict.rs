@@ -23,7 +23,8 @@
 //!   directions; `explained` by `mass3_pt3` alone, sized within 15 % and its interval, every
 //!   Model 4 parameter within 3 sd of the truth (in the default suite).
 //!
-//! The other independent cases run with RFMLAB_LONG=1 (minutes each on 2 busy cores).
+//! The other independent cases are ignored tests, minutes each on 2 busy cores (`cargo test
+//! --release --test suite -- --ignored closed_loop_verdict::independent`).
 
 use crate::closed_loop::{lines, posterior, simulate, TRUTH};
 use crate::common_data::data;
@@ -243,7 +244,7 @@ fn explained_wrongly(l: &DiagnoseLevel, expected: &[&str]) -> bool {
 /// built once and cached, and the loop on it): `cargo test --release --test suite -- --ignored
 /// independent_compliant_base_with_base_springs`.
 #[test]
-#[ignore]
+#[ignore = "slow: the two-shape term ROM and the closed loop on it (minutes); run with --ignored"]
 fn independent_compliant_base_with_base_springs_is_confounded_around_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let l = run_independent_with(dir.path(), "support_td", "L1", "\"all\"");

@@ -12,9 +12,10 @@
 //!    (sparse LU per line) with the paper's parameters, to within 0.5 % by the deterministic
 //!    RFM and by the MAP of a posterior with flat priors.
 //!
-//! `DESIGN_SPACE_FAST` geometries run in the normal suite; `RFMLAB_LONG=1` runs
-//! `DESIGN_SPACE_LONG` of them (`RFMLAB_LONG=1 cargo test --release --test suite --
-//! design_space --nocapture` prints the pass count, worst error and slowest geometry).
+//! `DESIGN_SPACE_FAST` geometries run in the normal suite; the ignored
+//! `design_space_40_joints_mesh_certify_and_identify_model4` runs `DESIGN_SPACE_LONG` of them
+//! (`cargo test --release --test suite -- --ignored design_space_40 --nocapture` prints the
+//! pass count, worst error and slowest geometry).
 
 use rand::{RngExt, SeedableRng};
 use rfmlab::common::{Direction, C64};
@@ -296,10 +297,11 @@ fn run_design_space(n: usize) {
 
 #[test]
 fn design_space_joints_mesh_certify_and_identify_model4() {
-    let long = std::env::var("RFMLAB_LONG").is_ok_and(|v| v == "1");
-    run_design_space(if long {
-        DESIGN_SPACE_LONG
-    } else {
-        DESIGN_SPACE_FAST
-    });
+    run_design_space(DESIGN_SPACE_FAST);
+}
+
+#[test]
+#[ignore = "slow: 40 seeded joints, each meshed, its ROM certified, data made by the full model and Model 4 identified twice; run time not measured; run with --ignored"]
+fn design_space_40_joints_mesh_certify_and_identify_model4() {
+    run_design_space(DESIGN_SPACE_LONG);
 }

@@ -48,15 +48,31 @@ fn the_estimate_s_rules() {
     assert!(observed_order(0.1, 0.2).is_nan());
     assert!(observed_order(0.1, -0.05).is_nan());
     assert_eq!(extrapolated_error(0.2, f64::NAN), 0.4);
-    // one excess explains 2 e / f = phi delta exactly: no scatter, sd half the excess
-    let (d, sd) = stiffness_excess(&[mode(0.005, 1.0, 1.0), mode(0.0025, 0.5, 1.0)]);
+    // one adhesive excess explains 2 e / f = phi delta_a exactly: no scatter, sd half the
+    // excess, nothing charged to the adherends
+    let x = stiffness_excess(&[mode(0.005, 1.0, 1.0), mode(0.0025, 0.5, 1.0)]);
     assert!(
-        (d - 0.01).abs() < 1e-12 && (sd - 0.005).abs() < 1e-12,
-        "{d} {sd}"
+        (x.adhesive - 0.01).abs() < 1e-9 && (x.adhesive_sd - 0.005).abs() < 1e-9,
+        "{x:?}"
     );
+    assert!(x.adherend.abs() < 1e-9, "{x:?}");
     // a mode the points do not see does not count
-    let (d, _) = stiffness_excess(&[mode(0.005, 1.0, 1.0), mode(0.05, 1.0, 0.0)]);
-    assert!((d - 0.01).abs() < 1e-12, "{d}");
+    let x = stiffness_excess(&[mode(0.005, 1.0, 1.0), mode(0.05, 1.0, 0.0)]);
+    assert!((x.adhesive - 0.01).abs() < 1e-12, "{x:?}");
+    // modes of a lap joint (1-13 % in the bond line) stiff through the strips: the excess is
+    // the adherends', not 20-100 times it in the adhesive
+    let lap = [mode(0.0015, 0.02, 1.0), mode(0.0014, 0.13, 1.0)];
+    let x = stiffness_excess(&lap);
+    assert!(
+        (x.adherend - 0.003).abs() < 3e-4 && x.adhesive.abs() < 0.003,
+        "{x:?}"
+    );
+    // every mode the adhesive's: the ridge keeps the adherends' part at zero
+    let x = stiffness_excess(&[mode(0.004, 0.98, 1.0), mode(0.0039, 0.97, 1.0)]);
+    assert!(
+        x.adherend.abs() < 5e-4 && (x.adhesive - 0.0082).abs() < 3e-4,
+        "{x:?}"
+    );
 }
 
 /// The paper's joint as the mesher builds it (the reference's geometry and materials).
