@@ -1,9 +1,9 @@
 //! The mesh's remaining discretisation error in the posterior (docs/method.md, "The mesh's
 //! discretisation error").
 //!
-//! With the allowance the model's adhesive stiffness is already corrected by the estimated
-//! excess ([`crate::discretisation`]: S / (1 + c delta), c the estimate's calibration
-//! [`ESTIMATE_SHARE_CENTRE`]). Two uncertainties are left, and both are marginalised here:
+//! With the allowance the model's adhesive and adherend stiffnesses are already corrected by the
+//! estimated excesses ([`crate::discretisation`]: S / (1 + c delta), K_b / (1 + c delta_b), c
+//! the estimate's calibration [`ESTIMATE_SHARE_CENTRE`]). Two uncertainties are left, and both are marginalised here:
 //!
 //! 1. **The correction's size.** c has an sd of [`ESTIMATE_SHARE_SD`], so the adhesive's
 //!    stiffness is uncertain by a factor (1 + u), u ~ N(0, (sd delta)^2). K_b + E*(w) S depends
@@ -11,9 +11,11 @@
 //!    scales E*(w) (moduli in Pa, viscosities in Pa s): each draw's scale parameters are
 //!    multiplied by one draw of (1 + u), and the Laplace covariance gains u's variance times
 //!    theta_i theta_j.
-//! 2. **What one delta leaves of each mode.** Mode k's relative error eps_k = e_k / f_k is
-//!    r_k = eps_k - phi_k delta / 2 away from the common correction, and eps_k itself is
-//!    uncertain by [`MODE_SD`] of itself. A mode-wise error moves the law's parameters: their
+//! 2. **What the corrections leave of each mode.** Mode k's relative error eps_k = e_k / f_k
+//!    is r_k = eps_k - (phi_k delta + (1 - phi_k) delta_b) / 2 away from the corrections of the
+//!    adhesive (delta) and the adherends (delta_b), eps_k itself is uncertain by [`MODE_SD`] of
+//!    itself, and the adherends' correction by its own sd (not a factor on the law, so it stays
+//!    with the mode). A mode-wise error moves the law's parameters: their
 //!    offset b satisfies G b = -eps, G_kj = d ln f_k / d theta_j = (phi_k / 2) d ln E'(w_k) /
 //!    d theta_j over the in-band modes the points see, as far as the data pin the frequencies:
 //!    the fit trades the frequency mismatch (mode k's costing 1 / (g_k^T Sigma g_k), the

@@ -12,6 +12,9 @@
 //!    data of the independent converged model: with the default mesh rule every Laplace 95 %
 //!    interval of Model 4 at both levels holds the truth; the same study on the uniform 5 mm
 //!    mesh with no allowance (the behaviour before) puts a parameter more than 3 sd off.
+//! 4. A single-lap joint: the refinement's estimate sees the strips' bending and clamp (the
+//!    bond line holds 2 % of the first mode's strain energy), conservative against the
+//!    independent continuum, and the excess goes to the strips.
 
 use rfmlab::discretisation::{
     extrapolated_error, observed_order, stiffness_excess, ModeError, RefineParams,
@@ -191,5 +194,56 @@ fn a_5_mm_block_off_the_beam_s_end_holds_the_continuum_s_truth() {
     assert!(
         worst > 3.0,
         "the uniform mesh without allowance should miss the continuum by more than 3 sd (worst {worst:.2})"
+    );
+}
+
+/// The single-lap joint of `studies/virtual_converged_lap1.toml` (aluminium strips 100 x 3 x 25
+/// mm, 25 mm overlap, a 1 mm bond line, clamped) refined by the default rule: its first y mode's
+/// estimate sees the strips' error (the bond line holds 2 % of that mode's strain energy) and is
+/// conservative against the independent continuum, and the excess is charged to the strips,
+/// not 50 times over to the adhesive.
+#[test]
+fn a_lap_joint_s_estimate_sees_the_strips() {
+    let study = rfmlab::Study::load(&root().join("studies/virtual_converged_lap1.toml"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let rfmlab::study::StructureSource::Lap(spec, _) = &study.structure.source else {
+        panic!("a lap joint");
+    };
+    let mut spec = spec.clone();
+    spec.points = rfmlab::study::build::point_specs(&study.structure);
+    let truth = json(&root().join("studies/data/virtual/converged/lap1/truth.json"));
+    let f_ref = truth["model"]["mesh_convergence"]["modes"][0]["extrapolated"]
+        .as_f64()
+        .unwrap();
+    let p = RefineParams {
+        tolerance: rfmlab::study::MeshRule::DEFAULT_TOLERANCE,
+        allowance: true,
+        reference_modulus_pa: 7.2e6,
+    };
+    let r = rfmlab::discretisation::select(&spec, &p, &|l| eprintln!("{l}")).unwrap();
+    let d = &r.discretisation;
+    let m = d.measured_mode_near(f_ref).unwrap();
+    let actual = (m.freq_hz - f_ref) / f_ref;
+    eprintln!(
+        "lap first y mode: {:.4} Hz ({} DOFs), reference {f_ref:.4} Hz: estimated {:+.3} %, actual {:+.3} %; excess adhesive {:+.3} %, strips {:+.3} %",
+        m.freq_hz,
+        d.levels[d.chosen].n_dof,
+        100.0 * m.rel_error,
+        100.0 * actual,
+        100.0 * d.stiffness_excess,
+        100.0 * d.adherend_excess
+    );
+    assert!(m.adhesive_share < 0.05, "share {}", m.adhesive_share);
+    assert!(
+        actual > 0.0 && m.rel_error >= actual,
+        "the estimate {:.3} % is not conservative against the actual {:.3} %",
+        100.0 * m.rel_error,
+        100.0 * actual
+    );
+    assert!(
+        d.adherend_excess > 0.0 && d.stiffness_excess.abs() < 0.1,
+        "the strips' excess {:.4}, the adhesive's {:.4}",
+        d.adherend_excess,
+        d.stiffness_excess
     );
 }
