@@ -204,7 +204,7 @@ fn a_5_mm_block_off_the_beam_s_end_holds_the_continuum_s_truth() {
 /// not 50 times over to the adhesive.
 #[test]
 fn a_lap_joint_s_estimate_sees_the_strips() {
-    let study = rfmlab::Study::load(&root().join("studies/virtual_converged_lap1.toml"))
+    let study = rfmlab::Study::load(root().join("studies/virtual_converged_lap1.toml"))
         .unwrap_or_else(|e| panic!("{e}"));
     let rfmlab::study::StructureSource::Lap(spec, _) = &study.structure.source else {
         panic!("a lap joint");
