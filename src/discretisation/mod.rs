@@ -766,6 +766,19 @@ pub fn correct(model: &mut StructuralModel, d: &Discretisation) {
 }
 
 impl Discretisation {
+    /// ", the adherends' by ... %" where the adherends' excess was fitted (a lap joint), else
+    /// "": for the sentences of `check` and the report.
+    pub fn adherends_clause(&self) -> String {
+        if self.adherend_excess == 0.0 {
+            return String::new();
+        }
+        format!(
+            ", the adherends' by {:+.3} % (sd {:.3} %)",
+            100.0 * self.adherend_excess,
+            100.0 * self.adherend_excess_sd
+        )
+    }
+
     /// The part of mode `m`'s relative error the two excesses explain:
     /// (phi delta_a + (1 - phi) delta_b) / 2.
     pub fn explained(&self, m: &ModeError) -> f64 {

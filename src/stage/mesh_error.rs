@@ -132,9 +132,10 @@ pub fn describe(d: &Discretisation) -> Vec<String> {
     }
     if d.allowance {
         out.push(format!(
-            "  allowance: the adhesive's stiffness on this mesh exceeds the continuum's by about {:+.3} % (sd {:.3} %); the posteriors carry the per-mode errors",
+            "  allowance: the adhesive's stiffness on this mesh exceeds the continuum's by about {:+.3} % (sd {:.3} %){}; the posteriors carry the per-mode errors",
             100.0 * d.stiffness_excess,
-            100.0 * d.stiffness_excess_sd
+            100.0 * d.stiffness_excess_sd,
+            d.adherends_clause()
         ));
     }
     out

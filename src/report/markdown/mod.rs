@@ -143,9 +143,10 @@ fn mesh_error_section(
     );
     report.paragraph(&if d.allowance {
         format!(
-            "Allowance: the adhesive's stiffness on this mesh exceeds the continuum's by about {:+.3} % (sd {:.3} %, from 2 e_k / f_k = share_k x excess over the modes, each weighted by its measured share). The posteriors carry the per-mode errors: the law's parameters are moved by what these errors do to them and widened by their uncertainty (docs/method.md); the deterministic fits (Tables 4 and 5) are the mesh's.",
+            "Allowance: the adhesive's stiffness on this mesh exceeds the continuum's by about {:+.3} % (sd {:.3} %){} (from 2 e_k / f_k = share_k x excess + (1 - share_k) x the adherends' over the modes, each weighted by its measured share). The posteriors carry the per-mode errors: the law's parameters are moved by what these errors do to them and widened by their uncertainty (docs/method.md); the deterministic fits (Tables 4 and 5) are the mesh's.",
             100.0 * d.stiffness_excess,
-            100.0 * d.stiffness_excess_sd
+            100.0 * d.stiffness_excess_sd,
+            d.adherends_clause()
         )
     } else {
         "No allowance (`allowance = false`): the study declares that its data were made on this very mesh; the results do not include the estimate.".to_string()
