@@ -267,8 +267,12 @@ pub trait Meshed: Clone + PartialEq + Sized {
     /// The model on this mesh with every cell split in two per direction (the estimate of a
     /// fixed mesh), its memory checked first.
     fn build_split(&self) -> Result<(StructuralModel, MeshInfo), FeError>;
+    /// Its measurement points.
+    fn points(&self) -> &[crate::fe::joint::PointSpec];
     /// The axes its points measure.
-    fn measured_axes(&self) -> [bool; 3];
+    fn measured_axes(&self) -> [bool; 3] {
+        measured_axes(self.points())
+    }
     /// The joint as a key of the process's memo.
     fn key(&self) -> Family;
     fn from_key(f: &Family) -> Option<Self>;
@@ -299,8 +303,8 @@ impl Meshed for JointSpec {
     fn build_split(&self) -> Result<(StructuralModel, MeshInfo), FeError> {
         crate::fe::joint::build_joint_model_refined(self, 2)
     }
-    fn measured_axes(&self) -> [bool; 3] {
-        measured_axes(&self.points)
+    fn points(&self) -> &[crate::fe::joint::PointSpec] {
+        &self.points
     }
     fn key(&self) -> Family {
         Family::Block(self.clone())
@@ -343,34 +347,10 @@ impl Meshed for LapSpec {
         build_lap_model(self)
     }
     fn build_split(&self) -> Result<(StructuralModel, MeshInfo), FeError> {
-        let mut s = self.clone();
-        let h = self.mesh.element_size_m;
-        s.mesh.z = Some(
-            2 * self
-                .mesh
-                .z
-                .unwrap_or_else(|| crate::fe::mesh::segment_divisions(self.geometry.width_m, h)),
-        );
-        s.mesh.element_size_m = 0.5 * h;
-        s.mesh.y_adhesive *= 2;
-        s.mesh.y_strip *= 2;
-        let cost = lap_cost_estimate(&s)?;
-        if let Err(msg) = crate::fe::cost::check_memory(
-            cost.memory_bytes,
-            crate::fe::cost::available_memory_bytes(),
-        ) {
-            return Err(FeError::InvalidMesh {
-                key: "structure.lap.mesh".into(),
-                detail: format!(
-                    "the mesh refined twice per direction for the discretisation-error estimate ({:.2e} DOFs) {msg}",
-                    cost.n_dof as f64
-                ),
-            });
-        }
-        build_lap_model(&s)
+        crate::fe::lap::build_lap_model_refined(self, 2)
     }
-    fn measured_axes(&self) -> [bool; 3] {
-        measured_axes(&self.points)
+    fn points(&self) -> &[crate::fe::joint::PointSpec] {
+        &self.points
     }
     fn key(&self) -> Family {
         Family::Lap(self.clone())
@@ -443,7 +423,7 @@ pub fn stiffness_excess(modes: &[ModeError]) -> Excess {
         adherend: 0.0,
         adherend_sd: 0.0,
     };
-    if sw <= 1e-12 {
+    if sw <= 1e-12 || aa <= 1e-12 {
         return zero;
     }
     // the adherends' part only where the first mode the points see is mostly the adherends' (a
@@ -454,39 +434,31 @@ pub fn stiffness_excess(modes: &[ModeError]) -> Excess {
         .iter()
         .find(|m| m.measured_share > 0.5)
         .is_some_and(|m| m.adhesive_share < 0.5);
-    if !adherend_seen {
-        if aa <= 1e-12 {
+    // (delta_a, delta_b) and the diagonal of the normal matrix's inverse
+    let (da, db, ia, ib) = if adherend_seen {
+        let bb = bb + ADHEREND_RIDGE * sw;
+        let det = aa * bb - ab * ab;
+        if det <= 1e-18 {
             return zero;
         }
-        let da = ra / aa;
-        let scatter = modes
-            .iter()
-            .map(|m| w(m) * (2.0 * m.rel_error - m.adhesive_share * da).powi(2))
-            .sum::<f64>()
-            / aa;
-        return Excess {
-            adhesive: da,
-            adhesive_sd: (0.25 * da * da + scatter).sqrt(),
-            ..zero
-        };
-    }
-    let bb = bb + ADHEREND_RIDGE * sw;
-    let det = aa * bb - ab * ab;
-    if aa <= 1e-12 || det <= 1e-18 {
-        return zero;
-    }
-    let da = (bb * ra - ab * rb) / det;
-    let db = (aa * rb - ab * ra) / det;
-    let scatter = modes
+        (
+            (bb * ra - ab * rb) / det,
+            (aa * rb - ab * ra) / det,
+            bb / det,
+            aa / det,
+        )
+    } else {
+        (ra / aa, 0.0, 1.0 / aa, 0.0)
+    };
+    let residual2 = modes
         .iter()
         .map(|m| {
             w(m) * (2.0 * m.rel_error - m.adhesive_share * da - (1.0 - m.adhesive_share) * db)
                 .powi(2)
         })
-        .sum::<f64>()
-        / sw;
-    // the scatter's variance on each part: the diagonal of the normal matrix's inverse
-    let (va, vb) = (scatter * sw * bb / det, scatter * sw * aa / det);
+        .sum::<f64>();
+    // the scatter's variance on each part
+    let (va, vb) = (residual2 * ia, residual2 * ib);
     Excess {
         adhesive: da,
         adhesive_sd: (0.25 * da * da + va).sqrt(),

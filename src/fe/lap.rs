@@ -384,6 +384,41 @@ pub fn lap_cost_estimate(spec: &LapSpec) -> Result<super::cost::CostEstimate, Fe
     Ok(super::cost::cost_of(3 * n_free, mesh.n_elements(), band))
 }
 
+/// The lap joint's model with its element size and width divisions divided by `factor` and its
+/// elements through the bond line and the strips multiplied by it (a uniformly refined mesh,
+/// for the estimate of the discretisation error), its cost checked against the machine's
+/// memory first (as [`super::joint::build_joint_model_refined`] does for the beam on a block).
+pub fn build_lap_model_refined(
+    spec: &LapSpec,
+    factor: usize,
+) -> Result<(StructuralModel, MeshInfo), FeError> {
+    let f = factor.max(1);
+    let mut s = spec.clone();
+    let h = spec.mesh.element_size_m;
+    s.mesh.z = Some(
+        f * spec
+            .mesh
+            .z
+            .unwrap_or_else(|| segment_divisions(spec.geometry.width_m, h)),
+    );
+    s.mesh.element_size_m = h / f as f64;
+    s.mesh.y_adhesive *= f;
+    s.mesh.y_strip *= f;
+    let cost = lap_cost_estimate(&s)?;
+    if let Err(msg) =
+        super::cost::check_memory(cost.memory_bytes, super::cost::available_memory_bytes())
+    {
+        return Err(FeError::InvalidMesh {
+            key: format!("{KEY}.mesh"),
+            detail: format!(
+                "the mesh refined {f} times for the discretisation-error estimate ({:.2e} DOFs) {msg}",
+                cost.n_dof as f64
+            ),
+        });
+    }
+    build_lap_model(&s)
+}
+
 /// Build the lap joint's structural model.
 pub fn build_lap_model(spec: &LapSpec) -> Result<(StructuralModel, MeshInfo), FeError> {
     let mesh = lap_mesh(spec)?;

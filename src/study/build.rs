@@ -3,8 +3,8 @@
 
 use super::{MeshSize, Structure, StructureSource, StudyError};
 use crate::fe::joint::{
-    build_joint_model, AdherendDamping, Divisions, IsoMaterial, JointGeometry, JointSpec, MeshInfo,
-    MeshParams, PointSpec,
+    AdherendDamping, Divisions, IsoMaterial, JointGeometry, JointSpec, MeshInfo, MeshParams,
+    PointSpec,
 };
 use crate::fe::points::PointMapping;
 use crate::fe::StructuralModel;
@@ -105,17 +105,47 @@ pub fn chosen_spec(s: &Structure, file: &str) -> Result<Option<JointSpec>, Study
     if !j.mesh_rule.refine {
         return Ok(Some(spec));
     }
-    let chosen = crate::discretisation::select_spec(&spec, &refine_params(j), &|_| {})
+    let chosen = crate::discretisation::select_spec(&spec, &refine_params(&j.mesh_rule), &|_| {})
         .map_err(|e| fe_error(file, e))?;
     Ok(Some(chosen))
 }
 
-fn refine_params(j: &super::Joint) -> crate::discretisation::RefineParams {
+fn refine_params(rule: &super::MeshRule) -> crate::discretisation::RefineParams {
     crate::discretisation::RefineParams {
-        tolerance: j.mesh_rule.tolerance,
-        allowance: j.mesh_rule.allowance,
-        reference_modulus_pa: j.mesh_rule.reference_modulus_pa,
+        tolerance: rule.tolerance,
+        allowance: rule.allowance,
+        reference_modulus_pa: rule.reference_modulus_pa,
     }
+}
+
+/// A mesher's joint built by its mesh rule: refined to the tolerance, or as given with the
+/// estimate of its error when the allowance asks for it; the model corrected by the allowance.
+fn meshed<S: crate::discretisation::Meshed>(
+    spec: &S,
+    rule: &super::MeshRule,
+    file: &str,
+    progress: &dyn Fn(&str),
+) -> Result<
+    (
+        StructuralModel,
+        MeshInfo,
+        Option<crate::discretisation::Discretisation>,
+    ),
+    StudyError,
+> {
+    let p = refine_params(rule);
+    if rule.refine {
+        let r = crate::discretisation::select(spec, &p, progress).map_err(|e| fe_error(file, e))?;
+        return Ok((r.model, r.info, Some(r.discretisation)));
+    }
+    let (mut m, info) = spec.build().map_err(|e| fe_error(file, e))?;
+    if !rule.allowance {
+        return Ok((m, info, None));
+    }
+    progress("estimating the mesh's discretisation error (the mesh refined twice per direction)");
+    let d = crate::discretisation::fixed(spec, &m, &p).map_err(|e| fe_error(file, e))?;
+    crate::discretisation::correct(&mut m, &d);
+    Ok((m, info, Some(d)))
 }
 
 fn fe_error(file: &str, e: crate::fe::FeError) -> StudyError {
@@ -141,47 +171,16 @@ pub fn build_model_with(
     let (model, mesh) = match &s.source {
         StructureSource::Mesher(j) => {
             let spec = joint_spec(s).expect("mesher source");
-            let p = refine_params(j);
-            if j.mesh_rule.refine {
-                let r = crate::discretisation::select(&spec, &p, progress)
-                    .map_err(|e| fe_error(file, e))?;
-                discretisation = Some(r.discretisation);
-                (r.model, Some(r.info))
-            } else {
-                let (mut m, info) = build_joint_model(&spec).map_err(|e| fe_error(file, e))?;
-                if j.mesh_rule.allowance {
-                    progress("estimating the mesh's discretisation error (the mesh refined twice per direction)");
-                    let d = crate::discretisation::fixed(&spec, &m, &p)
-                        .map_err(|e| fe_error(file, e))?;
-                    crate::discretisation::correct(&mut m, &d);
-                    discretisation = Some(d);
-                }
-                (m, Some(info))
-            }
+            let (m, info, d) = meshed(&spec, &j.mesh_rule, file, progress)?;
+            discretisation = d;
+            (m, Some(info))
         }
         StructureSource::Lap(spec, rule) => {
             let mut spec = spec.clone();
             spec.points = point_specs(s);
-            let lap_err = |e| fe_error(file, e);
-            let p = crate::discretisation::RefineParams {
-                tolerance: rule.tolerance,
-                allowance: rule.allowance,
-                reference_modulus_pa: rule.reference_modulus_pa,
-            };
-            if rule.refine {
-                let r = crate::discretisation::select(&spec, &p, progress).map_err(lap_err)?;
-                discretisation = Some(r.discretisation);
-                (r.model, Some(r.info))
-            } else {
-                let (mut m, info) = crate::fe::lap::build_lap_model(&spec).map_err(lap_err)?;
-                if rule.allowance {
-                    progress("estimating the mesh's discretisation error (the mesh refined twice per direction)");
-                    let d = crate::discretisation::fixed(&spec, &m, &p).map_err(lap_err)?;
-                    crate::discretisation::correct(&mut m, &d);
-                    discretisation = Some(d);
-                }
-                (m, Some(info))
-            }
+            let (m, info, d) = meshed(&spec, rule, file, progress)?;
+            discretisation = d;
+            (m, Some(info))
         }
         StructureSource::MatrixMarket(im) => {
             let files = crate::fe::foreign::ImportFiles {
