@@ -7,6 +7,7 @@
 //! |---|---|
 //! | [`report`] | results -> parquet, figures, report.md, manifest.json in one atomic folder swap; `run_study`; the material command's files |
 //! | [`pipeline`] | the public API: study -> [`pipeline::Plan`] (typed `*Params` per stage) -> [`pipeline::run`] -> [`Results`] with every table; `check` |
+//! | [`design`] | test planning (`rfmlab design`): candidate sensor places, the likelihood's Fisher information with the noise the measurement chain will give, greedy search with exchange, design.parquet and design.md |
 //! | [`diagnose`] | the closed loop as a stage of a run and `rfmlab diagnose`: candidate effects and their term ROM, the loop at every level, its verdict, tables and markdown |
 //! | [`bayes`] | the Bayesian stages of a run: posterior per model and level, MAP, samplers, evidence and comparison criteria, redundancy, basins, the comparison across levels |
 //! | [`identify`] | the deterministic identification of a level: RFM per line, per band and per model, circle fit + IEM, correlation, sensitivities, the leakage fixed point |
@@ -84,6 +85,7 @@ pub mod closed_loop;
 pub mod common;
 pub mod correlation;
 pub mod data;
+pub mod design;
 pub mod diagnose;
 pub mod discretisation;
 pub mod experiment;

@@ -10,6 +10,7 @@ use clap::{Parser, Subcommand};
 
 pub mod common;
 mod convergence;
+mod design;
 mod diagnose;
 mod frf;
 mod inspect;
@@ -97,6 +98,11 @@ enum Command {
         after_help = DIAGNOSE_HELP
     )]
     Diagnose(diagnose::DiagnoseArgs),
+    /// Plan the test: where the sensors go, in which directions, where the shaker drives, with the posterior each design will give.
+    #[command(
+        after_help = DESIGN_HELP
+    )]
+    Design(design::DesignArgs),
 }
 
 /// `rfmlab run --help`: what it writes (tests/suite/docs.rs checks the tables against docs/outputs.md).
@@ -124,6 +130,11 @@ const DIAGNOSE_HELP: &str = "Writes results/<name>.diagnose/: closed_loop.md, ma
   residuals, candidates, closed_loop, verdict, signatures, and mesh when a refined mesh was compared;
   closed_loop.md's first line is the status per level.
 Docs: docs/closed-loop.md (what each status means and what to do next), docs/outputs.md (closed-loop tables).";
+
+/// `rfmlab design --help`.
+const DESIGN_HELP: &str = "Writes results/<name>.design/: design.md, manifest.json, design_information.png/.svg and parquet tables
+  design (the ranked designs, the study's own first), design_candidates (every candidate sensor and what it adds).
+Docs: docs/planning.md (planning a test, a worked example), docs/study-files.md ([design]), docs/outputs.md (design tables).";
 
 /// Restore the default action of SIGPIPE (the Rust runtime ignores it, so that a write to a
 /// closed pipe fails and `println!` panics): a command whose reader went away, as in
@@ -167,6 +178,7 @@ pub fn run() -> i32 {
         Command::Material(a) => material::run(a, &g),
         Command::Validate(a) => validate::run(a, &g),
         Command::Diagnose(a) => diagnose::run(a, &g),
+        Command::Design(a) => design::run(a, &g),
     };
     match result {
         Ok(()) => 0,

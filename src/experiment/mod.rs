@@ -267,6 +267,49 @@ pub fn leakage_bias(
     Ok(out)
 }
 
+/// The expected ordinary coherence `[channel][line]` of the chain on `plant` at
+/// `chain.lines_hz`: the truth record's `expected_coherence` of [`simulate_level`] (the same
+/// force spectrum, window kernel and sensor noise), without simulating the records. What a test
+/// plan predicts for the likelihood's noise scales (`rfmlab design`).
+pub fn expected_coherence(
+    plant: &dyn Plant,
+    chain: &ChainParams,
+) -> Result<Vec<Vec<f64>>, ExperimentError> {
+    let layout = chain.layout(plant.n_channels())?;
+    let band = band_model_fine(plant, chain)?;
+    let m = band.resp.len();
+    let p_w = chain.window.power_sum(layout.n_block);
+    let force_noise = noise_rms(chain.force_noise, chain.force_rms_n);
+    let resp_noise: Vec<f64> = (0..m)
+        .map(|i| {
+            noise_rms(
+                chain.response_noise_of(i),
+                band.response_mean_square(i).sqrt(),
+            )
+        })
+        .collect();
+    let mut out = vec![Vec::with_capacity(layout.line_bins.len()); m];
+    for &k in &layout.line_bins {
+        let (ff, fa, aa) = band.expected_diagonal(
+            k as f64 / chain.block_s,
+            chain.window,
+            layout.n_block,
+            chain.block_s,
+            chain.kernel.half_width_hz,
+        );
+        let g_ff = ff + force_noise.powi(2) * p_w;
+        for (i, o) in out.iter_mut().enumerate() {
+            let g_aa = aa[i] + resp_noise[i].powi(2) * p_w;
+            o.push(if g_ff * g_aa > 0.0 {
+                (fa[i].norm_sqr() / (g_ff * g_aa)).min(1.0)
+            } else {
+                0.0
+            });
+        }
+    }
+    Ok(out)
+}
+
 /// Simulate one excitation level of the measurement chain on `plant`.
 ///
 /// Returns H1 and coherence per channel on `chain.lines_hz` plus the truth record.

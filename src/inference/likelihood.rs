@@ -812,6 +812,41 @@ impl<'a> FrfLikelihood<'a> {
         })
     }
 
+    /// The law's block of the expected (Fisher) information per channel at `p`, summed over
+    /// the lines: `[k]` row-major `np x np`, `sum_l Re(conj(J_ilk) J_jlk) / v_lk` with the
+    /// variances at the noise coordinates `noise`. It is [`Self::information`]'s law block split
+    /// by channel for Gaussian errors and independent channels, where the information of a set
+    /// of channels is the sum of theirs (what a sensor-placement search adds up), and it does
+    /// not depend on the data beyond their variances.
+    pub fn channel_information(
+        &self,
+        p: &[f64],
+        noise: &[f64],
+    ) -> Result<Vec<Vec<f64>>, ForwardError> {
+        let pred = self.forward.predict(p, true)?;
+        let v = self.variances(noise);
+        let np = pred.jac.len();
+        let n = self.data.n_out;
+        let mut out = vec![vec![0.0; np * np]; n];
+        for (o, vo) in v.iter().enumerate() {
+            let f = &mut out[o % n];
+            for i in 0..np {
+                let ji = pred.jac[i][o];
+                for j in 0..=i {
+                    f[i * np + j] += (ji.conj() * pred.jac[j][o]).re / vo;
+                }
+            }
+        }
+        for f in &mut out {
+            for i in 0..np {
+                for j in 0..i {
+                    f[j * np + i] = f[i * np + j];
+                }
+            }
+        }
+        Ok(out)
+    }
+
     /// Pointwise log likelihood per line (summed over channels), for LOO and WAIC.
     pub fn pointwise(&self, p: &[f64], noise: &[f64]) -> Result<Vec<f64>, ForwardError> {
         let pred = self.forward.predict(p, false)?;

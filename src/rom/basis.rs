@@ -49,6 +49,8 @@ pub struct BasisBuilder<'a> {
     multi: std::sync::OnceLock<MultiCsr>,
     /// Unit loads at the observation points (n x n_out).
     pub b_all: Mat<f64>,
+    /// Columns of `b_all` whose Krylov sequences build the basis (`None`: all).
+    starts: Option<Vec<usize>>,
     v: Mat<f64>,
     /// A V for each model matrix; `av[0]` is M V.
     av: Vec<Mat<f64>>,
@@ -93,6 +95,7 @@ impl<'a> BasisBuilder<'a> {
             ops,
             multi: std::sync::OnceLock::new(),
             b_all,
+            starts: None,
             v: Mat::zeros(n, 0),
             av: (0..nop).map(|_| Mat::zeros(n, 0)).collect(),
             proj: (0..nop).map(|_| Mat::zeros(0, 0)).collect(),
@@ -349,12 +352,23 @@ impl<'a> BasisBuilder<'a> {
         Ok(())
     }
 
+    /// Build the basis from the Krylov sequences of the loads at these observation points only
+    /// (the others are still projected: their FRFs ride on the basis).
+    pub(crate) fn restrict_starts(&mut self, outputs: &[usize]) {
+        self.starts = Some(outputs.to_vec());
+    }
+
     /// Continue one Krylov sequence to `depth` blocks; returns its new raw blocks.
     fn run_sequence(&self, st: &mut KrylovState, depth: usize, f: &SpdSolver) -> RawBlocks {
         let mut raw = Vec::new();
         while st.depth < depth {
             let mut x = if st.depth == 0 {
-                self.b_all.clone()
+                match &self.starts {
+                    None => self.b_all.clone(),
+                    Some(c) => {
+                        Mat::from_fn(self.b_all.nrows(), c.len(), |i, j| self.b_all[(i, c[j])])
+                    }
+                }
             } else {
                 Mat::from_fn(st.q.nrows(), st.last.len(), |i, j| {
                     st.mq[(i, st.last.start + j)]

@@ -249,6 +249,7 @@ fn judge(
     reference: &[Vec<Vec<C64>>],
     floor: &[Vec<f64>],
     tol: f64,
+    outputs: Option<&[usize]>,
 ) -> Result<Judged, RomError> {
     let mut j = Judged {
         score: 0.0,
@@ -271,7 +272,11 @@ fn judge(
             let line_floor =
                 FLOOR_FACTOR * floor[m][l] * w.iter().map(|v| v.norm()).fold(0.0, f64::max);
             let (mut worst, mut scaled, mut by_floor) = (0.0f64, 0.0f64, allowance > tol);
+            let n_in = rom.inputs.len().max(1);
             for k in 0..blk {
+                if outputs.is_some_and(|o| !o.contains(&(k / n_in))) {
+                    continue;
+                }
                 let d = (sw.h[l * blk + k] - w[k]).norm();
                 let rel = if peaks[k] > 0.0 { d / peaks[k] } else { d };
                 let rel = if rel.is_nan() { f64::INFINITY } else { rel };
@@ -454,6 +459,11 @@ pub fn build_rom(
     };
     let pat = ModelPattern::new(model)?;
     let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
+    if let Some(o) = &params.certified_outputs {
+        let mut starts = o.clone();
+        starts.extend(inputs.iter().filter(|i| !o.contains(i)));
+        basis.restrict_starts(&starts);
+    }
     let mut history = Vec::new();
     let mut best: Option<(ReducedModel, Judged)> = None;
     let mut levels = 0;
@@ -490,7 +500,15 @@ pub fn build_rom(
             refh = Some(h);
         }
         let h = refh.as_mut().expect("reference");
-        let mut judged = judge(&rom, &moduli, &lines, h, &floor, params.tolerance)?;
+        let mut judged = judge(
+            &rom,
+            &moduli,
+            &lines,
+            h,
+            &floor,
+            params.tolerance,
+            params.certified_outputs.as_deref(),
+        )?;
         if judged.score > params.tolerance && gmres_stats.is_some() {
             // near a lightly damped resonance a GMRES reference converged to its residual
             // tolerance can itself be off by more than the certificate's tolerance: the few
@@ -503,7 +521,15 @@ pub fn build_rom(
                 .collect();
             if !suspect.is_empty() && suspect.len() * MAX_DIRECT_FRACTION_INV <= n_points {
                 solve_directly(&suspect, h, &mut floor, &mut direct)?;
-                judged = judge(&rom, &moduli, &lines, h, &floor, params.tolerance)?;
+                judged = judge(
+                    &rom,
+                    &moduli,
+                    &lines,
+                    h,
+                    &floor,
+                    params.tolerance,
+                    params.certified_outputs.as_deref(),
+                )?;
             }
         }
         seconds_certify += t.elapsed().as_secs_f64();

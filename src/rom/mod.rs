@@ -110,6 +110,12 @@ pub struct RomParams {
     /// certified basis ([`compress`]); None keeps the enriched basis. Default
     /// [`compress::CompressParams::default`].
     pub compress: Option<compress::CompressParams>,
+    /// Outputs (indices into the model's points) whose loads start the basis's Krylov
+    /// sequences (with the inputs) and whose FRFs the certificate judges; `None`: every output.
+    /// The others are carried by the same basis, uncertified: a test plan's many candidate
+    /// sensors ride on the basis certified at the study's points.
+    /// Default `None`.
+    pub certified_outputs: Option<Vec<usize>>,
 }
 
 /// The certificate's full-model solver.
@@ -178,6 +184,7 @@ impl Default for RomParams {
             n_cert_lines: 25,
             reference: Reference::default(),
             compress: Some(compress::CompressParams::default()),
+            certified_outputs: None,
         }
     }
 }

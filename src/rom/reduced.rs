@@ -59,6 +59,28 @@ impl ReducedModel {
         Ok(r)
     }
 
+    /// The same reduced model with point masses `(output index, kg)` added along the outputs'
+    /// directions: `M_r + sum m (V^T b)(V^T b)^T`, the exact projection of the added masses on
+    /// the basis (which was certified without them: accurate while the masses change the
+    /// modes' shapes little, as a sensor's grams on a joint do).
+    pub fn with_point_masses(&self, masses: &[(usize, f64)]) -> Result<ReducedModel, RomError> {
+        if let Some(&(p, _)) = masses.iter().find(|(p, _)| *p >= self.n_out) {
+            return Err(RomError::Params(format!(
+                "point mass at output {p}: the reduced model has {} outputs",
+                self.n_out
+            )));
+        }
+        let mut r = self.clone();
+        for &(p, m) in masses {
+            for i in 0..self.n_r {
+                for j in 0..self.n_r {
+                    r.m_r[(i, j)] += m * self.b_r[(i, p)] * self.b_r[(j, p)];
+                }
+            }
+        }
+        Ok(r)
+    }
+
     /// Basis size n_r.
     pub fn basis_size(&self) -> usize {
         self.n_r
@@ -360,15 +382,10 @@ impl FrfEngine for ReducedModel {
         if let Some(&(p, _)) = masses.iter().find(|(p, _)| *p >= self.n_out) {
             return Some(Err(FrfError::BadInput(p)));
         }
-        // M_r + sum m (V^T b)(V^T b)^T: the exact projection of the added masses.
-        let mut r = self.clone();
-        for &(p, m) in masses {
-            for i in 0..self.n_r {
-                for j in 0..self.n_r {
-                    r.m_r[(i, j)] += m * self.b_r[(i, p)] * self.b_r[(j, p)];
-                }
-            }
-        }
+        let r = match self.with_point_masses(masses) {
+            Ok(r) => r,
+            Err(e) => return Some(Err(FrfError::from(e))),
+        };
         Some(ReducedModel::complex_modes(&r, modulus_pa, n_modes).map_err(FrfError::from))
     }
 }

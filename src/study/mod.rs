@@ -297,6 +297,8 @@ pub struct Study {
     pub declared_effects: Vec<effects::DeclaredEffect>,
     /// The `[closed_loop]` section, when given.
     pub closed_loop: Option<effects::ClosedLoopSettings>,
+    /// The `[design]` section (`rfmlab design`), when given.
+    pub design: Option<design::DesignSettings>,
 }
 
 mod ctx;
@@ -324,6 +326,7 @@ pub(crate) fn resolve(file: &Path, p: &str) -> PathBuf {
 
 pub mod build;
 pub mod comparison;
+pub mod design;
 pub mod effects;
 pub mod experiment;
 pub mod inference;

@@ -19,6 +19,8 @@ pub struct RawStudy {
     pub inference: Option<super::inference::RawInference>,
     /// The closed loop (see [`super::effects`]).
     pub closed_loop: Option<super::effects::RawClosedLoop>,
+    /// Test planning (see [`super::design`]).
+    pub design: Option<super::design::RawDesign>,
 }
 
 #[derive(Debug, Deserialize, Default)]

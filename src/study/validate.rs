@@ -61,6 +61,31 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
         None => None,
         Some(r) => Some(super::effects::closed_loop(&ctx, r)?),
     };
+    let design = match &raw.design {
+        None => None,
+        Some(r) => {
+            let d = super::design::design(&ctx, r, &point_ids)?;
+            if let Some(ms) = &d.models {
+                if let Some(m) = ms
+                    .iter()
+                    .find(|m| !models.iter().any(|s| s.name.eq_ignore_ascii_case(m)))
+                {
+                    return Err(ctx.err(
+                        "design.models",
+                        format!(
+                            "\"{m}\" is not among [[models]] ({}): add it there or remove it here",
+                            models
+                                .iter()
+                                .map(|s| s.name.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                    ));
+                }
+            }
+            Some(d)
+        }
+    };
     let sha256 = {
         let mut h = Sha256::new();
         h.update(text.as_bytes());
@@ -88,6 +113,7 @@ pub fn parse_str(text: &str, path: &Path) -> Result<Study, StudyError> {
         inference,
         declared_effects,
         closed_loop,
+        design,
     })
 }
 
