@@ -132,7 +132,7 @@ const DIAGNOSE_HELP: &str = "Writes results/<name>.diagnose/: closed_loop.md, ma
 Docs: docs/closed-loop.md (what each status means and what to do next), docs/outputs.md (closed-loop tables).";
 
 /// `rfmlab design --help`.
-const DESIGN_HELP: &str = "Writes results/<name>.design/: design.md, manifest.json, design_information.png/.svg and parquet tables
+const DESIGN_HELP: &str = "Writes results/<name>.design/: report.md, manifest.json, design_information.png/.svg and parquet tables
   design (the ranked designs, the study's own first), design_candidates (every candidate sensor and what it adds).
 Docs: docs/planning.md (planning a test, a worked example), docs/study-files.md ([design]), docs/outputs.md (design tables).";
 

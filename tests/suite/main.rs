@@ -30,6 +30,7 @@ mod data_checks;
 mod declared_effects;
 mod default_data;
 mod default_study;
+mod design;
 mod design_space;
 mod docs;
 mod effects;
