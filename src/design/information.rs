@@ -9,14 +9,16 @@
 //! sensor's mass is part of the structure: the information is computed on the reduced model
 //! with the masses of a given set of places added ([`crate::rom::ReducedModel::with_point_masses`]).
 
+use crate::common::C64;
 use crate::experiment::plant::EnginePlant;
 use crate::experiment::ChainParams;
 use crate::forward::{ForwardModel, MeasurementModel};
 use crate::frf::FrfEngine;
+use crate::frf::{FrfError, Sweep};
 use crate::inference::likelihood::{FrfData, FrfLikelihood, NoiseModel};
 use crate::inference::prior::Prior;
 use crate::material::ConstitutiveModel;
-use crate::rom::ReducedModel;
+use crate::rom::{PencilSweep, ReducedModel};
 
 /// One model's parameter point and the priors' curvature there.
 #[derive(Clone, Debug)]
@@ -64,50 +66,132 @@ pub struct Chain<'a> {
 /// sensor masses.
 pub type ChannelInfo = Vec<Vec<Vec<f64>>>;
 
-/// The information of every channel in `channels` (output indices of `rom`) for a force at
-/// output `drive`, with `masses` (output index, kg) added, at `draw` of `law`, for each of
-/// `chain.levels`.
+/// The reduced model with one drive and a set of sensor masses, its pencil prepared on the
+/// grids the information needs (the measurement model's and the expected coherence's): a
+/// sweep at any draw's modulus then costs O(lines x terms x outputs) instead of a dense LU
+/// per line.
+pub struct Prepared {
+    rom: ReducedModel,
+    pencils: Vec<PencilSweep>,
+}
+
+impl Prepared {
+    /// `rom` with the input `drive` only and `masses` (output index, kg) added, prepared on
+    /// `grids` (rad/s).
+    pub fn new(
+        rom: &ReducedModel,
+        drive: usize,
+        masses: &[(usize, f64)],
+        grids: &[Vec<f64>],
+    ) -> Result<Prepared, String> {
+        let rom = rom
+            .with_inputs(&[drive])
+            .and_then(|r| r.with_point_masses(masses))
+            .map_err(|e| e.to_string())?;
+        let pencils = grids
+            .iter()
+            .map(|g| rom.prepare(g).map_err(|e| e.to_string()))
+            .collect::<Result<_, _>>()?;
+        Ok(Prepared { rom, pencils })
+    }
+}
+
+impl FrfEngine for Prepared {
+    fn n_out(&self) -> usize {
+        self.rom.n_out()
+    }
+    fn inputs(&self) -> &[usize] {
+        self.rom.inputs()
+    }
+    fn sweep_into(
+        &self,
+        omega_rad_s: &[f64],
+        modulus_pa: &[C64],
+        with_derivatives: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        let same = |p: &&PencilSweep| {
+            p.omega_rad_s().len() == omega_rad_s.len()
+                && p.omega_rad_s()
+                    .iter()
+                    .zip(omega_rad_s)
+                    .all(|(a, b)| a.to_bits() == b.to_bits())
+        };
+        match self.pencils.iter().find(same) {
+            Some(p) => p.sweep_into(omega_rad_s, modulus_pa, with_derivatives, out),
+            None => self
+                .rom
+                .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out),
+        }
+    }
+}
+
+/// The grids (rad/s) a [`Prepared`] engine needs for `chain`: the measurement model's fine grid
+/// (or the lines) and the expected coherence's band grid (without 0 Hz).
+pub fn grids(chain: &Chain<'_>) -> Vec<Vec<f64>> {
+    let lines = match chain.measurement {
+        Some(m) => m.fine_omega(),
+        None => chain
+            .freq_hz
+            .iter()
+            .map(|f| std::f64::consts::TAU * f)
+            .collect(),
+    };
+    let band: Vec<f64> = crate::experiment::band_grid_hz(&chain.levels[0])
+        .into_iter()
+        .filter(|f| *f > 0.0)
+        .map(|f| 2.0 * std::f64::consts::PI * f)
+        .collect();
+    vec![lines, band]
+}
+
+/// The information of every channel in `channels` (output indices of the engine) for a force
+/// at output `drive` (the engine's one input), at `draw` of `law`, for each of `chain.levels`
+/// (which differ in their force only).
 pub fn channel_info(
-    rom: &ReducedModel,
+    engine: &Prepared,
     drive: usize,
-    masses: &[(usize, f64)],
     channels: &[usize],
     law: &dyn ConstitutiveModel,
     draw: &Draw,
     chain: &Chain<'_>,
 ) -> Result<ChannelInfo, String> {
-    let engine = rom
-        .with_inputs(&[drive])
-        .and_then(|r| r.with_point_masses(masses))
-        .map_err(|e| e.to_string())?;
     let omega: Vec<f64> = chain
         .freq_hz
         .iter()
         .map(|f| std::f64::consts::TAU * f)
         .collect();
-    let forward = |m: Option<MeasurementModel>| {
-        ForwardModel::new(&engine, law, &omega, drive, channels, m).map_err(|e| e.to_string())
+    let forward = || {
+        ForwardModel::new(
+            engine,
+            law,
+            &omega,
+            drive,
+            channels,
+            chain.measurement.cloned(),
+        )
+        .map_err(|e| e.to_string())
     };
-    let fm = forward(chain.measurement.cloned())?;
-    let values = fm
-        .predict(&draw.p, false)
-        .map_err(|e| e.to_string())?
-        .values;
-    // The expected coherence of every channel (the plant's channels are the engine's outputs).
+    let pred = forward()?
+        .predict(&draw.p, true)
+        .map_err(|e| e.to_string())?;
+    // The expected coherence of every channel (the plant's channels are the engine's outputs)
+    // at every level's force.
     let modulus = |w: f64| law.modulus(&draw.p, w.abs());
     let plant = EnginePlant {
-        engine: &engine as &dyn FrfEngine,
+        engine: engine as &dyn FrfEngine,
         modulus: &modulus,
         input_col: 0,
         drive_output: drive,
     };
+    let forces: Vec<f64> = chain.levels.iter().map(|c| c.force_rms_n).collect();
+    let coh = crate::experiment::expected_coherence_at(&plant, &chain.levels[0], &forces)
+        .map_err(|e| e.to_string())?;
     let np = draw.p.len();
     let ids: Vec<u32> = (0..channels.len() as u32).collect();
+    let n = channels.len();
     let mut out = Vec::with_capacity(chain.levels.len());
-    for lc in chain.levels {
-        let coh_all =
-            crate::experiment::expected_coherence(&plant, lc).map_err(|e| e.to_string())?;
-        let n = channels.len();
+    for coh_all in coh {
         let mut coherence = vec![0.0; chain.freq_hz.len() * n];
         for (k, &c) in channels.iter().enumerate() {
             for (l, g) in coh_all[c].iter().enumerate() {
@@ -117,23 +201,15 @@ pub fn channel_info(
         let data = FrfData {
             freq_hz: chain.freq_hz.to_vec(),
             n_out: n,
-            values: values.clone(),
+            values: pred.values.clone(),
             coherence: Some(coherence),
         };
-        let lik = FrfLikelihood::new(
-            forward(chain.measurement.cloned())?,
-            data,
-            chain.noise.clone(),
-            &ids,
-        )
-        .map_err(|e| e.to_string())?;
-        let info = lik
-            .channel_information(&draw.p, &[])
+        let lik = FrfLikelihood::new(forward()?, data, chain.noise.clone(), &ids)
             .map_err(|e| e.to_string())?;
+        let info = lik.channel_information_of(&pred, &[]);
         out.push(
             info.into_iter()
-                .map(|f| {
-                    let mut g = f;
+                .map(|mut g| {
                     for i in 0..np {
                         for j in 0..np {
                             g[i * np + j] *= draw.dp_dx[i] * draw.dp_dx[j];

@@ -259,6 +259,13 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
             }],
             shaker: est.and_then(|e| e.shaker),
             lines_hz: freq_hz.clone(),
+            // The window kernel's quadrature at 8 points per line spacing (the simulator's
+            // 32 resolve the leakage bias of the sharpest peaks; the coherence, which only
+            // sets the noise scales, moves by less than the spread of the prediction).
+            kernel: crate::experiment::KernelParams {
+                grid_step_hz: 1.0 / (8.0 * block_s),
+                ..Default::default()
+            },
             ..ChainParams::default()
         });
     }
@@ -526,31 +533,51 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
             })
             .collect()
     };
-    let infos_for = |drive: usize, masses: &[(usize, f64)]| -> Result<Infos, DesignError> {
+    let grids = information::grids(&chain);
+    let compute_infos = |drive: usize, masses: &[(usize, f64)]| -> Result<Infos, DesignError> {
+        let engine = information::Prepared::new(&rom, drive, masses, &grids)
+            .map_err(|e| failed("reduced model", e))?;
         let mut info = Vec::new();
         for (m, law) in laws.iter().enumerate() {
-            let mut per_level = Vec::new();
-            for (l, ds) in draws[m].iter().enumerate() {
-                let one = Chain {
-                    levels: &chains[l..l + 1],
-                    ..chain
-                };
-                let per_draw: Result<Vec<_>, String> = ds
-                    .iter()
-                    .map(|d| {
-                        information::channel_info(
-                            &rom,
+            let n_draws = draws[m][0].len();
+            // The levels share their draws unless a previous posterior gives each its own:
+            // then one prediction serves every level.
+            let shared = draws[m].iter().all(|ds| {
+                ds.len() == n_draws && ds.iter().zip(&draws[m][0]).all(|(a, b)| a.p == b.p)
+            });
+            let mut per_level: Vec<Vec<Vec<Vec<f64>>>> = vec![Vec::new(); chains.len()];
+            for s in 0..n_draws {
+                if shared {
+                    let all = information::channel_info(
+                        &engine,
+                        drive,
+                        &outputs,
+                        law.as_ref(),
+                        &draws[m][0][s],
+                        &chain,
+                    )
+                    .map_err(|e| failed("information", e))?;
+                    for (l, v) in all.into_iter().enumerate() {
+                        per_level[l].push(v);
+                    }
+                } else {
+                    for (l, pl) in per_level.iter_mut().enumerate() {
+                        let one = Chain {
+                            levels: &chains[l..l + 1],
+                            ..chain
+                        };
+                        let mut v = information::channel_info(
+                            &engine,
                             drive,
-                            masses,
                             &outputs,
                             law.as_ref(),
-                            d,
+                            &draws[m][l][s],
                             &one,
                         )
-                        .map(|mut v| v.remove(0))
-                    })
-                    .collect();
-                per_level.push(per_draw.map_err(|e| failed("information", e))?);
+                        .map_err(|e| failed("information", e))?;
+                        pl.push(v.remove(0));
+                    }
+                }
             }
             info.push(per_level);
         }
@@ -559,6 +586,23 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
             draws: draws.clone(),
         })
     };
+    // The information of a drive and a set of masses is computed once (the study's own design
+    // and the search's first pass share it when no mass is declared).
+    let cache: std::cell::RefCell<Vec<(usize, Vec<(usize, f64)>, std::rc::Rc<Infos>)>> =
+        std::cell::RefCell::new(Vec::new());
+    let infos_for =
+        |drive: usize, masses: &[(usize, f64)]| -> Result<std::rc::Rc<Infos>, DesignError> {
+            if let Some((_, _, i)) = cache
+                .borrow()
+                .iter()
+                .find(|(d, m, _)| *d == drive && m.as_slice() == masses)
+            {
+                return Ok(i.clone());
+            }
+            let i = std::rc::Rc::new(compute_infos(drive, masses)?);
+            cache.borrow_mut().push((drive, masses.to_vec(), i.clone()));
+            Ok(i)
+        };
     // The study's design: its measured points in their directions.
     let channel_of = |id: u32, axis: Axis| {
         channels
@@ -612,7 +656,7 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
         });
     }
     // The search per drive point, with the sensor masses of the design found (fixed point).
-    let mut best: Option<(Evaluated, Infos, usize)> = None;
+    let mut best: Option<(Evaluated, std::rc::Rc<Infos>, usize)> = None;
     let mut ranked: Vec<Evaluated> = Vec::new();
     for (di, &drive) in drives.iter().enumerate() {
         let mut mass_places: Vec<usize> = keep.iter().map(|&c| place_of[c]).collect();

@@ -267,6 +267,16 @@ pub fn leakage_bias(
     Ok(out)
 }
 
+/// The frequency points (Hz) of the expected-value model's fine grid for `chain` (where the
+/// plant is evaluated): `lo + j (hi - lo) / n`, `n` from `chain.kernel.grid_step_hz`. An engine
+/// prepared on these points (as `2 pi f`, the zero excluded) serves the plant exactly.
+pub fn band_grid_hz(chain: &ChainParams) -> Vec<f64> {
+    let (lo, hi) = chain.band_hz;
+    let n = ((hi - lo) / chain.kernel.grid_step_hz).ceil().max(1.0) as usize;
+    let step = (hi - lo) / n as f64;
+    (0..=n).map(|j| lo + j as f64 * step).collect()
+}
+
 /// The expected ordinary coherence `[channel][line]` of the chain on `plant` at
 /// `chain.lines_hz`: the truth record's `expected_coherence` of [`simulate_level`] (the same
 /// force spectrum, window kernel and sensor noise), without simulating the records. What a test
@@ -275,39 +285,56 @@ pub fn expected_coherence(
     plant: &dyn Plant,
     chain: &ChainParams,
 ) -> Result<Vec<Vec<f64>>, ExperimentError> {
+    Ok(expected_coherence_at(plant, chain, &[chain.force_rms_n])?.remove(0))
+}
+
+/// [`expected_coherence`] at several force levels (N RMS, `[level][channel][line]`), the plant
+/// evaluated once: everything else of the chain is `chain`'s.
+pub fn expected_coherence_at(
+    plant: &dyn Plant,
+    chain: &ChainParams,
+    force_rms_n: &[f64],
+) -> Result<Vec<Vec<Vec<f64>>>, ExperimentError> {
     let layout = chain.layout(plant.n_channels())?;
-    let band = band_model_fine(plant, chain)?;
-    let m = band.resp.len();
+    let base = band_model_fine(plant, chain)?;
     let p_w = chain.window.power_sum(layout.n_block);
-    let force_noise = noise_rms(chain.force_noise, chain.force_rms_n);
-    let resp_noise: Vec<f64> = (0..m)
-        .map(|i| {
-            noise_rms(
-                chain.response_noise_of(i),
-                band.response_mean_square(i).sqrt(),
-            )
-        })
-        .collect();
-    let mut out = vec![Vec::with_capacity(layout.line_bins.len()); m];
-    for &k in &layout.line_bins {
-        let (ff, fa, aa) = band.expected_diagonal(
-            k as f64 / chain.block_s,
-            chain.window,
-            layout.n_block,
-            chain.block_s,
-            chain.kernel.half_width_hz,
-        );
-        let g_ff = ff + force_noise.powi(2) * p_w;
-        for (i, o) in out.iter_mut().enumerate() {
-            let g_aa = aa[i] + resp_noise[i].powi(2) * p_w;
-            o.push(if g_ff * g_aa > 0.0 {
-                (fa[i].norm_sqr() / (g_ff * g_aa)).min(1.0)
-            } else {
-                0.0
-            });
+    let mut all = Vec::new();
+    for &f_rms in force_rms_n {
+        let mut band = base.clone();
+        let r = (f_rms / chain.force_rms_n).powi(2);
+        band.force_power.iter_mut().for_each(|p| *p *= r);
+        let m = band.resp.len();
+        let force_noise = noise_rms(chain.force_noise, f_rms);
+        let resp_noise: Vec<f64> = (0..m)
+            .map(|i| {
+                noise_rms(
+                    chain.response_noise_of(i),
+                    band.response_mean_square(i).sqrt(),
+                )
+            })
+            .collect();
+        let mut out = vec![Vec::with_capacity(layout.line_bins.len()); m];
+        for &k in &layout.line_bins {
+            let (ff, fa, aa) = band.expected_diagonal(
+                k as f64 / chain.block_s,
+                chain.window,
+                layout.n_block,
+                chain.block_s,
+                chain.kernel.half_width_hz,
+            );
+            let g_ff = ff + force_noise.powi(2) * p_w;
+            for (i, o) in out.iter_mut().enumerate() {
+                let g_aa = aa[i] + resp_noise[i].powi(2) * p_w;
+                o.push(if g_ff * g_aa > 0.0 {
+                    (fa[i].norm_sqr() / (g_ff * g_aa)).min(1.0)
+                } else {
+                    0.0
+                });
+            }
         }
+        all.push(out);
     }
-    Ok(out)
+    Ok(all)
 }
 
 /// Simulate one excitation level of the measurement chain on `plant`.

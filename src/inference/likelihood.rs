@@ -823,7 +823,15 @@ impl<'a> FrfLikelihood<'a> {
         p: &[f64],
         noise: &[f64],
     ) -> Result<Vec<Vec<f64>>, ForwardError> {
-        let pred = self.forward.predict(p, true)?;
+        Ok(self.channel_information_of(&self.forward.predict(p, true)?, noise))
+    }
+
+    /// [`Self::channel_information`] of a prediction with its Jacobian already at hand.
+    pub fn channel_information_of(
+        &self,
+        pred: &crate::forward::Prediction,
+        noise: &[f64],
+    ) -> Vec<Vec<f64>> {
         let v = self.variances(noise);
         let np = pred.jac.len();
         let n = self.data.n_out;
@@ -844,7 +852,7 @@ impl<'a> FrfLikelihood<'a> {
                 }
             }
         }
-        Ok(out)
+        out
     }
 
     /// Pointwise log likelihood per line (summed over channels), for LOO and WAIC.
