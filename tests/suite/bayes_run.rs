@@ -53,16 +53,24 @@ fn write_study(dir: &Path, name: &str, extra_solver: &str) -> (PathBuf, PathBuf)
     (file, out)
 }
 
-fn run(file: &Path) -> (i32, String) {
-    let o = Command::new(BIN)
-        .args(["run", file.to_str().unwrap(), "--no-cache"])
-        .env("CI", "1")
-        .output()
-        .unwrap();
+/// `rfmlab run file`: with `cache` its certified ROM is read from (or saved to) that folder,
+/// without it the ROM is built (`--no-cache`).
+fn run(file: &Path, cache: Option<&Path>) -> (i32, String) {
+    let o = command(file, cache).output().unwrap();
     (
         o.status.code().unwrap_or(-1),
         String::from_utf8_lossy(&o.stderr).into_owned(),
     )
+}
+
+fn command(file: &Path, cache: Option<&Path>) -> Command {
+    let mut c = Command::new(BIN);
+    c.args(["run", file.to_str().unwrap()]).env("CI", "1");
+    match cache {
+        Some(dir) => c.env("RFMLAB_ROM_CACHE", dir),
+        None => c.arg("--no-cache").env_remove("RFMLAB_ROM_CACHE"),
+    };
+    c
 }
 
 fn python() -> Option<PathBuf> {
@@ -95,9 +103,11 @@ fn same_table(py: &Path, a: &Path, b: &Path) -> bool {
 fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the_same_draws() {
     let Some(py) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
-    // Uninterrupted reference.
+    // Uninterrupted reference; its certified ROM is saved for the interrupted run (the ROM
+    // build is most of a run's time; the run with one thread builds its own).
+    let cache = dir.path().join("rom-cache");
     let (fa, outa) = write_study(dir.path(), "a", "");
-    let (code, err) = run(&fa);
+    let (code, err) = run(&fa, Some(&cache));
     assert_eq!(code, 0, "{err}");
     for t in ["draws", "summary", "starts", "laplace", "sampler_runs"] {
         assert!(
@@ -143,9 +153,7 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
     // Interrupted run: kill -9 once sampling has checkpointed something, then run again.
     let (fb, outb) = write_study(dir.path(), "b", "");
     let ckpt = outb.parent().unwrap().join(".checkpoints");
-    let mut child = Command::new(BIN)
-        .args(["run", fb.to_str().unwrap(), "--no-cache"])
-        .env("CI", "1")
+    let mut child = command(&fb, Some(&cache))
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -170,8 +178,10 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
         !outb.join("draws.parquet").exists(),
         "killed before the results were written"
     );
-    let (code, err) = run(&fb);
+    let (code, err) = run(&fb, Some(&cache));
     assert_eq!(code, 0, "{err}");
+    assert_eq!(rom_builds(&outa), 1, "the reference run builds its ROM");
+    assert_eq!(rom_builds(&outb), 0, "the resumed run reads the cached ROM");
     assert!(
         same_table(
             &py,
@@ -181,9 +191,9 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
         "draws after kill -9 and rerun differ from the uninterrupted run"
     );
 
-    // One thread: the same draws.
+    // One thread, the ROM built again with it: the same draws.
     let (fc, outc) = write_study(dir.path(), "c", "threads = 1");
-    let (code, err) = run(&fc);
+    let (code, err) = run(&fc, None);
     assert_eq!(code, 0, "{err}");
     assert!(
         same_table(
@@ -193,6 +203,13 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
         ),
         "draws with 1 thread differ from the default thread count"
     );
+}
+
+/// The manifest's count of ROM builds of the run written to `out`.
+fn rom_builds(out: &Path) -> u64 {
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap();
+    m["counters"]["rom builds"].as_u64().unwrap_or(0)
 }
 
 /// Number of files below `dir` (0 when it does not exist).

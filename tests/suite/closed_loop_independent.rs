@@ -21,6 +21,7 @@
 //! at L1).
 
 use crate::closed_loop_td::judge;
+use crate::shared_rom_cache;
 use rfmlab::common::C64;
 use rfmlab::data::uff58::{read_uff, write_uff, Ordinate};
 use rfmlab::diagnose::{diagnose_study, params_of, DiagnoseLevel};
@@ -99,7 +100,12 @@ fn run(dir: &Path, level: &str, inject: Inject) -> DiagnoseLevel {
     std::fs::write(&study_path, &text).unwrap();
     let mut study = rfmlab::study::parse_str(&text, &study_path).unwrap();
     study.output_dir = dir.join(format!("{tag}_{level}_out"));
-    let s = diagnose_study(&study, None, &params_of(&study)).unwrap();
+    // The suite's shared ROMs of the study (crate::shared_rom_cache).
+    shared_rom_cache::share(dir);
+    let s = {
+        let _one_at_a_time = shared_rom_cache::lock();
+        diagnose_study(&study, None, &params_of(&study)).unwrap()
+    };
     let l = s.levels.into_iter().next().unwrap();
     eprintln!(
         "independent {tag} {level}: {}; chi2 {:.3} -> {:.3}; ranking {:?}; loop {:.0} s",

@@ -26,6 +26,7 @@
 //!   term ROM (opt-in in `[closed_loop] candidates`: a degraded bond strip at the block's inner
 //!   end, an adherend structural loss factor), with every candidate type named.
 
+use crate::shared_rom_cache;
 use rfmlab::diagnose::{diagnose_study, params_of, DiagnoseLevel};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -64,7 +65,7 @@ fn run_case_with(
     std::fs::write(&study_path, &study_text).unwrap();
     let mut study = rfmlab::study::parse_str(&study_text, &study_path).unwrap();
     study.output_dir = dir.join(format!("{tag}_out"));
-    let s = diagnose_study(&study, None, &params_of(&study)).unwrap();
+    let s = diagnose(dir, &study);
     let l = s.levels.into_iter().next().unwrap();
     eprintln!(
         "{name} (seed {seed:?}): {}; chi2 {:.3} -> {:.3}; ranking {:?}; loop {:.0} s",
@@ -75,6 +76,14 @@ fn run_case_with(
         l.loop_seconds
     );
     l
+}
+
+/// [`diagnose_study`] of `study` (its results folder in `dir`) on the suite's shared ROMs of
+/// the study ([`crate::shared_rom_cache`]).
+fn diagnose(dir: &Path, study: &rfmlab::Study) -> rfmlab::diagnose::DiagnoseSummary {
+    shared_rom_cache::share(dir);
+    let _one_at_a_time = shared_rom_cache::lock();
+    diagnose_study(study, None, &params_of(study)).unwrap()
 }
 
 /// Simulate the case `name` (its experiment file edited by `edit`) into `dir` with
@@ -346,7 +355,7 @@ fn mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir: &Path) {
     std::fs::write(&path, &text).unwrap();
     let mut study = rfmlab::study::parse_str(&text, &path).unwrap();
     study.output_dir = dir.join(format!("{tag}_out"));
-    let s = diagnose_study(&study, None, &params_of(&study)).unwrap();
+    let s = diagnose(dir, &study);
     let l = &s.levels[0];
     assert_eq!(l.status, "nothing_missing", "{}", l.conclusion);
     let md = std::fs::read_to_string(s.output_dir.join("closed_loop.md")).unwrap();

@@ -28,6 +28,7 @@
 
 use crate::closed_loop::{lines, posterior, simulate, TRUTH};
 use crate::common_data::data;
+use crate::shared_rom_cache;
 use crate::spring_model::measured_engine;
 use rfmlab::closed_loop::conclude::conclude;
 use rfmlab::closed_loop::null::{calibrate, Chain, NullParams};
@@ -182,7 +183,12 @@ fn run_independent_with(dir: &Path, case: &str, level: &str, candidates: &str) -
     std::fs::write(&path, &text).unwrap();
     let mut study = rfmlab::study::parse_str(&text, &path).unwrap();
     study.output_dir = dir.join(format!("{case}_{level}_out"));
-    let s = diagnose_study(&study, None, &params_of(&study)).unwrap();
+    // The suite's shared ROMs of the study (crate::shared_rom_cache).
+    shared_rom_cache::share(dir);
+    let s = {
+        let _one_at_a_time = shared_rom_cache::lock();
+        diagnose_study(&study, None, &params_of(&study)).unwrap()
+    };
     let l = s.levels.into_iter().next().unwrap();
     eprintln!(
         "{case} {level}: {} | {} | loop {:.0} s, null {:.1} s",

@@ -7,6 +7,7 @@ mod numerics;
 mod python_checks;
 mod rom_model;
 mod runner_common;
+mod shared_rom_cache;
 mod spring_model;
 
 mod base_springs;

@@ -1,0 +1,43 @@
+//! One folder of certified ROMs and term ROMs for the suite's process, shared by the tests that
+//! diagnose the paper's joint (the closed loop on time-domain data, on the independent data):
+//! building and certifying them is most of a diagnosis, and a cached ROM is exact (its
+//! matrices are stored bit for bit, keyed by everything it depends on), so each is built once
+//! per run of the suite instead of once per test.
+//!
+//! The folder is `<CARGO_TARGET_TMPDIR>/suite-rom-cache`, emptied at its first use in a process
+//! (no ROM of an earlier build of the code is read). A test's results folder `<dir>/<name>` has
+//! its cache at `<dir>/.rom-cache` (`rfmlab::stage::rom_cache_dir`); [`share`] makes that a
+//! link to the shared folder, and [`lock`] makes the tests' diagnoses take turns.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, MutexGuard, OnceLock};
+
+/// The shared folder, emptied at its first use in this process.
+fn folder() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("suite-rom-cache");
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    })
+}
+
+/// Make `<dir>/.rom-cache` (the ROM cache of results folders in `dir`) the shared folder.
+pub fn share(dir: &Path) {
+    let link = dir.join(".rom-cache");
+    if std::fs::symlink_metadata(&link).is_ok() {
+        return;
+    }
+    std::os::unix::fs::symlink(folder(), &link).unwrap();
+}
+
+/// Held while a test diagnoses a study with the shared folder: one diagnosis at a time (the
+/// studies of the time-domain loop and of the independent data share their joint, and so their
+/// ROMs), so that the second of two tests run at the same time reads what the first built
+/// instead of building it again. A test that failed while holding it does not stop the others.
+pub fn lock() -> MutexGuard<'static, ()> {
+    static LOCK: Mutex<()> = Mutex::new(());
+    LOCK.lock().unwrap_or_else(|e| e.into_inner())
+}
