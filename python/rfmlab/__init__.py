@@ -7,6 +7,7 @@ from measured FRFs.
     results.tables["parameters"]                     # every table as a polars DataFrame
     idata = results.to_inference_data(model="model4", level="L1")   # ArviZ
     post = study.posterior("model4", "L1")           # logp(x), logp_and_grad(x) for other samplers
+    plan = study.design(output="plan")               # where the sensors go (rfmlab design)
 
 See docs/python.md for the whole API.
 """
@@ -25,6 +26,7 @@ import polars as pl
 
 from . import _rfmlab
 from ._errors import DataError, RfmlabError, RunError, StudyError
+from .design import Design, PlannedDesign
 from .posterior import Posterior
 from .results import Results
 
@@ -37,6 +39,8 @@ __all__ = [
     "Study",
     "Results",
     "Posterior",
+    "Design",
+    "PlannedDesign",
     "Simulation",
     "RfmlabError",
     "StudyError",
@@ -165,6 +169,59 @@ class Study:
             model, threshold_nats, None if output is None else str(output), output is not None, callback
         )
         return json.loads(text)
+
+    def design(
+        self,
+        output: str | Path | None = None,
+        sensors: int | None = None,
+        force: bool = False,
+        quiet: bool = True,
+        progress: Callable[[str, int, int], object] | None = None,
+    ) -> Design:
+        """Plan the test (as ``rfmlab design``, docs/planning.md) and return the Design.
+
+        The study's ``[design]`` section sets the search (its defaults when the study has
+        none): where the response sensors go, in which directions, where the shaker drives,
+        so that the planned measurement pins down the adhesive law's parameters. The study's
+        own design is scored the same way (``Design.current``).
+
+        Args:
+            output: a folder to also write the design's files into (``design.parquet``,
+                ``design_candidates.parquet``, a figure, ``report.md``, ``manifest.json``,
+                replaced as a whole as by ``rfmlab design -o``); None writes nothing.
+            sensors: response sensors per design (overrides ``[design] sensors``).
+            force: replace ``output`` even when rfmlab did not write it (a folder with other
+                files, or a file), as ``--force``.
+            quiet: when False, each step is logged at INFO on the ``rfmlab`` logger (at DEBUG
+                otherwise).
+            progress: called as ``progress(message, 0, 0)`` on every step.
+
+        A wrong ``[design]`` or ``sensors`` (or a study the design cannot use, e.g. a level
+        without ``force_rms_n``) raises StudyError; an output folder that may not be
+        replaced, or a failed computation, RunError. The GIL is released while it computes;
+        Ctrl-C is honoured when the search ends (it has no cancellation point).
+        """
+        level = logging.INFO if not quiet else logging.DEBUG
+
+        def callback(step: str, done: int, total: int) -> None:
+            log.log(level, "%s", step)
+            if progress is not None:
+                progress(step, done, total)
+
+        d = self._native._design(None if output is None else str(output), sensors, force, callback)
+        return Design(
+            best=PlannedDesign._from_native(d["best"]),
+            current=None if d["current"] is None else PlannedDesign._from_native(d["current"]),
+            table=pl.read_parquet(io.BytesIO(d["table"])),
+            candidates=pl.read_parquet(io.BytesIO(d["candidates"])),
+            notes=list(d["notes"]),
+            report=d["report"],
+            models=list(d["models"]),
+            levels=list(d["levels"]),
+            params={m: list(p) for m, p in zip(d["models"], d["params"])},
+            timings={k: float(v) for k, v in d["timings"]},
+            output=None if output is None else Path(output),
+        )
 
     def posterior(
         self,

@@ -2,9 +2,9 @@
 //! (`python/rfmlab/`) turns what these functions return (parquet bytes, columns, plain lists)
 //! into polars frames, numpy arrays and ArviZ InferenceData.
 //!
-//! Long calls (a run, building a posterior's engine, a simulation) release the GIL. Errors
-//! become the package's exceptions (`rfmlab.StudyError` with `file`, `key` and `message`,
-//! `rfmlab.DataError`, `rfmlab.RunError`), built by `rfmlab._errors`.
+//! Long calls (a run, a design, building a posterior's engine, a simulation) release the GIL.
+//! Errors become the package's exceptions (`rfmlab.StudyError` with `file`, `key` and
+//! `message`, `rfmlab.DataError`, `rfmlab.RunError`), built by `rfmlab._errors`.
 
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
@@ -17,6 +17,7 @@ use rfmlab::study::StudyError;
 use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 
+mod design;
 mod run;
 
 /// An instance of the exception class `class` of `rfmlab._errors` made with `args`; if the
@@ -300,6 +301,25 @@ impl Study {
             closed_loop,
         };
         run::run(py, &self.study, args, callback)
+    }
+
+    /// Plan the test (see `design.rs`, as `rfmlab design`): a dict with the best and the
+    /// study's own design, the design tables as parquet bytes, the notes and the report.
+    #[pyo3(signature = (output=None, sensors=None, force=false, callback=None))]
+    fn _design<'py>(
+        &self,
+        py: Python<'py>,
+        output: Option<PathBuf>,
+        sensors: Option<usize>,
+        force: bool,
+        callback: Option<Py<PyAny>>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let args = design::DesignArgs {
+            output,
+            sensors,
+            force,
+        };
+        design::design(py, &self.study, args, callback)
     }
 
     /// The closed loop on the study (as `rfmlab diagnose`): its summary as JSON text.

@@ -32,7 +32,7 @@ pub(crate) struct Outcome {
     pub closed_loop: Option<String>,
 }
 
-fn parquet_bytes(df: &DataFrame) -> Result<Vec<u8>, String> {
+pub(crate) fn parquet_bytes(df: &DataFrame) -> Result<Vec<u8>, String> {
     let mut buf = Vec::new();
     let mut df = df.clone();
     ParquetWriter::new(&mut buf)
