@@ -95,6 +95,9 @@ pub struct DesignResult {
     pub timings: Vec<(String, f64)>,
 }
 
+/// Information computed for a drive (output index) and a set of sensor masses.
+type CachedInfos = (usize, Vec<(usize, f64)>, std::rc::Rc<Infos>);
+
 /// Rows of the ranked table.
 pub const RANKED: usize = 20;
 
@@ -588,8 +591,7 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
     };
     // The information of a drive and a set of masses is computed once (the study's own design
     // and the search's first pass share it when no mass is declared).
-    let cache: std::cell::RefCell<Vec<(usize, Vec<(usize, f64)>, std::rc::Rc<Infos>)>> =
-        std::cell::RefCell::new(Vec::new());
+    let cache: std::cell::RefCell<Vec<CachedInfos>> = std::cell::RefCell::new(Vec::new());
     let infos_for =
         |drive: usize, masses: &[(usize, f64)]| -> Result<std::rc::Rc<Infos>, DesignError> {
             if let Some((_, _, i)) = cache
@@ -609,9 +611,15 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
             .iter()
             .position(|c| places[c.place].id == id && c.axis == axis)
     };
-    let current_channels: Option<Vec<usize>> = study
+    // The study's design: its measured points (optional ones, e.g. candidate drive points,
+    // are not sensors).
+    let measured: Vec<&crate::study::Point> = study
         .structure
         .points
+        .iter()
+        .filter(|p| !p.optional)
+        .collect();
+    let current_channels: Option<Vec<usize>> = measured
         .iter()
         .map(|p| channel_of(p.id, p.direction.axis))
         .collect();
