@@ -396,6 +396,16 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
             .ok_or_else(|| input("design.drives", format!("point {id} is not in the model")))?;
         drives.push(o);
     }
+    // The reduced model's inputs: the candidate drives and the study's own excitation (its
+    // design is scored too).
+    let mut rom_inputs = drives.clone();
+    if let Some(p) = study.point(study.structure.excitation) {
+        if let Some(o) = out_of(p.id, p.direction.axis) {
+            if !rom_inputs.contains(&o) {
+                rom_inputs.push(o);
+            }
+        }
+    }
     let mut channels = Vec::new();
     for (pi, pl) in places.iter().enumerate() {
         for &axis in &settings.directions {
@@ -440,7 +450,7 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
         range,
         tolerance: study.solver.rom_tolerance.max(ROM_TOLERANCE),
         allow_uncertified: true,
-        reference: crate::rom::Reference::suited(built.model.n_dof(), drives.len()),
+        reference: crate::rom::Reference::suited(built.model.n_dof(), rom_inputs.len()),
         // The certificate judges the study's points and the drives, as a run's does; the
         // candidates ride on the same basis and are spot-checked below.
         certified_outputs: Some(
@@ -449,7 +459,7 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
                 .points
                 .iter()
                 .filter_map(|p| out_of(p.id, p.direction.axis))
-                .chain(drives.iter().copied())
+                .chain(rom_inputs.iter().copied())
                 .collect(),
         ),
         ..Default::default()
@@ -459,7 +469,7 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
         drives.len(),
         built.model.n_dof()
     ));
-    let (rom, cert) = crate::rom::build_rom(&built.model, &drives, &rom_params)
+    let (rom, cert) = crate::rom::build_rom(&built.model, &rom_inputs, &rom_params)
         .map_err(|e| failed("reduced model", e))?;
     let mut notes = vec![format!(
         "Reduced model: {} basis vectors, certified error {:.1e} of each FRF's peak (tolerance {:.0e}){} over {:.1}-{:.1} Hz and E' {:.2}-{:.1} MPa; model {} DOFs, {} candidate places, {} candidate channels.",
