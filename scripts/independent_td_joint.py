@@ -45,6 +45,20 @@ loss factor 0.0035 at 78.5 Hz): the reduced basis needs --ref-moduli 5.6e6,7.2e6
 1e-6 to 1e-5 of so sharp a peak); lap1 then passes --rom-tol 1e-6 (studies/data/virtual/
 converged/README.md).
 
+Single-lap points anywhere on the strips' outer surfaces (the joint file's points as
+[x, y, z, "+x" | "+y" | "+z"], with "point_ids", "channels" and the drive among the points; see
+load_joint): the drive's force acts along its point's direction. The mesh gets extra breaks at
+the points' x, at their y inside a strip and at their (mirrored) z inside the half width, so
+every point is a node and the response is read at that node (snapped; no shape-function
+interpolation is needed, and a point more than 1e-9 m from a node is an error). Such a load and
+such points are not symmetric about the mid-width plane: the data are then the sum of both
+halves, the symmetric (u_z = 0 on the plane) and the antisymmetric (u_x = u_y = 0 on it), each
+loaded with half the mirrored force, f_s = 1/2 s_d e_d and f_a = 1/2 a_d e_d at the drive's
+node in the half z in [0, w / 2] (s = (1, 1, -1), a = (-1, -1, 1) for a point mirrored from
+z > w / 2, else 1), and a point's response u_c = s_c u_s,c + a_c u_a,c at its (mirrored) node
+(a component held on the plane contributes 0); each half has its own reduced basis (the same
+moduli and moments) and the check against direct solves sums both halves' solves.
+
 FE model. K(w) = K_b + E*(w) S - w^2 M, with K_b the beam's stiffness, S the adhesive's stiffness
 assembled at unit Young's modulus and M the consistent mass; 3x3x3 Gauss points (exact for these
 box elements). Three meshes (--mesh):
@@ -111,7 +125,9 @@ level, seed + i - 1 for level i unless the joint file states its seed.
 Written into OUT_DIR:
   level1.uff   UFF58 ASCII: the 4 accelerances H1 (func type 4, response node i +Y, reference
                node 2 +Y, (m/s^2)/N) then the 4 coherences (func type 6); level2.uff ... for
-               further levels of a joint file
+               further levels of a joint file. Points given as [x, y, z, "+d"]: the channels'
+               point ids and directions (UFF58 codes x 1, y 2, z 3, as rfmlab's reader maps
+               them), reference node the drive's id and direction
   truth.json   geometry, materials, law and parameters, E*(f), the modes, the mesh, its
                convergence, the reduced basis check, the chain's settings and statistics,
                versions; "levels": per level id, name, force_rms_N, law, params (the form
@@ -217,6 +233,10 @@ MESH_LAP = {
 JOINT_KIND = "beam_on_block"
 LAP = None
 POINTS_Y = None
+# Single-lap points given as [x, y, z, "+d"] (load_lap): a list of {"id", "pos", "comp", "dir"}
+# and the measured point ids (channels); None for the classic [x, y] points.
+POINTS_SPEC = None
+CHANNELS = None
 
 # The matched mesh (--mesh matched, the default): the discretisation a user's study with
 # rfmlab's default `element_size = 0.005` gets for this joint, built here by this script's own
@@ -263,7 +283,18 @@ def load_joint(path):
        "support": "clamped",         # the lower strip's end face x = 0 fixed (the only support)
        "points": [[x, y], ...],      # four points on the strips' upper faces (y = t1 or
                                      # t1 + t_a + t2), centreline z = w / 2, +y, ids 1, 2, ...
-       "drive", "seed", "levels",    # as above
+                 or [[x, y, z, "+z"], ...],   # or anywhere on a strip's outer surface,
+                                     # measured in "+x", "+y" or "+z" (then all points so)
+       "point_ids": [5, 31, ...],    # optional with the second form: the points' ids (else
+                                     # 1, 2, ...)
+       "channels": [31, 32, ...],    # optional with the second form: the measured points (the
+                                     # UFF's channels, in this order; else every point)
+       "drive", "seed", "levels",    # as above (the second form: the drive is one of the
+                                     # points, the force along its direction)
+       "response_noise_rms": 0.01,   # optional: the accelerometers' white noise RMS, m/s^2
+                                     # (over the sampled span 0-1024 Hz; default CHAIN's 0.002)
+       "force_noise_rel": 0.002,     # optional: the force sensor's noise RMS as a fraction of
+                                     # the level's force RMS (default CHAIN's 0.002 N absolute)
        "mesh": {...}}                # optional: entries of MESH_LAP to replace
     Returns the parsed file."""
     global JOINT_NAME, BEAM_L, BEAM_T, BEAM_W, BOND_X0, BOND_L, BOND_T, STEEL, GLUE
@@ -336,6 +367,8 @@ def load_lap(cfg, path):
     BOND_X0, BOND_L, BOND_T = L - lo, lo, ta
     STEEL = {"E": float(st["E"]), "nu": float(st["nu"]), "rho": float(st["rho"])}
     GLUE = {"nu": float(a["nu"]), "rho": float(a["rho"])}
+    if any(len(p) == 4 for p in cfg["points"]):
+        return load_lap_points(cfg, path)
     pts = [tuple(float(v) for v in p) for p in cfg["points"]]
     if len(pts) != 4:
         raise SystemExit(f"{path}: four points expected, got {len(pts)}")
@@ -357,8 +390,69 @@ def load_lap(cfg, path):
     return cfg
 
 
+def load_lap_points(cfg, path):
+    """The rest of load_lap for points given as [x, y, z, "+d"] (anywhere on a strip's outer
+    surface, any axis direction), with optional "point_ids", "channels" and noise keys."""
+    global POINTS_X, POINTS_Y, POINTS_SPEC, CHANNELS, DRIVE, TRUTH, LEVELS, MESH, MESH_MATCHED
+    L, lo, t1, ta, t2, w = (LAP[k] for k in ("L", "overlap", "t1", "ta", "t2", "w"))
+    ids = [int(v) for v in cfg.get("point_ids", range(1, len(cfg["points"]) + 1))]
+    if len(ids) != len(cfg["points"]) or len(set(ids)) != len(ids):
+        raise SystemExit(f"{path}: point_ids must give one distinct id per point")
+    tol = 1e-12
+    spec = []
+    for pid, p in zip(ids, cfg["points"]):
+        if len(p) != 4 or str(p[3]) not in ("+x", "+y", "+z"):
+            raise SystemExit(f"{path}: point {pid}: [x, y, z, \"+x\" | \"+y\" | \"+z\"] expected "
+                             f"(all points in that form), got {p}")
+        x, y, z = (float(v) for v in p[:3])
+        # the strips' boxes (x0, x1, y0, y1) and the bonded face each has (y, x range)
+        boxes = [((0.0, L, 0.0, t1), t1), ((L - lo, 2 * L - lo, t1 + ta, t1 + ta + t2), t1 + ta)]
+        ok = False
+        for (x0, x1, y0, y1), y_bond in boxes:
+            inside = (x0 - tol <= x <= x1 + tol and y0 - tol <= y <= y1 + tol
+                      and -tol <= z <= w + tol)
+            on_face = (min(abs(x - x0), abs(x - x1), abs(y - y0), abs(y - y1), abs(z),
+                           abs(z - w)) <= tol)
+            bonded = abs(y - y_bond) <= tol and L - lo + tol < x < L - tol
+            if inside and on_face and not bonded:
+                ok = True
+        if not ok:
+            raise SystemExit(f"{path}: point {pid} [{x}, {y}, {z}] is not on a strip's outer "
+                             "surface")
+        spec.append({"id": pid, "pos": np.array([x, y, z]), "comp": "xyz".index(p[3][1]),
+                     "dir": str(p[3])})
+    POINTS_SPEC = spec
+    CHANNELS = [int(v) for v in cfg.get("channels", ids)]
+    DRIVE = int(cfg["drive"])
+    for c in CHANNELS + [DRIVE]:
+        if c not in ids:
+            raise SystemExit(f"{path}: point {c} (channel or drive) is not one of {ids}")
+    POINTS_X = tuple(float(sp_["pos"][0]) for sp_ in spec)
+    POINTS_Y = tuple(float(sp_["pos"][1]) for sp_ in spec)
+    if "response_noise_rms" in cfg:
+        CHAIN["accel_noise_rms_ms2"] = float(cfg["response_noise_rms"])
+    if "force_noise_rel" in cfg:
+        CHAIN["force_noise_rel"] = float(cfg["force_noise_rel"])
+        CHAIN["force_noise_rms_n"] = None
+    LEVELS = load_levels(cfg)
+    TRUTH = LEVELS[0][2]
+    MESH = {**MESH_LAP, **{k: (tuple(v) if isinstance(v, list) else v)
+                           for k, v in cfg.get("mesh", {}).items()}}
+    MESH_MATCHED = None
+    return cfg
+
+
+def mirrored(pos):
+    """A position mapped into the half z in [0, w / 2] and whether it was mirrored."""
+    if pos[2] > BEAM_W / 2 + 1e-12:
+        return np.array([pos[0], pos[1], BEAM_W - pos[2]]), True
+    return np.array(pos, dtype=float), False
+
+
 def point_targets():
     """The points' coordinates (x, y, z), ids 1, 2, ..."""
+    if POINTS_SPEC is not None:
+        return [sp_["pos"] for sp_ in POINTS_SPEC]
     if JOINT_KIND == "single_lap":
         return [np.array([x, y, BEAM_W / 2]) for x, y in zip(POINTS_X, POINTS_Y)]
     return [np.array([x, BEAM_T, BEAM_W / 2]) for x in POINTS_X]
@@ -436,6 +530,12 @@ def lap_axes(spec, refine=1.0, half=True):
         if isinstance(spec["y_strip"], (int, np.integer)):
             return np.linspace(a, b, int(round(spec["y_strip"] * r)) + 1)
         he, g, hm = spec["y_strip"]
+        if POINTS_SPEC is not None:  # breaks at the points' y inside the strip
+            cy = sorted(set([a, b] + [float(sp_["pos"][1]) for sp_ in POINTS_SPEC
+                                      if a + 1e-12 < sp_["pos"][1] < b - 1e-12]))
+            if len(cy) > 2:
+                return join(*[nodes_graded_to(c0, c1, [(face, he / r, g / r)], hm / r)
+                              for c0, c1 in zip(cy[:-1], cy[1:])])
         return nodes_graded_to(a, b, [(face, he / r, g / r)], hm / r)
 
     he, g = spec["y_bond"]
@@ -444,7 +544,16 @@ def lap_axes(spec, refine=1.0, half=True):
     y_upper = strip(t1 + ta, t1 + ta + t2, t1 + ta)
     y = join(y_lower, y_bond, y_upper)
     he, g, hm = spec["z"]
-    z = graded_nodes(0.0, BEAM_W / 2, he / r, None, g / r, hm / r)
+    cz = []
+    if POINTS_SPEC is not None:  # breaks at the points' (mirrored) z inside the half width
+        cz = sorted(set(float(mirrored(sp_["pos"])[0][2]) for sp_ in POINTS_SPEC
+                        if 1e-12 < mirrored(sp_["pos"])[0][2] < BEAM_W / 2 - 1e-12))
+    if cz:
+        cz = [0.0] + cz + [BEAM_W / 2]
+        z = join(*[nodes_graded_to(c0, c1, [(0.0, he / r, g / r)], hm / r)
+                   for c0, c1 in zip(cz[:-1], cz[1:])])
+    else:
+        z = graded_nodes(0.0, BEAM_W / 2, he / r, None, g / r, hm / r)
     if not half:
         z = join(z, (BEAM_W - z[::-1]))
     return x, y, z, (len(y_lower) - 1, len(y_bond) - 1, len(y_upper) - 1)
@@ -569,6 +678,19 @@ class Joint:
                            {"beam": int(len(beam)), "bond": int(len(bond))})
         self.assembly_s = time.time() - t0
         self.point_dofs = []
+        if POINTS_SPEC is not None:
+            # per point: its node's DOF of its direction in the half, and whether mirrored
+            self.point_nodes = {}
+            for sp_ in POINTS_SPEC:
+                target, mir = mirrored(sp_["pos"]) if half else (sp_["pos"], False)
+                cand = np.nonzero(self.comp == sp_["comp"])[0]
+                d = np.linalg.norm(self.loc[:, cand].T - target, axis=1)
+                k = int(np.argmin(d))
+                if d[k] > 1e-9:
+                    raise SystemExit(f"no node at point {sp_['id']} {target} (nearest "
+                                     f"{d[k]:.2e} m away)")
+                self.point_nodes[sp_["id"]] = (int(cand[k]), sp_["comp"], mir)
+            return
         for target in point_targets():
             cand = np.nonzero(self.comp == 1)[0]
             d = np.linalg.norm(self.loc[:, cand].T - target, axis=1)
@@ -622,7 +744,21 @@ class Half:
         self.loc = joint.loc[:, self.free]
         n = len(self.free)
         self.f = np.zeros(n)
-        if kind == "anti":  # the points lie on the plane, held in y: no force, no outputs
+        self.C = None
+        if POINTS_SPEC is not None:  # general points: weighted outputs, mirrored force
+            pos = {g: i for i, g in enumerate(self.free)}
+            sign = lambda c, mir: (1.0 if not mir else  # noqa: E731
+                                   ((1.0, 1.0, -1.0) if kind == "sym" else (-1.0, -1.0, 1.0))[c])
+            self.C = np.zeros((len(CHANNELS), n))
+            for i, pid in enumerate(CHANNELS):
+                g, c, mir = joint.point_nodes[pid]
+                if g in pos:
+                    self.C[i, pos[g]] = sign(c, mir) if kind != "full" else 1.0
+            g, c, mir = joint.point_nodes[DRIVE]
+            if g in pos:
+                self.f[pos[g]] = 0.5 * sign(c, mir) if kind != "full" else 1.0
+            self.out = np.arange(len(CHANNELS))
+        elif kind == "anti":  # the points lie on the plane, held in y: no force, no outputs
             self.out = np.zeros(0, dtype=np.int64)
         else:
             pos = {g: i for i, g in enumerate(self.free)}
@@ -729,7 +865,7 @@ class Projected:
         self.Sr = V.T @ (half.S @ V)
         self.Mr = V.T @ (half.M @ V)
         self.fr = V.T @ half.f
-        self.Cr = V[half.out, :]
+        self.Cr = V[half.out, :] if half.C is None else half.C @ V
 
     def receptance(self, w, E, chunk=2000):
         """u at the points (4 x len(w)) for a unit force at the drive point: batched solves of
@@ -764,6 +900,22 @@ class Projected:
         return self.half.mode_residual(E, lam, phi), phi
 
 
+class PairROM:
+    """The sum of the symmetric and antisymmetric halves' reduced models (general single-lap
+    points: each half's outputs already carry the mirror signs)."""
+
+    def __init__(self, roms):
+        self.roms = roms
+        self.V = np.zeros((0, sum(r.V.shape[1] for r in roms)))  # V.shape[1]: vectors in all
+        self.vectors = [int(r.V.shape[1]) for r in roms]
+
+    def receptance(self, w, E):
+        return sum(r.receptance(w, E) for r in self.roms)
+
+    def accelerance(self, w, E):
+        return -(np.asarray(w, dtype=float) ** 2) * self.receptance(w, E)
+
+
 def direct_receptance(half, w, E, extended=False):
     """Full-order solve of (K_b + E S - w^2 M) x = f by complex sparse LU with one step of
     iterative refinement; x at the points and the relative residual. extended: the refinement's
@@ -788,12 +940,12 @@ def direct_receptance(half, w, E, extended=False):
         x = xl.astype(complex)
         resid = float(np.linalg.norm((Al @ xl - bl).astype(complex))
                       / (abs(A).sum(axis=1).max() * np.linalg.norm(x) + np.linalg.norm(b)))
-        return x[half.out], resid
+        return (x[half.out] if half.C is None else half.C @ x), resid
     x += lu.solve(b - A @ x)
     # normwise backward error ||A x - b|| / (||A||_inf ||x|| + ||b||)
     resid = np.linalg.norm(A @ x - b) / (abs(A).sum(axis=1).max() * np.linalg.norm(x)
                                           + np.linalg.norm(b))
-    return x[half.out], float(resid)
+    return (x[half.out] if half.C is None else half.C @ x), float(resid)
 
 
 _JOB = {}
@@ -900,20 +1052,23 @@ def measure(rom, law, segments, seed, force_rms_n=None):
     wk = 2 * np.pi * fk[band]
     H = rom.accelerance(wk, law(wk))  # 4 x n_band: the FRF at every FFT bin
     frf_s = time.time() - t0
-    acc = np.empty((4, N))
-    for i in range(4):
+    nch = H.shape[0]
+    acc = np.empty((nch, N))
+    for i in range(nch):
         A = np.zeros_like(F)
         A[band] = H[i] * F[band]
         acc[i] = np.fft.irfft(A, N)
-    f_meas = force + CHAIN["force_noise_rms_n"] * rng.standard_normal(N)
-    a_meas = acc + CHAIN["accel_noise_rms_ms2"] * rng.standard_normal((4, N))
+    f_noise = (CHAIN["force_noise_rms_n"] if CHAIN.get("force_noise_rel") is None
+               else CHAIN["force_noise_rel"] * force_rms_n)
+    f_meas = force + f_noise * rng.standard_normal(N)
+    a_meas = acc + CHAIN["accel_noise_rms_ms2"] * rng.standard_normal((nch, N))
     win = hann_periodic(nb)
     starts = np.arange(segments) * step
     lines = np.arange(CHAIN["lines_hz"][0], CHAIN["lines_hz"][1] + 1)
     bins = np.rint(lines * nb / fs).astype(int)
     Gff = np.zeros(len(lines))
-    Gfa = np.zeros((4, len(lines)), dtype=complex)
-    Gaa = np.zeros((4, len(lines)))
+    Gfa = np.zeros((nch, len(lines)), dtype=complex)
+    Gaa = np.zeros((nch, len(lines)))
     for s in starts:
         Fs = np.fft.rfft(win * f_meas[s:s + nb])[bins]
         As = np.fft.rfft(win * a_meas[:, s:s + nb], axis=1)[:, bins]
@@ -929,6 +1084,7 @@ def measure(rom, law, segments, seed, force_rms_n=None):
         "fine_df_hz": fs / N,
         "n_bins_in_band": int(band.sum()),
         "force_rms_n": float(np.sqrt(np.mean(force ** 2))),
+        **({} if CHAIN.get("force_noise_rel") is None else {"force_noise_rms_n": f_noise}),
         "accel_rms_ms2": [float(v) for v in np.sqrt(np.mean(acc ** 2, axis=1))],
         "coherence_min": float(coh.min()),
         "coherence_median": float(np.median(coh)),
@@ -941,17 +1097,24 @@ def measure(rom, law, segments, seed, force_rms_n=None):
 
 def write_uff(path, lines, H1, coh, segments, level=1, force_rms_n=None):
     force_rms_n = CHAIN["force_rms_n"] if force_rms_n is None else force_rms_n
+    if POINTS_SPEC is not None:  # general points: ids and UFF direction codes x 1, y 2, z 3
+        by_id = {sp_["id"]: sp_ for sp_ in POINTS_SPEC}
+        rsp = [(pid, by_id[pid]["comp"] + 1, by_id[pid]["dir"].upper()) for pid in CHANNELS]
+        ref = (DRIVE, by_id[DRIVE]["comp"] + 1, by_id[DRIVE]["dir"].upper())
+    else:
+        rsp = [(i + 1, 2, "+Y") for i in range(4)]
+        ref = (DRIVE, 2, "+Y")
     common = {
         "type": 58, "binary": 0, "func_id": 0, "ver_num": 0, "load_case_id": 0,
-        "rsp_ent_name": "BEAM", "rsp_dir": 2, "ref_ent_name": "BEAM", "ref_node": DRIVE,
-        "ref_dir": 2, "abscissa_spacing": 1, "abscissa_min": float(lines[0]),
+        "rsp_ent_name": "BEAM", "rsp_dir": 2, "ref_ent_name": "BEAM", "ref_node": ref[0],
+        "ref_dir": ref[1], "abscissa_spacing": 1, "abscissa_min": float(lines[0]),
         "abscissa_inc": float(lines[1] - lines[0]), "z_axis_value": 0.0,
         "abscissa_spec_data_type": 18, "abscissa_len_unit_exp": 0,
         "abscissa_force_unit_exp": 0, "abscissa_temp_unit_exp": 0,
         "abscissa_axis_lab": "Frequency", "abscissa_axis_units_lab": "Hz",
         "z_axis_spec_data_type": 0, "z_axis_len_unit_exp": 0, "z_axis_force_unit_exp": 0,
         "z_axis_temp_unit_exp": 0, "z_axis_axis_lab": "NONE", "z_axis_axis_units_lab": "NONE",
-        "id2": f"Level {level}: random excitation {force_rms_n} N rms at point {DRIVE} +Y",
+        "id2": f"Level {level}: random excitation {force_rms_n} N rms at point {DRIVE} {ref[2]}",
         "id3": f"H1 estimator, {segments} averages, Hann, 1 Hz lines",
         "id5": "NONE",
         "x": lines,
@@ -964,11 +1127,12 @@ def write_uff(path, lines, H1, coh, segments, level=1, force_rms_n=None):
     sets = []
     for title, units, func, dtype, (o_spec, o_len, o_force, o_lab, o_unit), \
             (d_spec, d_len, d_force, d_lab, d_unit), values in (acc, cohs):
-        for i in range(4):
+        for i, (node, code, _) in enumerate(rsp):
             d = dict(common)
             d.update({
-                "id1": "Independent bonded joint: " + title.format(i=i + 1, d=DRIVE),
-                "id4": units, "func_type": func, "rsp_node": i + 1, "ord_data_type": dtype,
+                "id1": "Independent bonded joint: " + title.format(i=node, d=DRIVE),
+                "id4": units, "func_type": func, "rsp_node": node, "rsp_dir": code,
+                "ord_data_type": dtype,
                 "ordinate_spec_data_type": o_spec, "ordinate_len_unit_exp": o_len,
                 "ordinate_force_unit_exp": o_force, "ordinate_temp_unit_exp": 0,
                 "ordinate_axis_lab": o_lab, "ordinate_axis_units_lab": o_unit,
@@ -1138,19 +1302,27 @@ def converge(refines, tol, law, data_refine=None, n_modes=4):
     return joint, sym, rec
 
 
-def verify_rom(rom, sym, law, y_modes, n_verify, jobs, tol=1e-6, extended=False):
+def verify_rom(rom, sym, law, y_modes, n_verify, jobs, tol=1e-6, extended=False,
+               extra_peaks=()):
     """The reduced basis against direct sparse LU solves of the full half at 1 and 500 Hz, the y
     modes' peaks and log-spaced frequencies up to n_verify in all."""
     t0 = time.time()
     wd = 2 * np.pi * np.linspace(1.0, 500.0, 20001)
     peak = np.abs(rom.accelerance(wd, law(wd))).max(axis=1)
     f_peaks = [round(m["f_hz"], 3) for m in y_modes if m["f_hz"] <= 500.0]
+    f_peaks += [round(f, 3) for f in extra_peaks if f <= 500.0]
     n_more = max(n_verify - 2 - len(f_peaks), 0)
     f_check = sorted(set([1.0, 500.0] + f_peaks
                          + [round(float(v), 3) for v in np.geomspace(4.0, 470.0, n_more)]))
     wE = [(2 * np.pi * fc, complex(law(2 * np.pi * fc))) for fc in f_check]
     errs, resids = [], []
-    for (w, E), (xd, resid) in zip(wE, direct_receptances(sym, wE, jobs, extended)):
+    if isinstance(sym, tuple):  # general single-lap points: the sum of both halves' solves
+        per_half = [direct_receptances(h, wE, jobs, extended) for h in sym]
+        direct = [(sum(r[k][0] for r in per_half), max(r[k][1] for r in per_half))
+                  for k in range(len(wE))]
+    else:
+        direct = direct_receptances(sym, wE, jobs, extended)
+    for (w, E), (xd, resid) in zip(wE, direct):
         hr = rom.accelerance(np.array([w]), np.array([E]))[:, 0]
         errs.append(np.abs(hr - (-w ** 2 * xd)) / peak)
         resids.append(resid)
@@ -1163,6 +1335,7 @@ def verify_rom(rom, sym, law, y_modes, n_verify, jobs, tol=1e-6, extended=False)
         "direct_relative_residual_max": float(max(resids)),
         "peak_accelerance": [float(v) for v in peak],
         "vectors": int(rom.V.shape[1]),
+        **({"vectors_sym_anti": rom.vectors} if isinstance(rom, PairROM) else {}),
         "time_s": round(time.time() - t0, 1),
     }
     if extended:
@@ -1192,9 +1365,13 @@ def lap_geometry():
         "bond": "perfect (shared nodes)",
         "support": "clamped: every node of the lower strip's end face x = 0 fixed "
                    "(u_x, u_y, u_z)",
-        "points": [{"id": i + 1, "position_m": [float(v) for v in p], "direction": "+y"}
-                   for i, p in enumerate(point_targets())],
+        "points": ([{"id": sp_["id"], "position_m": [float(v) for v in sp_["pos"]],
+                     "direction": sp_["dir"]} for sp_ in POINTS_SPEC]
+                   if POINTS_SPEC is not None else
+                   [{"id": i + 1, "position_m": [float(v) for v in p], "direction": "+y"}
+                    for i, p in enumerate(point_targets())]),
         "excitation_point": DRIVE,
+        **({"channels": CHANNELS} if POINTS_SPEC is not None else {}),
     }
 
 
@@ -1297,7 +1474,15 @@ def main(argv):
     t0 = time.time()
     rom = Projected(sym, krylov(sym, ref, [sym.f], args.krylov_depth or KRYLOV_DEPTH,
                                 args.modulus_moments or KRYLOV_S_DEPTH))
-    print(f"reduced basis: {rom.V.shape[1]} vectors ({time.time() - t0:.1f} s)", flush=True)
+    general = POINTS_SPEC is not None and anti is not None
+    if general:  # general points: the antisymmetric half carries its share of force and outputs
+        rom_a = Projected(anti, krylov(anti, ref, [anti.f], args.krylov_depth or KRYLOV_DEPTH,
+                                       args.modulus_moments or KRYLOV_S_DEPTH))
+        rom = PairROM([rom, rom_a])
+        print(f"reduced basis: {rom.vectors} vectors (symmetric, antisymmetric half; "
+              f"{time.time() - t0:.1f} s)", flush=True)
+    else:
+        print(f"reduced basis: {rom.V.shape[1]} vectors ({time.time() - t0:.1f} s)", flush=True)
 
     # modes: real modulus 7.2 MPa (whole joint), self-consistent (measured half), all modes
     # below 520 Hz at E*(first y mode) (both halves)
@@ -1331,8 +1516,17 @@ def main(argv):
         print(f"{name}: self-consistent modes at the truth (measured half): "
               + ", ".join(f"{m['f_hz']:.3f} Hz eta {m['eta']:.4f}" for m in y_modes), flush=True)
         H_lines = rom.accelerance(w_lines, law_i(w_lines))
-        romcheck = verify_rom(rom, sym, law_i, y_modes, args.verify, args.jobs, args.rom_tol,
-                              args.direct_extended)
+        extra_peaks = ()
+        if general:  # the antisymmetric half's modes in band, self-consistent at the truth
+            a_modes = self_consistent(manti, law_i, 560.0)
+            for m in a_modes:
+                m["symmetry"] = "anti"
+            extra_peaks = [m["f_hz"] for m in a_modes]
+            print(f"{name}: self-consistent modes at the truth (antisymmetric half): "
+                  + ", ".join(f"{m['f_hz']:.3f} Hz eta {m['eta']:.4f}" for m in a_modes),
+                  flush=True)
+        romcheck = verify_rom(rom, (sym, anti) if general else sym, law_i, y_modes, args.verify,
+                              args.jobs, args.rom_tol, args.direct_extended, extra_peaks)
         freq, H1, coh, stats = measure(rom, law_i, args.segments, seed, force_rms_n)
         print(f"{name} record: {stats['N']} samples ({stats['record_s']} s), "
               f"{stats['n_bins_in_band']} FFT bins in (0, 500] Hz (FRF in "
@@ -1343,7 +1537,9 @@ def main(argv):
                   level=i + 1, force_rms_n=force_rms_n)
         levels.append({"id": i + 1, "name": name, "force_rms_N": force_rms_n, "law": "model4",
                        "params": params, "seed": seed, "file": f"level{i + 1}.uff",
-                       "y_modes": y_modes, "first_y_mode": first, "E_star_first_y_mode_pa":
+                       "y_modes": y_modes, "first_y_mode": first,
+                       **({"anti_modes": a_modes} if general else {}),
+                       "E_star_first_y_mode_pa":
                        [E1st.real, E1st.imag], "rom_check": romcheck,
                        "measurement": {**CHAIN, "force_rms_n": force_rms_n, "seed": seed,
                                        **stats},
@@ -1355,7 +1551,9 @@ def main(argv):
     if not args.no_exact:
         extra = {f"H_exact_L{lv['id']}": lv["_H_lines"] for lv in levels[1:]}
         np.savez(os.path.join(args.out, "exact.npz"), freq_hz=lines, H_exact=L1["_H_lines"],
-                 E_star=law(w_lines), points=np.arange(1, 5), **extra)
+                 E_star=law(w_lines),
+                 points=np.array(CHANNELS) if POINTS_SPEC is not None else np.arange(1, 5),
+                 **extra)
     for lv in levels:
         del lv["_H_lines"]
 
@@ -1409,6 +1607,10 @@ def main(argv):
             "mesh": args.mesh, "mesh_spec": spec, "mesh_refinement": refine_used,
             **mesh_info,
             "symmetry": ("none: the whole width" if matched else
+                         f"half width z in [0, {BEAM_W / 2:g}]; data the sum of the symmetric "
+                         "(u_z = 0 on the plane) and antisymmetric (u_x = u_y = 0 on it) "
+                         "halves, each with half the mirrored force (points and force off the "
+                         "plane or not in y)" if POINTS_SPEC is not None else
                          f"half width z in [0, {BEAM_W / 2:g}]; data from the symmetric half "
                          "(u_z = 0 on the plane, force halved)"),
             "reduced_basis": {"reference_moduli_pa": list(ref),
