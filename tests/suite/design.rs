@@ -255,8 +255,8 @@ fn a_sensor_mass_moves_the_recommended_sensors_on_a_light_lap_joint() {
         std::fs::write(
             &f,
             base.replace(
-                "draws = 0",
-                &format!("draws = 0\nsensor_mass = {mass}\nspacing = 0.0146"),
+                "\ndraws = 0\n",
+                &format!("\ndraws = 0\nsensor_mass = {mass}\nspacing = 0.0146\n"),
             ),
         )
         .unwrap();
