@@ -21,6 +21,15 @@ pub fn designs_table(r: &DesignResult) -> Result<crate::output::Table, OutputErr
         }
         rows.push(("ranked", k as i64 + 1, e));
     }
+    // Every model's parameters as columns (a model without one has NaN there).
+    let mut names: Vec<String> = Vec::new();
+    for ps in &r.params {
+        for p in ps {
+            if !names.contains(p) {
+                names.push(p.clone());
+            }
+        }
+    }
     for (kind, rank, e) in rows {
         for (mi, model) in r.models.iter().enumerate() {
             for (li, level) in r.levels.iter().enumerate() {
@@ -32,12 +41,12 @@ pub fn designs_table(r: &DesignResult) -> Result<crate::output::Table, OutputErr
                 c.i("drive", e.drive as i64);
                 c.i("n_sensors", e.channels.len() as i64);
                 c.i("own_masses", e.own_masses as i64);
-                for (pi, p) in r.params[mi].iter().enumerate() {
-                    c.f(
-                        &format!("sd_rel_{}", p.to_ascii_lowercase()),
-                        "1",
-                        e.score.rel_sd[mi][li][pi],
-                    );
+                for p in &names {
+                    let v = r.params[mi]
+                        .iter()
+                        .position(|q| q == p)
+                        .map_or(f64::NAN, |pi| e.score.rel_sd[mi][li][pi]);
+                    c.f(&format!("sd_rel_{}", p.to_ascii_lowercase()), "1", v);
                 }
                 c.f("worst_sd_rel", "1", e.score.worst);
                 c.f("info_gain", "nat", e.score.info_gain);
@@ -324,4 +333,64 @@ fn figure(r: &DesignResult, stem: &Path) -> Option<Vec<std::path::PathBuf>> {
     )
     .ok()
     .map(|f| vec![f.png, f.svg])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::common::Axis;
+    use crate::design::{candidates::Place, search::Score, Channel};
+
+    /// Two laws with different parameters in one table: every row has every law's columns
+    /// (NaN where a law lacks the parameter).
+    #[test]
+    fn designs_table_holds_laws_with_different_parameters() {
+        let score = Score {
+            rel_sd: vec![vec![vec![0.01, 0.02]], vec![vec![0.03, 0.04, 0.05]]],
+            worst: 0.05,
+            sum_log: 0.0,
+            info_gain: 1.0,
+        };
+        let e = Evaluated {
+            channels: vec![0],
+            drive: 1,
+            score,
+            own_masses: true,
+        };
+        let r = DesignResult {
+            models: vec!["model1".into(), "model3".into()],
+            params: vec![
+                vec!["E0".into(), "h".into()],
+                vec!["E0".into(), "E1".into(), "eta1".into()],
+            ],
+            levels: vec!["L1".into()],
+            places: vec![Place {
+                id: 1,
+                position_m: [0.1, 0.01, 0.01],
+                face: "point".into(),
+                current: true,
+            }],
+            channels: vec![Channel {
+                place: 0,
+                axis: Axis::Y,
+                output: 0,
+            }],
+            current: Some(e.clone()),
+            best: e.clone(),
+            ranked: vec![e],
+            channel_gain: vec![1.0],
+            draws: Vec::new(),
+            settings: crate::design::default_settings(),
+            notes: Vec::new(),
+            timings: Vec::new(),
+        };
+        let t = designs_table(&r).unwrap();
+        assert_eq!(t.n_rows(), 4);
+        let h = t.column("sd_rel_h").unwrap().as_f64().unwrap();
+        assert_eq!(h[0], 0.02);
+        assert!(h[1].is_nan());
+        let eta1 = t.column("sd_rel_eta1").unwrap().as_f64().unwrap();
+        assert_eq!(eta1[1], 0.05);
+        assert!(candidates_table(&r).is_ok());
+    }
 }
