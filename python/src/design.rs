@@ -39,37 +39,13 @@ struct Outcome {
     report: String,
 }
 
-/// `study` with the `sensors` override applied to its `[design]` section (the defaults when
-/// the study has none), as `rfmlab design --sensors` does.
+/// `study` with the `sensors` override applied to its `[design]` section
+/// ([`rfmlab::design::with_sensors`], as `rfmlab design --sensors` does).
 fn with_sensors(study: &Study, sensors: Option<usize>) -> Result<Study, StudyError> {
-    let mut study = study.clone();
-    let Some(k) = sensors else {
-        return Ok(study);
-    };
-    let err = |message: String| StudyError {
-        file: study.file.display().to_string(),
-        key: "design.sensors".into(),
-        message,
-    };
-    if k == 0 {
-        return Err(err(
-            "sensors=0: a design needs at least one response sensor, e.g. sensors=4".into(),
-        ));
+    match sensors {
+        None => Ok(study.clone()),
+        Some(k) => rfmlab::design::with_sensors(study, k),
     }
-    let mut d = study
-        .design
-        .clone()
-        .unwrap_or_else(rfmlab::design::default_settings);
-    if k < d.keep.len() {
-        return Err(err(format!(
-            "sensors={k}: fewer than the {} kept sensors ([design] keep); ask for at least {}",
-            d.keep.len(),
-            d.keep.len()
-        )));
-    }
-    d.sensors = Some(k);
-    study.design = Some(d);
-    Ok(study)
 }
 
 fn table_bytes(

@@ -22,23 +22,8 @@ pub struct DesignArgs {
 pub fn run(a: &DesignArgs, g: &Global) -> anyhow::Result<()> {
     let mut study = super::common::load_study(&a.study)?;
     if let Some(k) = a.sensors {
-        if k == 0 {
-            return Err(anyhow::Error::new(InputError(
-                "--sensors 0: a design needs at least one response sensor, e.g. --sensors 4".into(),
-            )));
-        }
-        let mut d = study
-            .design
-            .clone()
-            .unwrap_or_else(rfmlab::design::default_settings);
-        if k < d.keep.len() {
-            return Err(anyhow::Error::new(InputError(format!(
-                "--sensors {k}: fewer than the {} kept sensors ([design] keep)",
-                d.keep.len()
-            ))));
-        }
-        d.sensors = Some(k);
-        study.design = Some(d);
+        study = rfmlab::design::with_sensors(&study, k)
+            .map_err(|e| InputError(format!("--sensors {k}: {e}")))?;
     }
     let out = match &a.output {
         Some(o) => o.clone(),

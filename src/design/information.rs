@@ -7,18 +7,17 @@
 //!
 //! For independent channels the information of a design is the sum of its channels'. A
 //! sensor's mass is part of the structure: the information is computed on the reduced model
-//! with the masses of a given set of places added ([`crate::rom::ReducedModel::with_point_masses`]).
+//! with the masses of a given set of places added ([`crate::rom::ReducedModel::with_point_masses`]),
+//! its pencil prepared on the grids below ([`RomEngine::prepared`]).
 
-use crate::common::C64;
 use crate::experiment::plant::EnginePlant;
 use crate::experiment::ChainParams;
 use crate::forward::{ForwardModel, MeasurementModel};
 use crate::frf::FrfEngine;
-use crate::frf::{FrfError, Sweep};
 use crate::inference::likelihood::{FrfData, FrfLikelihood, NoiseModel};
 use crate::inference::prior::Prior;
 use crate::material::ConstitutiveModel;
-use crate::rom::{PencilSweep, ReducedModel};
+use crate::stage::rom_engine::RomEngine;
 
 /// One model's parameter point and the priors' curvature there.
 #[derive(Clone, Debug)]
@@ -66,67 +65,7 @@ pub struct Chain<'a> {
 /// sensor masses.
 pub type ChannelInfo = Vec<Vec<Vec<f64>>>;
 
-/// The reduced model with one drive and a set of sensor masses, its pencil prepared on the
-/// grids the information needs (the measurement model's and the expected coherence's): a
-/// sweep at any draw's modulus then costs O(lines x terms x outputs) instead of a dense LU
-/// per line.
-pub struct Prepared {
-    rom: ReducedModel,
-    pencils: Vec<PencilSweep>,
-}
-
-impl Prepared {
-    /// `rom` with the input `drive` only and `masses` (output index, kg) added, prepared on
-    /// `grids` (rad/s).
-    pub fn new(
-        rom: &ReducedModel,
-        drive: usize,
-        masses: &[(usize, f64)],
-        grids: &[Vec<f64>],
-    ) -> Result<Prepared, String> {
-        let rom = rom
-            .with_inputs(&[drive])
-            .and_then(|r| r.with_point_masses(masses))
-            .map_err(|e| e.to_string())?;
-        let pencils = grids
-            .iter()
-            .map(|g| rom.prepare(g).map_err(|e| e.to_string()))
-            .collect::<Result<_, _>>()?;
-        Ok(Prepared { rom, pencils })
-    }
-}
-
-impl FrfEngine for Prepared {
-    fn n_out(&self) -> usize {
-        self.rom.n_out()
-    }
-    fn inputs(&self) -> &[usize] {
-        self.rom.inputs()
-    }
-    fn sweep_into(
-        &self,
-        omega_rad_s: &[f64],
-        modulus_pa: &[C64],
-        with_derivatives: bool,
-        out: &mut Sweep,
-    ) -> Result<(), FrfError> {
-        let same = |p: &&PencilSweep| {
-            p.omega_rad_s().len() == omega_rad_s.len()
-                && p.omega_rad_s()
-                    .iter()
-                    .zip(omega_rad_s)
-                    .all(|(a, b)| a.to_bits() == b.to_bits())
-        };
-        match self.pencils.iter().find(same) {
-            Some(p) => p.sweep_into(omega_rad_s, modulus_pa, with_derivatives, out),
-            None => self
-                .rom
-                .sweep_into(omega_rad_s, modulus_pa, with_derivatives, out),
-        }
-    }
-}
-
-/// The grids (rad/s) a [`Prepared`] engine needs for `chain`: the measurement model's fine grid
+/// The grids (rad/s) whose pencils ([`RomEngine::prepared`]) serve the information for `chain`: the measurement model's fine grid
 /// (or the lines) and the expected coherence's band grid (without 0 Hz).
 pub fn grids(chain: &Chain<'_>) -> Vec<Vec<f64>> {
     let lines = match chain.measurement {
@@ -149,7 +88,7 @@ pub fn grids(chain: &Chain<'_>) -> Vec<Vec<f64>> {
 /// at output `drive` (the engine's one input), at `draw` of `law`, for each of `chain.levels`
 /// (which differ in their force only).
 pub fn channel_info(
-    engine: &Prepared,
+    engine: &RomEngine,
     drive: usize,
     channels: &[usize],
     law: &dyn ConstitutiveModel,

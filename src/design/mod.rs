@@ -148,6 +148,34 @@ pub fn default_settings() -> DesignSettings {
     }
 }
 
+/// `study` with `[design] sensors` set to `k` (on the default settings when the study has no
+/// `[design]`): what `rfmlab design --sensors` and Python's `Study.design(sensors=...)` ask for.
+/// `k` must be at least one and at least the kept sensors; the error names `design.sensors`.
+pub fn with_sensors(study: &Study, k: usize) -> Result<Study, StudyError> {
+    let mut d = study.design.clone().unwrap_or_else(default_settings);
+    let err = |message: String| StudyError {
+        file: study.file.display().to_string(),
+        key: "design.sensors".into(),
+        message,
+    };
+    if k == 0 {
+        return Err(err(
+            "0 sensors: a design needs at least one response sensor, e.g. 4".into(),
+        ));
+    }
+    if k < d.keep.len() {
+        return Err(err(format!(
+            "{k} sensors: fewer than the {} kept sensors ([design] keep); ask for at least {}",
+            d.keep.len(),
+            d.keep.len()
+        )));
+    }
+    d.sensors = Some(k);
+    let mut out = study.clone();
+    out.design = Some(d);
+    Ok(out)
+}
+
 /// Default accelerometer noise (m/s^2 RMS over the analyser's span): the broadband resolution
 /// of a general-purpose piezoelectric accelerometer (about 0.00015 g).
 pub const DEFAULT_RESPONSE_NOISE_RMS: f64 = 1.5e-3;
@@ -548,7 +576,10 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
     };
     let grids = information::grids(&chain);
     let compute_infos = |drive: usize, masses: &[(usize, f64)]| -> Result<Infos, DesignError> {
-        let engine = information::Prepared::new(&rom, drive, masses, &grids)
+        let engine = rom
+            .with_inputs(&[drive])
+            .and_then(|r| r.with_point_masses(masses))
+            .and_then(|r| crate::stage::rom_engine::RomEngine::prepared(r, &grids))
             .map_err(|e| failed("reduced model", e))?;
         let mut info = Vec::new();
         for (m, law) in laws.iter().enumerate() {
@@ -674,11 +705,10 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
         });
     }
     // The search per drive point, with the sensor masses of the design found (fixed point).
-    let mut best: Option<(Evaluated, std::rc::Rc<Infos>, usize)> = None;
+    let mut best: Option<(Evaluated, std::rc::Rc<Infos>)> = None;
     let mut ranked: Vec<Evaluated> = Vec::new();
     for (di, &drive) in drives.iter().enumerate() {
         let mut mass_places: Vec<usize> = keep.iter().map(|&c| place_of[c]).collect();
-        let mut last: Option<Vec<usize>> = None;
         for pass in 0..3 {
             progress(&format!(
                 "design: drive {} ({} of {}), information pass {}",
@@ -719,21 +749,16 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
                 }));
                 let better = best
                     .as_ref()
-                    .is_none_or(|(b, _, _)| ev.score.worst < b.score.worst);
+                    .is_none_or(|(b, _)| ev.score.worst < b.score.worst);
                 if better {
-                    best = Some((ev, infos, di));
+                    best = Some((ev, infos));
                 }
                 break;
             }
-            if last.as_ref() == Some(&cp) {
-                break;
-            }
-            last = Some(cp.clone());
             mass_places = cp;
         }
     }
-    let (best, best_infos, _) =
-        best.ok_or_else(|| DesignError::Failed("no design found".into()))?;
+    let (best, best_infos) = best.ok_or_else(|| DesignError::Failed("no design found".into()))?;
     ranked.sort_by(|a, b| a.score.worst.total_cmp(&b.score.worst));
     ranked.dedup_by(|a, b| {
         let (mut x, mut y) = (a.channels.clone(), b.channels.clone());

@@ -187,6 +187,42 @@ impl BandModel {
             .sum::<f64>()
     }
 
+    /// Every fine-grid point within `half_width_hz` of line `f_k`, and the mirror images at
+    /// `-f_j` of those within it of `-f_k`, with its weight `E|c_j|^2 |W(delta T)|^2` (zero
+    /// weights skipped): `visit(j, weight, mirror)`. The sums of [`BandModel::expected`] and
+    /// [`BandModel::expected_diagonal`] run over these.
+    fn kernel_points(
+        &self,
+        f_k: f64,
+        window: Window,
+        n_block: usize,
+        block_s: f64,
+        half_width_hz: f64,
+        mut visit: impl FnMut(usize, f64, bool),
+    ) {
+        let last = self.freq_hz.len() - 1;
+        let idx = |f: f64| (f - self.f0) / self.step;
+        let mut add = |j: usize, delta: f64, mirror: bool| {
+            let k2 = window.dtft(n_block, delta).norm_sqr() * self.force_power[j];
+            if k2 != 0.0 {
+                visit(j, k2, mirror);
+            }
+        };
+        let j0 = idx(f_k - half_width_hz).ceil().max(0.0) as usize;
+        let j1 = idx(f_k + half_width_hz).floor().min(last as f64);
+        if j1 >= 0.0 {
+            for j in j0..=(j1 as usize) {
+                add(j, (f_k - self.freq_hz[j]) * block_s, false);
+            }
+        }
+        let jm = idx(half_width_hz - f_k).floor().min(last as f64);
+        if jm >= 0.0 {
+            for j in 0..=(jm as usize) {
+                add(j, (f_k + self.freq_hz[j]) * block_s, true);
+            }
+        }
+    }
+
     /// Expected block spectral matrix at line `f_k` of the vector `(F, A_0, .., A_{m-1})`
     /// (signal part only, noise excluded), `cov[a][b] = E[v_a conj(v_b)]`, and the
     /// window-kernel average of the plain FRF, `K_i = sum H_i S_F |W|^2 / sum S_F |W|^2`:
@@ -204,13 +240,7 @@ impl BandModel {
         let m = self.resp.len();
         let mut cov = vec![vec![C64::new(0.0, 0.0); m + 1]; m + 1];
         let mut kern_num = vec![C64::new(0.0, 0.0); m];
-        let last = self.freq_hz.len() - 1;
-        let idx = |f: f64| (f - self.f0) / self.step;
-        let mut add = |j: usize, delta: f64, mirror: bool| {
-            let k2 = window.dtft(n_block, delta).norm_sqr() * self.force_power[j];
-            if k2 == 0.0 {
-                return;
-            }
+        let add = |j: usize, k2: f64, mirror: bool| {
             let r = |i: usize| {
                 if mirror {
                     self.resp[i][j].conj()
@@ -233,19 +263,7 @@ impl BandModel {
                 }
             }
         };
-        let j0 = idx(f_k - half_width_hz).ceil().max(0.0) as usize;
-        let j1 = idx(f_k + half_width_hz).floor().min(last as f64);
-        if j1 >= 0.0 {
-            for j in j0..=(j1 as usize) {
-                add(j, (f_k - self.freq_hz[j]) * block_s, false);
-            }
-        }
-        let jm = idx(half_width_hz - f_k).floor().min(last as f64);
-        if jm >= 0.0 {
-            for j in 0..=(jm as usize) {
-                add(j, (f_k + self.freq_hz[j]) * block_s, true);
-            }
-        }
+        self.kernel_points(f_k, window, n_block, block_s, half_width_hz, add);
         // Hermitian fill of the upper triangle (index pairs (a, b) and (b, a)).
         #[allow(clippy::needless_range_loop)]
         for a in 0..=m {
@@ -260,9 +278,7 @@ impl BandModel {
             .collect();
         (cov, kernel)
     }
-}
 
-impl BandModel {
     /// The diagonal and force column of [`BandModel::expected`] at line `f_k`: `E|F|^2`,
     /// `E[A_i conj(F)]` and `E|A_i|^2` per channel (signal part only), in O(channels) per
     /// frequency point instead of O(channels^2): what the expected coherence needs.
@@ -276,13 +292,7 @@ impl BandModel {
     ) -> (f64, Vec<C64>, Vec<f64>) {
         let m = self.resp.len();
         let (mut ff, mut fa, mut aa) = (0.0, vec![C64::new(0.0, 0.0); m], vec![0.0; m]);
-        let last = self.freq_hz.len() - 1;
-        let idx = |f: f64| (f - self.f0) / self.step;
-        let mut add = |j: usize, delta: f64, mirror: bool| {
-            let k2 = window.dtft(n_block, delta).norm_sqr() * self.force_power[j];
-            if k2 == 0.0 {
-                return;
-            }
+        let add = |j: usize, k2: f64, mirror: bool| {
             ff += k2;
             for a in 0..m {
                 let r = self.resp[a][j];
@@ -290,19 +300,7 @@ impl BandModel {
                 aa[a] += r.norm_sqr() * k2;
             }
         };
-        let j0 = idx(f_k - half_width_hz).ceil().max(0.0) as usize;
-        let j1 = idx(f_k + half_width_hz).floor().min(last as f64);
-        if j1 >= 0.0 {
-            for j in j0..=(j1 as usize) {
-                add(j, (f_k - self.freq_hz[j]) * block_s, false);
-            }
-        }
-        let jm = idx(half_width_hz - f_k).floor().min(last as f64);
-        if jm >= 0.0 {
-            for j in 0..=(jm as usize) {
-                add(j, (f_k + self.freq_hz[j]) * block_s, true);
-            }
-        }
+        self.kernel_points(f_k, window, n_block, block_s, half_width_hz, add);
         (ff, fa, aa)
     }
 }

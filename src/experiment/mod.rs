@@ -210,6 +210,16 @@ impl Truth {
     }
 }
 
+/// Ordinary coherence `|G_fa|^2 / (G_ff G_aa)` of expected block spectra (noise included),
+/// at most 1; 0 where a spectrum vanishes.
+fn coherence(g_fa: C64, g_ff: f64, g_aa: f64) -> f64 {
+    if g_ff * g_aa > 0.0 {
+        (g_fa.norm_sqr() / (g_ff * g_aa)).min(1.0)
+    } else {
+        0.0
+    }
+}
+
 fn noise_rms(level: NoiseLevel, signal_rms: f64) -> f64 {
     match level {
         NoiseLevel::Rms(x) => x,
@@ -325,11 +335,7 @@ pub fn expected_coherence_at(
             let g_ff = ff + force_noise.powi(2) * p_w;
             for (i, o) in out.iter_mut().enumerate() {
                 let g_aa = aa[i] + resp_noise[i].powi(2) * p_w;
-                o.push(if g_ff * g_aa > 0.0 {
-                    (fa[i].norm_sqr() / (g_ff * g_aa)).min(1.0)
-                } else {
-                    0.0
-                });
+                o.push(coherence(fa[i], g_ff, g_aa));
             }
         }
         all.push(out);
@@ -387,11 +393,7 @@ pub fn simulate_level(
             let g_aa = cov[i + 1][i + 1].re + resp_noise[i].powi(2) * p_w;
             let g_fa = cov[i + 1][0];
             let h = c.exact[li];
-            let coh = if g_ff * g_aa > 0.0 {
-                (g_fa.norm_sqr() / (g_ff * g_aa)).min(1.0)
-            } else {
-                0.0
-            };
+            let coh = coherence(g_fa, g_ff, g_aa);
             c.expected_h1.push(if g_ff > 0.0 {
                 g_fa / g_ff
             } else {

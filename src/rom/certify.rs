@@ -248,9 +248,10 @@ fn judge(
     lines: &[f64],
     reference: &[Vec<Vec<C64>>],
     floor: &[Vec<f64>],
-    tol: f64,
-    outputs: Option<&[usize]>,
+    params: &RomParams,
 ) -> Result<Judged, RomError> {
+    // the tolerance, and the outputs judged (all unless `certified_outputs` says)
+    let (tol, outputs) = (params.tolerance, params.certified_outputs.as_deref());
     let mut j = Judged {
         score: 0.0,
         over: Vec::new(),
@@ -500,15 +501,7 @@ pub fn build_rom(
             refh = Some(h);
         }
         let h = refh.as_mut().expect("reference");
-        let mut judged = judge(
-            &rom,
-            &moduli,
-            &lines,
-            h,
-            &floor,
-            params.tolerance,
-            params.certified_outputs.as_deref(),
-        )?;
+        let mut judged = judge(&rom, &moduli, &lines, h, &floor, params)?;
         if judged.score > params.tolerance && gmres_stats.is_some() {
             // near a lightly damped resonance a GMRES reference converged to its residual
             // tolerance can itself be off by more than the certificate's tolerance: the few
@@ -521,15 +514,7 @@ pub fn build_rom(
                 .collect();
             if !suspect.is_empty() && suspect.len() * MAX_DIRECT_FRACTION_INV <= n_points {
                 solve_directly(&suspect, h, &mut floor, &mut direct)?;
-                judged = judge(
-                    &rom,
-                    &moduli,
-                    &lines,
-                    h,
-                    &floor,
-                    params.tolerance,
-                    params.certified_outputs.as_deref(),
-                )?;
+                judged = judge(&rom, &moduli, &lines, h, &floor, params)?;
             }
         }
         seconds_certify += t.elapsed().as_secs_f64();

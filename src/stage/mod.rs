@@ -12,7 +12,7 @@ pub mod measurement;
 pub mod mesh_error;
 pub mod model;
 pub mod preflight;
-mod rom_engine;
+pub mod rom_engine;
 pub mod setup;
 
 /// Progress of a run, for progress bars.

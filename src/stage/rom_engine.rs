@@ -4,15 +4,28 @@
 use crate::common::C64;
 use crate::frf::{FrfEngine, FrfError, Sweep};
 
-/// The ROM with a prepared pencil for the band's lines; other grids fall back to the reduced
-/// model's LU sweep (both are certified over the same range).
-pub(super) struct RomEngine {
-    pub(super) rom: crate::rom::ReducedModel,
-    /// Prepared pencils: the band's lines, and the measurement model's fine grid per level.
-    pub(super) pencils: Vec<crate::rom::PencilSweep>,
+/// The ROM with pencils prepared for the grids a caller evaluates; other grids fall back to
+/// the reduced model's LU sweep (both are certified over the same range).
+pub struct RomEngine {
+    pub rom: crate::rom::ReducedModel,
+    /// Prepared pencils: a run's band lines and the measurement model's fine grid per level; a
+    /// test plan's measurement and expected-coherence grids.
+    pub pencils: Vec<crate::rom::PencilSweep>,
 }
 
 impl RomEngine {
+    /// `rom` with its pencil prepared on each of `grids` (rad/s).
+    pub fn prepared(
+        rom: crate::rom::ReducedModel,
+        grids: &[Vec<f64>],
+    ) -> Result<RomEngine, crate::rom::RomError> {
+        let pencils = grids
+            .iter()
+            .map(|g| rom.prepare(g))
+            .collect::<Result<_, _>>()?;
+        Ok(RomEngine { rom, pencils })
+    }
+
     fn pencil_for(&self, omega_rad_s: &[f64]) -> Option<&crate::rom::PencilSweep> {
         self.pencils.iter().find(|p| {
             omega_rad_s.len() == p.omega_rad_s().len()

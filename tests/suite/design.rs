@@ -24,6 +24,17 @@ fn bayes_variant(dir: &Path, name: &str, replace: &[(&str, &str)], extra: &str) 
     f
 }
 
+/// `rfmlab <command> <study> -o <out>` exits 0 (its stderr shown when not).
+fn succeeds(command: &str, study: &Path, out: &Path) {
+    let (code, _, err) = rfmlab_cli(&[
+        command,
+        study.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(code, Some(0), "{err}");
+}
+
 fn column(path: &Path, name: &str) -> Vec<f64> {
     let t = rfmlab::output::Table::read_parquet(path).unwrap();
     t.column(name).and_then(|c| c.as_f64()).unwrap().to_vec()
@@ -64,13 +75,7 @@ fn predicted_sds_of_model4_match_the_laplace_sds_of_the_bayes_study() {
         "",
     );
     let run_dir = dir.path().join("run");
-    let (code, _, err) = rfmlab_cli(&[
-        "run",
-        study.to_str().unwrap(),
-        "-o",
-        run_dir.to_str().unwrap(),
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+    succeeds("run", &study, &run_dir);
     let plan = bayes_variant(
         dir.path(),
         "plan",
@@ -78,13 +83,7 @@ fn predicted_sds_of_model4_match_the_laplace_sds_of_the_bayes_study() {
         &format!("{DESIGN}draws = 0\nposterior = \"{}\"\n", run_dir.display()),
     );
     let out = dir.path().join("plan.design");
-    let (code, _, err) = rfmlab_cli(&[
-        "design",
-        plan.to_str().unwrap(),
-        "-o",
-        out.to_str().unwrap(),
-    ]);
-    assert_eq!(code, Some(0), "{err}");
+    succeeds("design", &plan, &out);
     let lap = run_dir.join("laplace.parquet");
     let (lv, mo, pa) = (
         strings(&lap, "level"),
@@ -130,13 +129,7 @@ fn a_sensor_mass_changes_the_predicted_sds() {
             &format!("{DESIGN}draws = 0\nsensor_mass = {mass}\n"),
         );
         let out = dir.path().join(format!("out{}", (mass * 1e3) as u32));
-        let (code, _, err) = rfmlab_cli(&[
-            "design",
-            plan.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ]);
-        assert_eq!(code, Some(0), "{err}");
+        succeeds("design", &plan, &out);
         let des = out.join("design.parquet");
         let kind = strings(&des, "design");
         let row = kind.iter().position(|k| k == "current").unwrap();
@@ -261,9 +254,7 @@ fn a_sensor_mass_moves_the_recommended_sensors_on_a_light_lap_joint() {
         )
         .unwrap();
         let out = dir.path().join(&name);
-        let (code, _, err) =
-            rfmlab_cli(&["design", f.to_str().unwrap(), "-o", out.to_str().unwrap()]);
-        assert_eq!(code, Some(0), "{err}");
+        succeeds("design", &f, &out);
         let des = out.join("design.parquet");
         let (kind, sensors) = (strings(&des, "design"), strings(&des, "sensors"));
         let worst = column(&des, "worst_sd_rel");
