@@ -184,6 +184,21 @@ pub struct TermCertificate {
     #[serde(default)]
     pub seconds_compress: f64,
     pub passed: bool,
+    /// The full-model solver of the certificate: "shifted Krylov" (one complex LU per case and
+    /// modulus, [`super::term_reference`]) or "sparse LU" (at every point; empty in a
+    /// certificate from before this field, made by sparse LU).
+    #[serde(default)]
+    pub reference: String,
+    /// Shifted Krylov: the largest final relative residual of a line and the largest Krylov
+    /// space (vectors) over all cases and moduli.
+    #[serde(default)]
+    pub reference_residual: Option<f64>,
+    #[serde(default)]
+    pub reference_krylov_vectors: Option<usize>,
+    /// Validation points (over all cases) whose reference is a sparse-LU solve: every point
+    /// with the sparse LU reference; with the shifted Krylov one those it did not resolve and
+    /// those where the ROM missed its solution by more than the tolerance.
+    pub reference_direct_points: usize,
 }
 
 /// One line of a sweep with terms: (h, dh/dE', sh, dh/dv_k per term).
