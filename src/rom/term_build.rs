@@ -1,7 +1,7 @@
 //! Building and certifying a reduced model with extra structural terms ([`super::terms`]):
 //! the certified ROM's basis enriched with the Krylov vectors of the full model with each term
 //! on, certified against the modified full model at every (term, value) case (by the shifted
-//! Krylov solver or the sparse LU, as `RomParams::reference` says: [`super::term_reference`]),
+//! Krylov solver or the sparse LU, as `RomParams::reference` says: `rom::term_reference`),
 //! then compressed ([`super::compress`]) and re-certified against the same reference.
 
 use super::basis::BasisBuilder;
