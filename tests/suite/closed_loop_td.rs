@@ -453,7 +453,7 @@ fn time_domain_null_data_accept_nothing_in_19_of_20_seeds() {
 /// evaluation with a term is a dense LU of the term ROM per fine line). Only with `--ignored`; the chi-square limit is 1.2 (the clean case's 0.669 x 1.1
 /// is below it).
 #[test]
-#[ignore = "slow: a dense LU of the term ROM per fine line per evaluation (several minutes); run with --ignored"]
+#[ignore = "slow: a dense LU of the term ROM per fine line per evaluation, 695 s in release beside other work; run with --ignored"]
 fn time_domain_term_cases_name_the_injected_effect() {
     let dir = tempfile::tempdir().unwrap();
     let defaults =

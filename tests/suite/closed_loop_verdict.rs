@@ -256,7 +256,7 @@ fn explained_wrongly(l: &DiagnoseLevel, expected: &[&str]) -> bool {
 /// built once and cached, and the loop on it): `cargo test --release --test suite -- --ignored
 /// independent_compliant_base_with_base_springs`.
 #[test]
-#[ignore = "slow: the two-shape term ROM and the closed loop on it (minutes); run with --ignored"]
+#[ignore = "slow: the two-shape term ROM and the closed loop on it, 122 s in release with the term ROM cached; run with --ignored"]
 fn independent_compliant_base_with_base_springs_is_confounded_around_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let l = run_independent_with(dir.path(), "support_td", "L1", "\"all\"");

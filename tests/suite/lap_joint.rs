@@ -362,7 +362,7 @@ fn lap_joint_design_space() {
 
 /// Twelve seeded lap geometries (the first three are the default test's).
 #[test]
-#[ignore = "12 lap geometries, about 4 min on 2 cores (not measured since the split)"]
+#[ignore = "slow: 12 lap geometries, 121 s in release beside other work; run with --ignored"]
 fn lap_joint_design_space_12_geometries() {
     lap_design_space(12);
 }
