@@ -24,6 +24,23 @@ sides), Poisson's ratio and density, the four points' x on the upper face centre
 point, one or more levels (force RMS, Model 4 parameters, noise seed) and, optionally, graded mesh
 sizes replacing MESH's. Level i is written to level<i>.uff; the file is copied as joint.json.
 
+Effects (optional joint-file entries of a beam on a block or bond line; test data for a closed
+loop that looks for what a model lacks):
+  "base_springs": {"normal": k_n, "tangential": k_t} (N/m^3): the adhesive's lower face sits on
+    distributed springs per unit area instead of the fixed base. The face's DOFs are free and
+    the springs add the surface integral of k_n u_y v_y + k_t (u_x v_x + u_z v_z) over that
+    face to the beam-side stiffness K_b (assembled with scikit-fem's facet basis on the face,
+    consistent; independent of the adhesive's modulus; undamped).
+  "masses": [{"point": id, "kg": m, "directions": "xyz"}]: a lumped mass at the point's node,
+    added to M in each listed translation (any of "x", "y", "z"; default "y"): a sensor's
+    inertia, no rotary inertia. The matched mesh is the whole joint and carries the whole
+    mass; on the symmetric half (graded and converged meshes) the points lie on the mid-width
+    plane, so the half carries half of it: in the symmetric half's x and y (u_z = 0 there) and
+    in the antisymmetric half's z.
+truth.json then holds "case" with "effects" in the form of studies/data/virtual's support_td and
+mass3d_td ("support": k_normal_N_per_m3, k_tangential_N_per_m3, eta; "point_mass": point,
+mass_kg, directions) and the model's details; without them every output is as before.
+
 Single-lap joints (a joint file with "kind": "single_lap", see load_joint): two strips of one
 material bonded over an overlap l_o by a bond line of thickness t_a (rfmlab's layout, width w
 along z for all three parts):
@@ -110,7 +127,14 @@ LU solves of the full model (scipy SuperLU) at --verify frequencies 1-500 Hz inc
 the largest error relative to each FRF's peak is 6.6e-7 on the matched mesh and 5.4e-8 on the
 graded one (the run stops above --rom-tol, 1e-6). On finer meshes the error has a floor that
 more basis vectors did not lower (round-off, it seems): 1.3e-6 at level 2 of the 3 mm bond
-line's 72 900-DOF mesh, unchanged by a third expansion modulus.
+line's 72 900-DOF mesh, unchanged by a third expansion modulus. That floor is the default
+chains' ("shared", see krylov: a modulus's moments continue from vectors orthogonalised
+against the other modulus's, so they do not span its Krylov space). On base springs it rises
+to 3e-4 at the paper's joint's second y mode (390 Hz) whatever the depth or the number of
+moduli; --krylov-chains own continues every chain from its own vectors and brings it to 1e-7
+with as many vectors (krylov_own_chains). The check's frequencies are the self-consistent y
+modes, which on the whole-width matched mesh can repeat one mode and miss another (the
+iteration from a z mode's start lands on a neighbour): --verify-at adds frequencies.
 
 Measurement chain (as the independent virtual experiments of docs/data.md): fs 2048 Hz; a
 record of N = 1024 (segments + 1) samples; the force is white Gaussian noise with its FFT bins outside
@@ -140,7 +164,8 @@ Written into OUT_DIR:
 Usage: independent_td_joint.py OUT_DIR [--joint FILE.json] [--mesh matched|graded|converged]
                                [--segments 200] [--seed 21] [--refine-mesh 1]
                                [--refine-seq 1,1.41,2] [--conv-tol 1e-4] [--check-mesh]
-                               [--verify 10] [--direct-extended] [--no-exact] [--jobs 2]
+                               [--verify 10] [--verify-at F1,F2] [--direct-extended]
+                               [--krylov-chains shared|own] [--no-exact] [--jobs 2]
 """
 import argparse
 import json
@@ -156,7 +181,8 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 import skfem
-from skfem import Basis, BilinearForm, ElementHex2, ElementHexS2, ElementVector, MeshHex, asm
+from skfem import (Basis, BilinearForm, ElementHex2, ElementHexS2, ElementVector, FacetBasis,
+                   MeshHex, asm)
 from skfem.helpers import ddot, dot, sym_grad, trace
 
 import pyuff
@@ -178,6 +204,10 @@ LEVELS = [("L1", 3.3, TRUTH, None)]
 REF_MODULI = (7.2e6, 10.0e6)  # real moduli of the reduced basis's expansions
 KRYLOV_DEPTH = 14  # frequency moments per modulus
 KRYLOV_S_DEPTH = 4  # modulus moments per modulus
+# How each modulus's frequency moments continue (--krylov-chains, see krylov): "shared" (each
+# next moment from the vector orthogonalised against the whole basis so far) or "own" (from the
+# chain's own Arnoldi vectors: a true Krylov space of every modulus)
+KRYLOV_CHAINS = "shared"
 MODAL_DEPTH = 6  # block Krylov depth of the mode lists (rigid-motion inertia loads per half)
 MODAL_S_DEPTH = 1  # and their modulus moments
 CHAIN = {
@@ -253,6 +283,13 @@ MESH_MATCHED = {
 # Recorded by --check-mesh at --refine-mesh 1 (truth.json carries it when not recomputed).
 CONVERGENCE_RECORDED = {}
 
+# Effects a joint file may add to a beam on a block or bond line (load_joint): distributed
+# springs under the adhesive's lower face instead of the fixed base ({"normal": k_n,
+# "tangential": k_t}, N/m^3, or None), and lumped masses at points' nodes (a list of
+# {"point": id, "kg": m, "directions": "xyz"}).
+BASE_SPRINGS = None
+MASSES = []
+
 
 def model4(w, p):
     """Model 4: a spring E0, a structural damper h and one Maxwell branch (E1, eta1)."""
@@ -272,7 +309,13 @@ def load_joint(path):
                    "params": {"E0", "h", "E1", "eta1"}, "seed": 21 (optional)}, ...],
        "seed": 21,                   # optional: the noise seed of level 1 (else --seed);
                                      # level i's is seed + i - 1 unless it states its own
-       "mesh": {...}}                # optional: entries of MESH to replace (graded sizes)
+       "mesh": {...},                # optional: entries of MESH to replace (graded sizes)
+       "base_springs": {"normal": 3.0e10, "tangential": 3.0e10},
+                                     # optional (N/m^3): the adhesive's lower face on
+                                     # distributed springs instead of the fixed base
+       "masses": [{"point": 4, "kg": 0.012, "directions": "xyz"}]}
+                                     # optional: lumped masses at points' nodes, acting in the
+                                     # listed translations (see the module doc, "Effects")
     A single-lap joint (see the module doc for the layout):
       {"name": "...", "kind": "single_lap",
        "strips": {"length",          # L, each strip along x
@@ -298,11 +341,14 @@ def load_joint(path):
        "mesh": {...}}                # optional: entries of MESH_LAP to replace
     Returns the parsed file."""
     global JOINT_NAME, BEAM_L, BEAM_T, BEAM_W, BOND_X0, BOND_L, BOND_T, STEEL, GLUE
-    global POINTS_X, DRIVE, TRUTH, LEVELS, MESH, MESH_MATCHED
+    global POINTS_X, DRIVE, TRUTH, LEVELS, MESH, MESH_MATCHED, BASE_SPRINGS, MASSES
     with open(path) as fh:
         cfg = json.load(fh)
     kind = cfg.get("kind", "beam_on_block")
     if kind == "single_lap":
+        for key in ("base_springs", "masses"):
+            if key in cfg:
+                raise SystemExit(f"{path}: {key!r} is for a beam on a block or bond line only")
         return load_lap(cfg, path)
     if kind != "beam_on_block":
         raise SystemExit(f"{path}: unknown kind {kind!r} (beam_on_block or single_lap)")
@@ -316,6 +362,7 @@ def load_joint(path):
     DRIVE = int(cfg["drive"])
     if len(POINTS_X) != 4:
         raise SystemExit(f"{path}: four points expected, got {len(POINTS_X)}")
+    BASE_SPRINGS, MASSES = load_effects(cfg, path)
     if not (0.0 <= BOND_X0 and BOND_X0 + BOND_L <= BEAM_L + 1e-12):
         raise SystemExit(f"{path}: the bond line [{BOND_X0}, {BOND_X0 + BOND_L}] m leaves the beam")
     LEVELS = []
@@ -334,6 +381,38 @@ def load_joint(path):
                                 "x_beam": cells(BEAM_L - BOND_X0 - BOND_L), "y_bond": 2,
                                 "y_beam": 2, "z": cells(BEAM_W)}}
     return cfg
+
+
+def load_effects(cfg, path):
+    """The optional "base_springs" and "masses" of a beam-on-block joint file (see load_joint):
+    the springs as {"normal": k_n, "tangential": k_t} (N/m^3) or None, the masses as a list of
+    {"point": id, "kg": m, "directions": "xyz"}."""
+    springs = None
+    if "base_springs" in cfg:
+        b = cfg["base_springs"]
+        if not isinstance(b, dict) or set(b) != {"normal", "tangential"}:
+            raise SystemExit(f"{path}: base_springs: {{\"normal\": k_n, \"tangential\": k_t}} "
+                             f"(N/m^3) expected, got {b!r}")
+        springs = {k: float(b[k]) for k in ("normal", "tangential")}
+        if not all(np.isfinite(v) and v > 0.0 for v in springs.values()):
+            raise SystemExit(f"{path}: base_springs: positive stiffnesses expected, got {b!r}")
+    masses = []
+    for i, m in enumerate(cfg.get("masses", [])):
+        where = f"{path}: masses[{i}]"
+        if not isinstance(m, dict) or not {"point", "kg"} <= set(m) \
+                or not set(m) <= {"point", "kg", "directions"}:
+            raise SystemExit(f"{where}: {{\"point\": id, \"kg\": m, \"directions\": "
+                             f"\"xyz\"}} expected, got {m!r}")
+        point, kg, dirs = int(m["point"]), float(m["kg"]), str(m.get("directions", "y"))
+        if not 1 <= point <= len(POINTS_X):
+            raise SystemExit(f"{where}: point {point} is not one of 1..{len(POINTS_X)}")
+        if not (np.isfinite(kg) and kg > 0.0):
+            raise SystemExit(f"{where}: a positive mass in kg expected, got {m['kg']!r}")
+        if not dirs or set(dirs) - set("xyz") or len(set(dirs)) != len(dirs):
+            raise SystemExit(f"{where}: directions: distinct letters of \"xyz\" expected, got "
+                             f"{dirs!r}")
+        masses.append({"point": point, "kg": kg, "directions": "".join(sorted(dirs))})
+    return springs, masses
 
 
 def load_levels(cfg):
@@ -668,6 +747,9 @@ class Joint:
         self.K_b = asm(isotropic(STEEL["E"], STEEL["nu"]), b_beam).tocsr()
         self.S = asm(isotropic(1.0, GLUE["nu"]), b_bond).tocsr()
         self.M = (asm(inertia(STEEL["rho"]), b_beam) + asm(inertia(GLUE["rho"]), b_bond)).tocsr()
+        self.base_area = None
+        if BASE_SPRINGS is not None:
+            self.K_b, self.base_area = base_springs(self.mesh, e, self.K_b)
         self.n = self.K_b.shape[0]
         self.loc = b_beam.doflocs
         self.comp = np.empty(self.n, dtype=np.int64)
@@ -698,12 +780,18 @@ class Joint:
             if d[k] > 1e-12:
                 raise SystemExit(f"no node at point {target}")
             self.point_dofs.append(int(cand[k]))
+        self.mass_dofs = []
+        if MASSES:
+            self.M, self.mass_dofs = lumped_masses(self.M, self.loc, self.comp, self.point_dofs,
+                                                   half)
 
     def free(self, kind):
         """Free DOFs: the base (a lap joint: its clamped end) fixed; on the mid-width plane
         u_z = 0 ('sym') or u_x = u_y = 0 ('anti'); 'full' for a whole-width mesh."""
         if JOINT_KIND == "single_lap":  # clamped: the lower strip's end face x = 0
             held = np.isclose(self.loc[0], 0.0)
+        elif BASE_SPRINGS is not None:  # the base face free on its springs
+            held = np.zeros(self.n, dtype=bool)
         else:
             held = np.isclose(self.loc[1], -BOND_T)
         if kind != "full":
@@ -714,6 +802,41 @@ class Joint:
     def restrict(self, kind):
         f = self.free(kind)
         return f, self.K_b[f][:, f].tocsc(), self.S[f][:, f].tocsc(), self.M[f][:, f].tocsc()
+
+
+def base_springs(mesh, element, K_b):
+    """K_b plus the distributed springs under the adhesive's lower face y = -BOND_T: the surface
+    integral of k_n u_y v_y + k_t (u_x v_x + u_z v_z) over that face (scikit-fem facet basis,
+    Gauss rule exact for the products of the face's shape functions); and the face's area."""
+    facets = mesh.facets_satisfying(lambda x: np.isclose(x[1], -BOND_T))
+    if len(facets) == 0:
+        raise SystemExit("base_springs: no element face lies on the adhesive's lower face")
+    fb = FacetBasis(mesh, element, facets=facets, intorder=4)
+    kn, kt = BASE_SPRINGS["normal"], BASE_SPRINGS["tangential"]
+    springs = BilinearForm(lambda u, v, w: kn * u[1] * v[1] + kt * (u[0] * v[0] + u[2] * v[2]))
+    area = float(asm(BilinearForm(lambda u, v, w: u[1] * v[1]), fb).sum())
+    return (K_b + asm(springs, fb)).tocsr(), area
+
+
+def lumped_masses(M, loc, comp, point_dofs, half):
+    """M plus MASSES: each mass at its point's node in its directions' DOFs (no rotary inertia).
+    On the half width the points lie on the mid-width plane, so the half carries half of each
+    mass (the symmetric half's x and y, the antisymmetric half's z); the whole width carries it
+    whole. Returns the matrix and (point, direction, DOF, mass added) rows."""
+    rows, added = [], []
+    for m in MASSES:
+        node = loc[:, point_dofs[m["point"] - 1]]
+        if half and not np.isclose(node[2], BEAM_W / 2):
+            raise SystemExit(f"mass at point {m['point']}: off the mid-width plane, the half "
+                             "model cannot carry it")
+        share = 0.5 * m["kg"] if half else m["kg"]
+        for d in m["directions"]:
+            cand = np.nonzero(comp == "xyz".index(d))[0]
+            k = cand[int(np.argmin(np.linalg.norm(loc[:, cand].T - node, axis=1)))]
+            rows.append(int(k))
+            added.append({"point": m["point"], "direction": d, "dof": int(k), "kg": share})
+    extra = sp.csr_matrix((np.array([a["kg"] for a in added]), (rows, rows)), shape=M.shape)
+    return (M + extra).tocsr(), added
 
 
 def factor(A):
@@ -836,7 +959,12 @@ def krylov(half, moduli, starts, depth, s_depth=0):
     """Block Krylov basis: for each modulus E_r (LU of K_r = K_b + E_r S) and start load b,
     v_0 = K_r^-1 b, v_k+1 = K_r^-1 M v_k for k < depth (the frequency moments about w = 0, whose
     span converges to the lowest modes the load reaches) and K_r^-1 S v_k for k < s_depth (the
-    moments in the modulus)."""
+    moments in the modulus). KRYLOV_CHAINS "shared": v_k is the vector as orthogonalised against
+    the whole basis, so the second modulus's chain starts from what the first one's lacks and is
+    not that modulus's Krylov space (enough without base springs: 1e-6 of a peak); "own": see
+    krylov_own_chains."""
+    if KRYLOV_CHAINS == "own":
+        return krylov_own_chains(half, moduli, starts, depth, s_depth)
     basis = MBasis(half.M)
     for E in moduli:
         lu = half.lu(E)
@@ -853,6 +981,30 @@ def krylov(half, moduli, starts, depth, s_depth=0):
             for v in ch[:s_depth]:
                 if v is not None:
                     basis.add(lu.solve(half.S @ v))
+    return basis.matrix()
+
+
+def krylov_own_chains(half, moduli, starts, depth, s_depth=0):
+    """krylov with every chain continued from its own vectors: per modulus E_r and start load b,
+    the Arnoldi vectors u_0 ~ K_r^-1 b, u_k+1 ~ K_r^-1 M u_k (M-orthonormalised within the chain
+    only) span that modulus's Krylov space; each u_k and, for k < s_depth, K_r^-1 S u_k join
+    the basis. On the paper's joint on base springs the shared chains stall at 4e-5 of the
+    response (M-norm) at 390 Hz and 10 MPa, the expansion modulus itself, these reach 1e-13
+    there with as many vectors."""
+    basis = MBasis(half.M)
+    for E in moduli:
+        lu = half.lu(E)
+        for b in starts:
+            chain = MBasis(half.M)
+            u = chain.add(lu.solve(b))
+            for k in range(depth + 1):
+                if u is None:
+                    break
+                basis.add(u)
+                if k < s_depth:
+                    basis.add(lu.solve(half.S @ u))
+                if k < depth:
+                    u = chain.add(lu.solve(half.M @ u))
     return basis.matrix()
 
 
@@ -1352,6 +1504,46 @@ def verify_rom(rom, sym, law, y_modes, n_verify, jobs, tol=1e-6, extended=False,
     return romcheck
 
 
+def effects_record(joint):
+    """truth.json's "case" of a joint with base springs or masses: its effects in the form of
+    the independent experiments of studies/data/virtual (support_td, mass3d_td), with the
+    model's details."""
+    parts = []
+    if BASE_SPRINGS is not None:
+        parts.append(f"springs under the adhesive (k_n {BASE_SPRINGS['normal']:.3g}, k_t "
+                     f"{BASE_SPRINGS['tangential']:.3g} N/m^3)")
+    parts += [f"{1e3 * m['kg']:g} g mass at point {m['point']} ({', '.join(m['directions'])})"
+              for m in MASSES]
+    return {
+        "name": JOINT_NAME,
+        "description": "independent virtual experiment, Model 4, td, undeclared "
+                       + " and ".join(parts),
+        "effects": {
+            "point_mass": [{"point": m["point"], "mass_kg": m["kg"],
+                            "directions": m["directions"]} for m in MASSES],
+            "shaker": None,
+            "support": (None if BASE_SPRINGS is None else
+                        {"k_normal_N_per_m3": BASE_SPRINGS["normal"],
+                         "k_tangential_N_per_m3": BASE_SPRINGS["tangential"], "eta": 0.0}),
+            "beam": None,
+            "disbond": None,
+            "channels": None,
+        },
+        "model": {
+            "base_springs": (None if BASE_SPRINGS is None else
+                             "surface integral of k_n u_y v_y + k_t (u_x v_x + u_z v_z) over "
+                             "the adhesive's lower face added to K_b (consistent, scikit-fem "
+                             "facet basis); the face's DOFs free; no damping"),
+            "base_area_m2": joint.base_area,
+            "masses": ("lumped at the point's node in each listed translation, no rotary "
+                       "inertia; " + ("the whole width: the whole mass" if not joint.half else
+                                      "half width: half of each mass (the points lie on the "
+                                      "mid-width plane)")) if MASSES else None,
+            "mass_dofs": joint.mass_dofs,
+        },
+    }
+
+
 def lap_geometry():
     """truth.json's geometry of a single-lap joint."""
     L, lo, t1, ta, t2, w = (LAP[k] for k in ("L", "overlap", "t1", "ta", "t2", "w"))
@@ -1412,6 +1604,14 @@ def main(argv):
                     help=f"frequency moments of the reduced basis per modulus ({KRYLOV_DEPTH})")
     ap.add_argument("--modulus-moments", type=int,
                     help=f"modulus moments of the reduced basis per modulus ({KRYLOV_S_DEPTH})")
+    ap.add_argument("--krylov-chains", choices=("shared", "own"), default="shared",
+                    help="shared (the default): each modulus's next frequency moment from the "
+                         "vector orthogonalised against the whole basis; own: from the chain's "
+                         "own Arnoldi vectors, a true Krylov space per modulus (see krylov; "
+                         "needed with base_springs)")
+    ap.add_argument("--verify-at",
+                    help="further frequencies (Hz, comma separated) of the reduced basis's check, "
+                         "e.g. a y mode's peak that the self-consistent mode list misses")
     ap.add_argument("--rom-tol", type=float, default=1e-6,
                     help="largest error of the reduced basis against the direct solves, "
                          "relative to each FRF's peak (the run stops above it)")
@@ -1424,6 +1624,9 @@ def main(argv):
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                     help="processes for the direct solves of the check")
     args = ap.parse_args(argv[1:])
+    global KRYLOV_CHAINS
+    KRYLOV_CHAINS = args.krylov_chains
+    verify_at = [float(v) for v in args.verify_at.split(",")] if args.verify_at else []
     t_start = time.time()
     joint_cfg = load_joint(args.joint) if args.joint else None
     if args.mesh is None:
@@ -1469,6 +1672,11 @@ def main(argv):
           + f"{joint.n_elements['bond']} bond line), "
           f"{len(sym.free)} free DOFs ({'whole joint' if matched else 'symmetric half'}); "
           f"assembled in {joint.assembly_s:.1f} s", flush=True)
+    case = effects_record(joint) if BASE_SPRINGS is not None or MASSES else None
+    if case is not None:
+        print("effects: " + case["description"].split("undeclared ")[1]
+              + (f"; base face {joint.base_area * 1e6:.1f} mm^2" if joint.base_area else ""),
+              flush=True)
 
     # the reduced basis of the measured (symmetric) half
     t0 = time.time()
@@ -1516,12 +1724,12 @@ def main(argv):
         print(f"{name}: self-consistent modes at the truth (measured half): "
               + ", ".join(f"{m['f_hz']:.3f} Hz eta {m['eta']:.4f}" for m in y_modes), flush=True)
         H_lines = rom.accelerance(w_lines, law_i(w_lines))
-        extra_peaks = ()
+        extra_peaks = tuple(verify_at)
         if general:  # the antisymmetric half's modes in band, self-consistent at the truth
             a_modes = self_consistent(manti, law_i, 560.0)
             for m in a_modes:
                 m["symmetry"] = "anti"
-            extra_peaks = [m["f_hz"] for m in a_modes]
+            extra_peaks = [m["f_hz"] for m in a_modes] + verify_at
             print(f"{name}: self-consistent modes at the truth (antisymmetric half): "
                   + ", ".join(f"{m['f_hz']:.3f} Hz eta {m['eta']:.4f}" for m in a_modes),
                   flush=True)
@@ -1581,13 +1789,16 @@ def main(argv):
         "geometry": lap_geometry() if JOINT_KIND == "single_lap" else {
             "beam_length_m": BEAM_L, "beam_thickness_m": BEAM_T, "beam_width_m": BEAM_W,
             "adhesive_x_start_m": BOND_X0, "adhesive_length_m": BOND_L,
-            "adhesive_thickness_m": BOND_T, "base": "adhesive lower face fixed",
+            "adhesive_thickness_m": BOND_T,
+            "base": ("adhesive lower face fixed" if BASE_SPRINGS is None else
+                     "adhesive lower face free on distributed springs (case.effects.support)"),
             "points": [{"id": i + 1, "position_m": [x, BEAM_T, BEAM_W / 2], "direction": "+y"}
                        for i, x in enumerate(POINTS_X)],
             "excitation_point": DRIVE,
         },
         "materials": ({"strips": STEEL, "adhesive": GLUE} if JOINT_KIND == "single_lap"
                       else {"beam": STEEL, "adhesive": GLUE}),
+        **({"case": case} if case is not None else {}),
         "law": {
             "name": "model4",
             "formula": "E*(w) = E0 + j h + j w eta1 E1 / (E1 + j w eta1)",
@@ -1616,6 +1827,8 @@ def main(argv):
             "reduced_basis": {"reference_moduli_pa": list(ref),
                               "krylov_depth": args.krylov_depth or KRYLOV_DEPTH,
                               "modulus_moments": args.modulus_moments or KRYLOV_S_DEPTH,
+                              **({"chains": "own (krylov_own_chains)"}
+                                 if KRYLOV_CHAINS == "own" else {}),
                               "vectors": romcheck["vectors"]},
             "rom_check": romcheck,
             "mesh_convergence": conv,

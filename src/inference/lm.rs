@@ -28,7 +28,7 @@ pub struct LmParams {
     pub tol: f64,
     /// Relative tolerance: stop also when the decrement is below `rel_tol |f|`. Default 0.
     pub rel_tol: f64,
-    /// Give up (reason "given up: ...") when, after [`GIVE_UP_AFTER`] iterations, the
+    /// Give up ([`LmStop::GivenUp`]) when, after [`GIVE_UP_AFTER`] iterations, the
     /// objective is still above this by more than [`GIVE_UP_RATIO`] Newton decrements: the
     /// search cannot reach it at the pace its quadratic model predicts. For a candidate that
     /// must beat a known fit (an alternative law refitted against the current one); `INFINITY`
@@ -42,21 +42,53 @@ pub const GIVE_UP_AFTER: u64 = 3;
 /// search gives up.
 pub const GIVE_UP_RATIO: f64 = 100.0;
 
+/// Why a search stopped. Its `Display` is the reason in words, as the tables and reports
+/// give it ("converged: ...", "given up: ...", "stalled: ...", "failed: ...", "maximum
+/// iterations reached").
+#[derive(Clone, Debug, PartialEq)]
+pub enum LmStop {
+    /// The Newton decrement fell below the tolerance.
+    Converged,
+    /// The iteration limit was reached.
+    MaxIterations,
+    /// The objective stayed `above` the value to beat ([`LmParams::give_up_above`]) by more
+    /// than [`GIVE_UP_RATIO`] times the decrease `predicted` by the quadratic model.
+    GivenUp { above: f64, predicted: f64 },
+    /// No damped step decreases the objective.
+    Stalled,
+    /// The objective or its curvature is not finite at the start or at an accepted point.
+    Failed(String),
+}
+
+impl std::fmt::Display for LmStop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            LmStop::Converged => write!(f, "converged: Newton decrement below tolerance"),
+            LmStop::MaxIterations => write!(f, "maximum iterations reached"),
+            LmStop::GivenUp { above, predicted } => write!(
+                f,
+                "given up: {above:.4e} above the objective to beat, with {predicted:.3e} predicted by the quadratic model"
+            ),
+            LmStop::Stalled => write!(f, "stalled: no damped step decreases the objective"),
+            LmStop::Failed(why) => write!(f, "failed: {why}"),
+        }
+    }
+}
+
 /// Where the search ended.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LmOutcome {
     pub x: Vec<f64>,
     pub f: f64,
     pub iterations: u64,
-    /// Why it stopped, in words ("converged: ...", "stalled: ...", "failed: ...",
-    /// "maximum iterations reached").
-    pub reason: String,
+    /// Why it stopped.
+    pub stop: LmStop,
 }
 
 /// Levenberg-Marquardt from `x0` (see the module doc). `quadratic(x)` gives the value,
 /// gradient and curvature (`Err` with a reason where they are not finite); `value(x)` the value
 /// alone (`INFINITY` where it is not finite). A start without a finite quadratic model ends at
-/// once with reason "failed: ...".
+/// once with [`LmStop::Failed`].
 pub fn levenberg_marquardt<Q, V, E>(
     x0: &[f64],
     mut quadratic: Q,
@@ -76,28 +108,28 @@ where
                 x: x0.to_vec(),
                 f: f64::INFINITY,
                 iterations: 0,
-                reason: format!("failed: the objective is not finite at the start ({e})"),
+                stop: LmStop::Failed(format!("the objective is not finite at the start ({e})")),
             }
         }
     };
     let mut x = x0.to_vec();
     let mut lambda = 1e-3;
     let mut nu = 2.0;
-    let mut reason = "maximum iterations reached".to_string();
+    let mut stop = LmStop::MaxIterations;
     let mut it = 0;
     while it < params.max_iters {
         if let Some(l) = cholesky(&h, d) {
             let s = chol_solve(&l, d, &g);
             let dec = 0.5 * s.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>();
             if dec < params.tol || dec < params.rel_tol * f.abs() {
-                reason = "converged: Newton decrement below tolerance".into();
+                stop = LmStop::Converged;
                 break;
             }
             if it >= GIVE_UP_AFTER && f - params.give_up_above > GIVE_UP_RATIO * dec {
-                reason = format!(
-                    "given up: {:.4e} above the objective to beat, with {dec:.3e} predicted by the quadratic model",
-                    f - params.give_up_above
-                );
+                stop = LmStop::GivenUp {
+                    above: f - params.give_up_above,
+                    predicted: dec,
+                };
                 break;
             }
         }
@@ -129,7 +161,7 @@ where
                     (f, g, h) = (f1, g1, h1);
                 }
                 Err(e) => {
-                    reason = format!("failed: curvature at an accepted point ({e})");
+                    stop = LmStop::Failed(format!("curvature at an accepted point ({e})"));
                     break;
                 }
             }
@@ -140,7 +172,7 @@ where
             nu *= 2.0;
         }
         if lambda > 1e16 {
-            reason = "stalled: no damped step decreases the objective".into();
+            stop = LmStop::Stalled;
             break;
         }
     }
@@ -148,7 +180,7 @@ where
         x,
         f,
         iterations: it,
-        reason,
+        stop,
     }
 }
 
@@ -194,7 +226,7 @@ mod tests {
             r[0] * r[0] + r[1] * r[1]
         };
         let out = levenberg_marquardt(&[-1.2, 1.0], q, v, &params());
-        assert!(out.reason.starts_with("converged"), "{}", out.reason);
+        assert_eq!(out.stop, LmStop::Converged, "{}", out.stop);
         assert!(
             (out.x[0] - 1.0).abs() < 1e-8 && (out.x[1] - 1.0).abs() < 1e-8,
             "{:?}",
@@ -222,6 +254,10 @@ mod tests {
             |_: &[f64]| f64::NAN,
             &params(),
         );
-        assert!(bad.reason.starts_with("failed") && bad.iterations == 0);
+        assert!(matches!(bad.stop, LmStop::Failed(_)) && bad.iterations == 0);
+        assert!(bad
+            .stop
+            .to_string()
+            .starts_with("failed: the objective is not finite"));
     }
 }

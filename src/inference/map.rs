@@ -87,14 +87,17 @@ pub struct StartResult {
     /// `-log p(x | data)` up to `log Z` at the end point (infinite when it failed).
     pub objective: f64,
     pub iterations: u64,
+    /// Why the search stopped, in words (the tables' `stop_reason`).
     pub stop_reason: String,
+    /// The Gauss-Newton search's stop ([`super::lm::LmStop`]); None for an L-BFGS search.
+    pub lm_stop: Option<super::lm::LmStop>,
 }
 
 impl StartResult {
-    /// Whether its search gave up above [`MapParams::give_up_above`] (the stop reason
-    /// [`super::lm::levenberg_marquardt`] gives).
+    /// Whether its search gave up above [`MapParams::give_up_above`]
+    /// ([`super::lm::LmStop::GivenUp`]).
     pub fn gave_up(&self) -> bool {
-        self.stop_reason.starts_with("given up")
+        matches!(self.lm_stop, Some(super::lm::LmStop::GivenUp { .. }))
     }
 }
 
@@ -360,7 +363,7 @@ fn gauss_newton_search(
     give_up_above: f64,
     physical: bool,
     count: &std::sync::atomic::AtomicUsize,
-) -> Option<(Vec<f64>, f64, u64, String)> {
+) -> Option<(Vec<f64>, f64, u64, super::lm::LmStop)> {
     use std::sync::atomic::Ordering::Relaxed;
     count.fetch_add(1, Relaxed);
     let mut first = match gn_objective(post, x0, physical)? {
@@ -370,7 +373,9 @@ fn gauss_newton_search(
                 x0.to_vec(),
                 f64::INFINITY,
                 0,
-                format!("failed: the posterior density is not finite at the start ({e})"),
+                super::lm::LmStop::Failed(format!(
+                    "the posterior density is not finite at the start ({e})"
+                )),
             ))
         }
     };
@@ -397,7 +402,7 @@ fn gauss_newton_search(
             give_up_above,
         },
     );
-    Some((out.x, out.f, out.iterations, out.reason))
+    Some((out.x, out.f, out.iterations, out.stop))
 }
 
 /// Central-difference Hessian of `-log p(x | data)` (in x, Jacobian included) from the
@@ -617,8 +622,13 @@ pub fn find_map(
                 ),
                 SearchMethod::Lbfgs => None,
             };
-            let (end_x, objective, iterations, stop_reason) =
-                gn.unwrap_or_else(|| search(post, x0, params, &count));
+            let (end_x, objective, iterations, stop_reason, lm_stop) = match gn {
+                Some((x, f, it, stop)) => (x, f, it, stop.to_string(), Some(stop)),
+                None => {
+                    let (x, f, it, reason) = search(post, x0, params, &count);
+                    (x, f, it, reason, None)
+                }
+            };
             progress();
             StartResult {
                 index: i,
@@ -632,6 +642,7 @@ pub fn find_map(
                 },
                 iterations,
                 stop_reason,
+                lm_stop,
             }
         })
         .collect();
@@ -651,8 +662,7 @@ pub fn find_map(
         })?;
     // A Gauss-Newton search that converged ends where the polish would (its stop is the
     // polish's Newton decrement), so only an L-BFGS end point is polished.
-    let gn_converged = params.search == SearchMethod::GaussNewton
-        && results[best].stop_reason.starts_with("converged");
+    let gn_converged = results[best].lm_stop == Some(super::lm::LmStop::Converged);
     // A search that gave up is not polished: its end point is only where it stopped.
     let given_up = results[best].gave_up();
     let (x, polish_steps) = if gn_converged || given_up {
@@ -672,7 +682,7 @@ pub fn find_map(
             false,
             &count,
         )
-        .filter(|r| r.3.starts_with("converged"))
+        .filter(|r| r.3 == super::lm::LmStop::Converged)
     } else {
         None
     };

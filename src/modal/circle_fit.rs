@@ -409,10 +409,12 @@ fn kasa_fit(z: &[C64]) -> Option<(C64, f64)> {
     ))
 }
 
-/// Levenberg-Marquardt on three parameters from `p0`: `normal(p)` gives the Gauss-Newton
-/// normal equations (J^T J, the step's right-hand side) or None when the model breaks down;
-/// a trial step is taken when `feasible` and it lowers `cost` (damping x0.3, at least 1e-12),
-/// else the damping grows x10 (20 tries); stops when a step gains less than 1e-15 relative.
+/// Levenberg-Marquardt ([`crate::inference::lm`]) on three parameters from `p0`:
+/// `normal(p)` gives the Gauss-Newton normal equations (J^T J and -J^T r, the undamped step's
+/// right-hand side) or None where the model breaks down (the fit then fails); `cost_of` the
+/// sum of squares; a trial point that is not `feasible` counts as no decrease. Stops when the
+/// Newton decrement is below 1e-15 of the cost, when no damped step decreases it, or after
+/// `max_iter` iterations.
 fn levenberg_marquardt3(
     p0: [f64; 3],
     cost_of: impl Fn([f64; 3]) -> f64,
@@ -420,37 +422,41 @@ fn levenberg_marquardt3(
     feasible: impl Fn([f64; 3]) -> bool,
     max_iter: usize,
 ) -> Option<[f64; 3]> {
-    let mut p = p0;
-    let mut cost = cost_of(p);
-    let mut lambda = 1e-3;
-    for _ in 0..max_iter {
-        let (jtj, jtr) = normal(p)?;
-        let mut improved = false;
-        for _ in 0..20 {
-            let mut a = jtj;
-            for (i, row) in a.iter_mut().enumerate() {
-                row[i] += lambda * jtj[i][i].max(1e-300);
-            }
-            let step = solve3(a, jtr)?;
-            let p1 = [p[0] + step[0], p[1] + step[1], p[2] + step[2]];
-            if feasible(p1) {
-                let cost1 = cost_of(p1);
-                if cost1 < cost {
-                    let rel = (cost - cost1) / cost.max(1e-300);
-                    p = p1;
-                    cost = cost1;
-                    lambda = (lambda * 0.3).max(1e-12);
-                    improved = rel > 1e-15;
-                    break;
-                }
-            }
-            lambda *= 10.0;
+    use crate::inference::lm::{levenberg_marquardt, LmParams, LmStop, Quadratic};
+    let at = |x: &[f64]| [x[0], x[1], x[2]];
+    // f = |r|^2: gradient 2 J^T r, Gauss-Newton curvature 2 J^T J.
+    let quadratic = |x: &[f64]| -> Result<Quadratic, &str> {
+        let p = at(x);
+        let (jtj, minus_jtr) = normal(p).ok_or("the model breaks down")?;
+        Ok((
+            cost_of(p),
+            minus_jtr.iter().map(|v| -2.0 * v).collect(),
+            (0..9).map(|k| 2.0 * jtj[k / 3][k % 3]).collect(),
+        ))
+    };
+    let value = |x: &[f64]| {
+        let p = at(x);
+        if feasible(p) {
+            cost_of(p)
+        } else {
+            f64::INFINITY
         }
-        if !improved {
-            break;
-        }
+    };
+    let out = levenberg_marquardt(
+        &p0,
+        quadratic,
+        value,
+        &LmParams {
+            max_iters: max_iter as u64,
+            tol: f64::MIN_POSITIVE,
+            rel_tol: 1e-15,
+            give_up_above: f64::INFINITY,
+        },
+    );
+    match out.stop {
+        LmStop::Failed(_) => None,
+        _ => Some(at(&out.x)),
     }
-    Some(p)
 }
 
 /// Geometric circle fit: minimise sum (|z_k - c| - R)^2 by Levenberg-Marquardt from (c0, r0).

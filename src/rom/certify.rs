@@ -10,7 +10,7 @@
 
 use super::basis::BasisBuilder;
 use super::reduced::{check_inputs, ReducedModel};
-use super::sparse::{FullSolver, ModelPattern};
+use super::sparse::{FullSolver, ModelPattern, SharedLuSymbolic};
 use super::{Certificate, Reference, RomError, RomParams};
 use crate::common::C64;
 use crate::fe::model::StructuralModel;
@@ -146,21 +146,11 @@ fn project_axis_masses(
     Ok(Box::new(out))
 }
 
-/// Full-model receptances on the validation set: for each modulus m, lines l:
-/// h[m][l] = n_out x n_in row-major.
-pub(crate) fn reference(
-    model: &StructuralModel,
-    inputs: &[usize],
-    moduli: &[C64],
-    lines: &[f64],
-) -> Result<Vec<Vec<Vec<C64>>>, RomError> {
-    Ok(reference_with_floor(model, inputs, moduli, lines)?.0)
-}
-
 /// Receptances per modulus and line (each n_out x n_in row-major).
 type Receptances = Vec<Vec<Vec<C64>>>;
 
-/// [`reference`] and, per modulus and line, the sparse LU's attainable relative accuracy
+/// Full-model receptances on the validation set (h[m][l] = n_out x n_in row-major for each
+/// modulus m and line l) and, per modulus and line, the sparse LU's attainable relative accuracy
 /// ([`FullSolver::solve`]).
 fn reference_with_floor(
     model: &StructuralModel,
@@ -191,7 +181,37 @@ pub(crate) fn reference_points(
     jobs: &[(usize, usize)],
 ) -> Result<Vec<(Vec<C64>, f64)>, RomError> {
     let pat = ModelPattern::new(model)?;
-    let solver = FullSolver::new(&pat)?;
+    points_with(model, inputs, moduli, lines, jobs, &FullSolver::new(&pat)?)
+}
+
+/// [`reference_points`] with the symbolic analysis `symbolic` when `model` has its pattern.
+pub(crate) fn reference_points_with(
+    model: &StructuralModel,
+    inputs: &[usize],
+    moduli: &[C64],
+    lines: &[f64],
+    jobs: &[(usize, usize)],
+    symbolic: &SharedLuSymbolic,
+) -> Result<Vec<(Vec<C64>, f64)>, RomError> {
+    let pat = ModelPattern::new(model)?;
+    points_with(
+        model,
+        inputs,
+        moduli,
+        lines,
+        jobs,
+        &symbolic.solver_for(&pat)?,
+    )
+}
+
+fn points_with(
+    model: &StructuralModel,
+    inputs: &[usize],
+    moduli: &[C64],
+    lines: &[f64],
+    jobs: &[(usize, usize)],
+    solver: &FullSolver<'_>,
+) -> Result<Vec<(Vec<C64>, f64)>, RomError> {
     let n = model.n_dof();
     let n_out = model.points.len();
     let mut rhs = faer::Mat::<f64>::zeros(n, inputs.len());
@@ -308,7 +328,7 @@ fn judge(
 /// A GMRES reference is checked by sparse LU at the validation points where the ROM misses it,
 /// when they are at most 1 / `MAX_DIRECT_FRACTION_INV` of all points (more means the basis,
 /// not the reference, is short).
-const MAX_DIRECT_FRACTION_INV: usize = 8;
+pub(crate) const MAX_DIRECT_FRACTION_INV: usize = 8;
 
 /// A transfer FRF whose peak is below `TRANSFER_FLOOR` times the largest FRF of its input
 /// column is judged against that fraction of the column's largest instead of its own peak: an

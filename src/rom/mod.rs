@@ -26,6 +26,7 @@ pub mod reduced;
 pub mod reference;
 pub(crate) mod sparse;
 pub mod term_build;
+pub(crate) mod term_reference;
 pub mod terms;
 
 pub use certify::{build_basis_only, build_rom};

@@ -11,9 +11,10 @@ use crate::common::C64;
 use crate::fe::model::{SpMat, StructuralModel};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky};
-use faer::sparse::linalg::lu::{factorize_symbolic_lu, NumericLu, SymbolicLu};
+use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuRef, NumericLu, SymbolicLu};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side};
+use std::sync::Arc;
 
 /// The union pattern of several square matrices, and for each matrix the map
 /// (source value index, destination value index).
@@ -227,14 +228,84 @@ impl SpdSolver {
 /// Complex sparse LU of Z(w, E*) on the union pattern (reference full-model solve).
 pub(crate) struct FullSolver<'a> {
     pat: &'a ModelPattern<'a>,
-    symbolic: SymbolicLu<usize>,
+    symbolic: Arc<SymbolicLu<usize>>,
+}
+
+/// A symbolic LU analysis with the union pattern it was made for, shared by the models of
+/// that pattern (a term ROM's cases: the springs, a strip and the beam's damping keep the
+/// model's pattern).
+pub(crate) struct SharedLuSymbolic {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    symbolic: Arc<SymbolicLu<usize>>,
+}
+
+impl SharedLuSymbolic {
+    pub fn new(pat: &ModelPattern<'_>) -> Result<Self, RomError> {
+        Ok(SharedLuSymbolic {
+            col_ptr: pat.pat.sym.col_ptr().to_vec(),
+            row_idx: pat.pat.sym.row_idx().to_vec(),
+            symbolic: Arc::new(lu_symbolic(pat)?),
+        })
+    }
+
+    /// The solver of `pat`: this analysis when `pat` has its pattern, else a new one.
+    pub fn solver_for<'a>(&self, pat: &'a ModelPattern<'a>) -> Result<FullSolver<'a>, RomError> {
+        let same = pat.pat.sym.col_ptr() == self.col_ptr.as_slice()
+            && pat.pat.sym.row_idx() == self.row_idx.as_slice();
+        if same {
+            Ok(FullSolver {
+                pat,
+                symbolic: self.symbolic.clone(),
+            })
+        } else {
+            FullSolver::new(pat)
+        }
+    }
+}
+
+fn lu_symbolic(pat: &ModelPattern<'_>) -> Result<SymbolicLu<usize>, RomError> {
+    factorize_symbolic_lu(pat.pat.sym.as_ref(), Default::default())
+        .map_err(|e| RomError::Factorization(format!("symbolic LU failed: {e:?}")))
 }
 
 impl<'a> FullSolver<'a> {
     pub fn new(pat: &'a ModelPattern<'a>) -> Result<Self, RomError> {
-        let symbolic = factorize_symbolic_lu(pat.pat.sym.as_ref(), Default::default())
-            .map_err(|e| RomError::Factorization(format!("symbolic LU failed: {e:?}")))?;
-        Ok(FullSolver { pat, symbolic })
+        Ok(FullSolver {
+            pat,
+            symbolic: Arc::new(lu_symbolic(pat)?),
+        })
+    }
+
+    /// The complex sparse LU of Z(w, E*), kept for several solves.
+    pub fn factor(&self, omega: f64, e: C64) -> Result<FullLu<'_>, RomError> {
+        let vals = self.pat.dynamic_values(omega, e);
+        let a = SparseColMatRef::new(self.pat.pat.sym.as_ref(), &vals);
+        let mut numeric = NumericLu::<usize, C64>::new();
+        let mut mem = MemBuffer::try_new(
+            self.symbolic
+                .factorize_numeric_lu_scratch::<C64>(Par::Seq, Default::default()),
+        )
+        .map_err(|_| RomError::Factorization("out of memory for the LU workspace".into()))?;
+        self.symbolic
+            .factorize_numeric_lu(
+                &mut numeric,
+                a,
+                Par::Seq,
+                MemStack::new(&mut mem),
+                Default::default(),
+            )
+            .map_err(|err| {
+                RomError::Factorization(format!(
+                    "Z is singular at {:.3} Hz, E* = {e} Pa ({err:?})",
+                    omega / (2.0 * std::f64::consts::PI)
+                ))
+            })?;
+        Ok(FullLu {
+            symbolic: &self.symbolic,
+            numeric,
+            vals,
+        })
     }
 
     /// X = Z(w, E*)^-1 RHS, RHS given as real columns (n x k, column-major).
@@ -250,33 +321,11 @@ impl<'a> FullSolver<'a> {
         e: C64,
         rhs: &faer::Mat<f64>,
     ) -> Result<(faer::Mat<C64>, f64), RomError> {
-        let vals = self.pat.dynamic_values(omega, e);
-        let a = SparseColMatRef::new(self.pat.pat.sym.as_ref(), &vals);
-        let mut numeric = NumericLu::<usize, C64>::new();
+        let lu = self.factor(omega, e)?;
+        let vals = &lu.vals;
         let k = rhs.ncols();
-        let mut mem = MemBuffer::try_new(faer::dyn_stack::StackReq::any_of(&[
-            self.symbolic
-                .factorize_numeric_lu_scratch::<C64>(Par::Seq, Default::default()),
-            self.symbolic.solve_in_place_scratch::<C64>(k, Par::Seq),
-        ]))
-        .map_err(|_| RomError::Factorization("out of memory for the LU workspace".into()))?;
-        let lu = self
-            .symbolic
-            .factorize_numeric_lu(
-                &mut numeric,
-                a,
-                Par::Seq,
-                MemStack::new(&mut mem),
-                Default::default(),
-            )
-            .map_err(|err| {
-                RomError::Factorization(format!(
-                    "Z is singular at {:.3} Hz, E* = {e} Pa ({err:?})",
-                    omega / (2.0 * std::f64::consts::PI)
-                ))
-            })?;
         let mut x = faer::Mat::<C64>::from_fn(rhs.nrows(), k, |i, j| C64::new(rhs[(i, j)], 0.0));
-        lu.solve_in_place_with_conj(Conj::No, x.as_mut(), Par::Seq, MemStack::new(&mut mem));
+        lu.solve_in_place(x.as_mut());
         let sym = self.pat.pat.sym.as_ref();
         let mut floor = 0.0;
         for _ in 0..2 {
@@ -291,7 +340,7 @@ impl<'a> FullSolver<'a> {
                     }
                 }
             }
-            lu.solve_in_place_with_conj(Conj::No, r.as_mut(), Par::Seq, MemStack::new(&mut mem));
+            lu.solve_in_place(r.as_mut());
             let (mut dn, mut xn) = (0.0f64, 0.0f64);
             for jc in 0..k {
                 for i in 0..rhs.nrows() {
@@ -303,5 +352,27 @@ impl<'a> FullSolver<'a> {
             floor = if xn > 0.0 { dn / xn } else { 0.0 };
         }
         Ok((x, floor))
+    }
+}
+
+/// A complex sparse LU of Z(w, E*) ([`FullSolver::factor`]).
+pub(crate) struct FullLu<'s> {
+    symbolic: &'s SymbolicLu<usize>,
+    numeric: NumericLu<usize, C64>,
+    /// Z's values on the union pattern.
+    vals: Vec<C64>,
+}
+
+impl FullLu<'_> {
+    /// Solve Z X = RHS in place (complex columns).
+    pub fn solve_in_place(&self, rhs: MatMut<'_, C64>) {
+        let k = rhs.ncols();
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<C64>(k, Par::Seq));
+        LuRef::new_unchecked(self.symbolic, &self.numeric).solve_in_place_with_conj(
+            Conj::No,
+            rhs,
+            Par::Seq,
+            MemStack::new(&mut mem),
+        );
     }
 }

@@ -1,24 +1,25 @@
 //! Building and certifying a reduced model with extra structural terms ([`super::terms`]):
 //! the certified ROM's basis enriched with the Krylov vectors of the full model with each term
-//! on, certified against the sparse LU of the modified full model at every (term, value)
-//! case, then compressed ([`super::compress`]) and re-certified.
+//! on, certified against the modified full model at every (term, value) case (by the shifted
+//! Krylov solver or the sparse LU, as `RomParams::reference` says: `rom::term_reference`),
+//! then compressed ([`super::compress`]) and re-certified against the same reference.
 
 use super::basis::BasisBuilder;
 use super::certify::{
-    enrich, reduce, reference, validate, validation_lines, validation_moduli, worst_rel_to_peak,
+    enrich, frf_scales, reduce, validate, validation_lines, validation_moduli,
+    MAX_DIRECT_FRACTION_INV,
 };
 use super::compress;
 use super::sparse::ModelPattern;
+use super::term_reference::{CaseRefs, Grid};
 use super::terms::{pinvs, TermCertificate, TermMap, TermRom, TermSpec};
 use super::{RomError, RomParams};
 use crate::common::C64;
 use crate::fe::model::{SpMat, StructuralModel};
-use crate::frf::{FrfEngine, TermCoef};
+use crate::frf::TermCoef;
 use faer::Mat;
 use std::time::Instant;
 
-/// Full-model receptances of one validation case: `[modulus][line][output * n_in + input]`.
-type CaseReference = Vec<Vec<Vec<C64>>>;
 /// Per-case errors of a certificate: (term name, value, error).
 type CaseErrors = Vec<(String, f64, f64)>;
 
@@ -107,8 +108,7 @@ fn compliance_sum(rom: &TermRom) -> Option<Mat<f64>> {
 
 /// Build and certify a reduced model of `model` with the extra `terms` (see the module doc),
 /// for the FRFs of all observation points x `inputs`, with the band, range, tolerance,
-/// enrichment schedule and validation grid of `params` (the certificate's reference is always
-/// the sparse LU of the modified full model).
+/// enrichment schedule, validation grid and reference solver of `params`.
 pub fn build_term_rom(
     model: &StructuralModel,
     inputs: &[usize],
@@ -123,21 +123,26 @@ pub fn build_term_rom(
     }
     let moduli = validation_moduli(params);
     let lines = validation_lines(params);
-    // Modified full models: for the basis and for the certificate.
+    let grid = Grid {
+        inputs,
+        moduli: &moduli,
+        lines: &lines,
+    };
+    // Modified full models for the basis.
     let mut side_models = Vec::new();
     for t in terms {
         for &v in &t.enrich_values {
             side_models.push(model_with_term(model, t, v)?);
         }
     }
+    let cases: Vec<(usize, f64)> = terms
+        .iter()
+        .enumerate()
+        .flat_map(|(k, t)| t.cert_values.iter().map(move |&v| (k, v)))
+        .collect();
     let t0 = Instant::now();
-    let mut cases: Vec<(usize, f64, CaseReference)> = Vec::new();
-    for (k, t) in terms.iter().enumerate() {
-        for &v in &t.cert_values {
-            let m = model_with_term(model, t, v)?;
-            cases.push((k, v, reference(&m, inputs, &moduli, &lines)?));
-        }
-    }
+    // (the reference does not depend on the basis: every enrichment level is judged by it)
+    let mut refs = CaseRefs::new(model, terms, &cases, &grid, params.reference)?;
     let mut seconds_certify = t0.elapsed().as_secs_f64();
     let mut seconds_basis = 0.0;
 
@@ -188,7 +193,8 @@ pub fn build_term_rom(
         }
         seconds_basis += t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let (worst, per_case) = certify_cases(&rom, terms, &cases, &moduli, &lines)?;
+        let (worst, per_case) =
+            certify_cases(&rom, model, terms, &cases, &mut refs, &grid, params)?;
         seconds_certify += t.elapsed().as_secs_f64();
         best = Some((rom, worst, per_case));
         if worst <= params.tolerance {
@@ -229,7 +235,8 @@ pub fn build_term_rom(
             let e_check = compress::check_error(&small, &rom, &check)?;
             compression_error = Some(e_check);
             if e_check <= params.tolerance {
-                let (worst, cases_small) = certify_cases(&small, terms, &cases, &moduli, &lines)?;
+                let (worst, cases_small) =
+                    certify_cases(&small, model, terms, &cases, &mut refs, &grid, params)?;
                 if worst <= params.tolerance {
                     rom = small;
                     err = worst;
@@ -252,6 +259,14 @@ pub fn build_term_rom(
         seconds_certify,
         seconds_compress,
         passed: err <= params.tolerance,
+        reference: if refs.shifted.is_some() {
+            "shifted Krylov".into()
+        } else {
+            "sparse LU".into()
+        },
+        reference_residual: refs.shifted.as_ref().map(|s| s.max_residual),
+        reference_krylov_vectors: refs.shifted.as_ref().map(|s| s.max_vectors),
+        reference_direct_points: refs.direct.iter().map(|d| d.len()).sum(),
     };
     if !cert.passed && !params.allow_uncertified {
         return Err(RomError::Uncertified {
@@ -265,38 +280,90 @@ pub fn build_term_rom(
 }
 
 /// The certificate of `rom` over every (term, value) case: the largest error and each case's.
+/// With the shifted Krylov reference, the points where the ROM misses it by more than the
+/// tolerance are solved by sparse LU before the verdict when they are at most
+/// 1 / `MAX_DIRECT_FRACTION_INV` of all points (more mean the basis is short), as the
+/// effect-free ROM does with its GMRES reference ([`super::certify::build_rom`]).
 fn certify_cases(
     rom: &TermRom,
+    model: &StructuralModel,
     terms: &[TermSpec],
-    cases: &[(usize, f64, CaseReference)],
-    moduli: &[C64],
-    lines: &[f64],
+    cases: &[(usize, f64)],
+    refs: &mut CaseRefs,
+    g: &Grid<'_>,
+    params: &RomParams,
 ) -> Result<(f64, CaseErrors), RomError> {
+    let tol = params.tolerance;
+    let judge = |c: usize, refs: &CaseRefs| {
+        let (k, v) = cases[c];
+        case_error(rom, &[terms[k].coef(k, v)], g, &refs.h[c], tol)
+    };
+    let mut judged: Vec<(f64, Vec<(usize, usize)>)> = (0..cases.len())
+        .map(|c| judge(c, refs))
+        .collect::<Result<_, _>>()?;
+    let worst = judged.iter().map(|j| j.0).fold(0.0f64, f64::max);
+    if !(worst <= tol) && refs.shifted.is_some() {
+        let suspect: Vec<Vec<(usize, usize)>> = judged
+            .iter()
+            .zip(&refs.direct)
+            .map(|((_, over), direct)| {
+                over.iter()
+                    .copied()
+                    .filter(|p| !direct.contains(p))
+                    .collect()
+            })
+            .collect();
+        let n_suspect: usize = suspect.iter().map(|s| s.len()).sum();
+        let n_points = cases.len() * g.moduli.len() * g.lines.len();
+        if n_suspect > 0 && n_suspect * MAX_DIRECT_FRACTION_INV <= n_points {
+            for (c, points) in suspect.iter().enumerate() {
+                if !points.is_empty() {
+                    refs.solve_directly(model, terms, cases, c, points, g)?;
+                    judged[c] = judge(c, refs)?;
+                }
+            }
+        }
+    }
     let mut worst = 0.0f64;
-    let mut per_case = Vec::new();
-    for (k, v, refh) in cases {
-        let coef = [terms[*k].coef(*k, *v)];
-        let err = case_error(rom, &coef, moduli, lines, refh)?;
-        worst = worst.max(err);
-        per_case.push((terms[*k].name.clone(), *v, err));
+    let mut per_case = Vec::with_capacity(cases.len());
+    for (&(k, v), (err, _)) in cases.iter().zip(&judged) {
+        worst = worst.max(*err);
+        per_case.push((terms[k].name.clone(), v, *err));
     }
     Ok((worst, per_case))
 }
 
-/// Largest error relative to the peak of each FRF of one (term, value) case.
+/// Largest error relative to the scale of each FRF ([`frf_scales`]: its peak) of one
+/// (term, value) case, and the validation points (modulus, line) where it exceeds `tol`.
 fn case_error(
     rom: &TermRom,
     coef: &[TermCoef],
-    moduli: &[C64],
-    lines: &[f64],
+    g: &Grid<'_>,
     refh: &[Vec<Vec<C64>>],
-) -> Result<f64, RomError> {
+    tol: f64,
+) -> Result<(f64, Vec<(usize, usize)>), RomError> {
+    let n_in = rom.rom.inputs.len();
     let mut worst = 0.0f64;
-    for (m, &e) in moduli.iter().enumerate() {
+    let mut over = Vec::new();
+    for (m, &e) in g.moduli.iter().enumerate() {
         let (sw, _) = rom
-            .sweep_terms_impl(lines, &vec![e; lines.len()], coef, false)
+            .sweep_terms_impl(g.lines, &vec![e; g.lines.len()], coef, false)
             .map_err(|x| RomError::Factorization(x.to_string()))?;
-        worst = worst.max(worst_rel_to_peak(&sw.h, &refh[m], rom.inputs().len()));
+        let want = &refh[m];
+        let blk = want.first().map_or(0, |w| w.len());
+        let scales = frf_scales(want, n_in);
+        for (l, w) in want.iter().enumerate() {
+            let mut line = 0.0f64;
+            for (k, &scale) in scales.iter().enumerate().take(blk) {
+                let err = (sw.h[l * blk + k] - w[k]).norm();
+                let rel = if scale > 0.0 { err / scale } else { err };
+                line = line.max(if rel.is_nan() { f64::INFINITY } else { rel });
+            }
+            worst = worst.max(line);
+            if !(line <= tol) {
+                over.push((m, l));
+            }
+        }
     }
-    Ok(worst)
+    Ok((worst, over))
 }

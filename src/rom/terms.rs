@@ -13,7 +13,8 @@
 //! model with each term on at a few values (`TermSpec::enrich_values`: the real part of
 //! `c_k G_k` added to K_b and S, the imaginary part to D_b), so that the responses of the
 //! modified structure lie in V. The certificate compares the reduced receptances with the
-//! full model's sparse LU with the same term on (`TermSpec::cert_values`) on a grid of
+//! full model with the same term on (`TermSpec::cert_values`; solved by one complex LU per
+//! modulus and the shifted Krylov space of its lines, `rom::term_reference`) on a grid of
 //! moduli x lines and enriches (deeper Krylov, more e) until the error relative to the peak
 //! of each FRF is at most the tolerance, as [`super::certify::build_rom`] does for the
 //! effect-free model. A sweep is a dense LU of the n_r x n_r reduced system per line (the
@@ -184,6 +185,22 @@ pub struct TermCertificate {
     #[serde(default)]
     pub seconds_compress: f64,
     pub passed: bool,
+    /// The full-model solver of the certificate: "shifted Krylov" (one complex LU per case and
+    /// modulus, `rom::term_reference`) or "sparse LU" (at every point; empty in a
+    /// certificate from before this field, made by sparse LU).
+    #[serde(default)]
+    pub reference: String,
+    /// Shifted Krylov: the largest final relative residual of a line and the largest Krylov
+    /// space (vectors) over all cases and moduli.
+    #[serde(default)]
+    pub reference_residual: Option<f64>,
+    #[serde(default)]
+    pub reference_krylov_vectors: Option<usize>,
+    /// Validation points (over all cases) whose reference is a sparse-LU solve: every point
+    /// with the sparse LU reference; with the shifted Krylov one those it did not resolve and
+    /// those where the ROM missed its solution by more than the tolerance.
+    #[serde(default)]
+    pub reference_direct_points: usize,
 }
 
 /// One line of a sweep with terms: (h, dh/dE', sh, dh/dv_k per term).

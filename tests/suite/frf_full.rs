@@ -265,27 +265,3 @@ fn bad_inputs_are_errors() {
         Err(FrfError::Other(_))
     ));
 }
-
-/// Timing of the bench's sweep (4 FRFs x 500 lines, 9,600 DOFs) in the test profile
-/// (run with `cargo test --test suite frf_full:: -- --ignored --nocapture`).
-#[test]
-#[ignore]
-fn timing_sweep_9600_dofs() {
-    let mut model = lattice_model(&LatticeParams::new(40, 10, 8, 1)).model;
-    model.points.truncate(4);
-    let t = std::time::Instant::now();
-    let fm = FullModel::new(&model, &[1], FullParams::default()).unwrap();
-    let setup = t.elapsed().as_secs_f64();
-    let w: Vec<f64> = (0..500)
-        .map(|l| 2.0 * std::f64::consts::PI * (10.0 + l as f64))
-        .collect();
-    let e = vec![E0; w.len()];
-    let t = std::time::Instant::now();
-    let sw = fm.sweep(&w, &e, true).unwrap();
-    eprintln!(
-        "{} DOFs: setup {setup:.3} s, sweep of 4 FRFs x 500 lines with derivatives {:.2} s",
-        model.n_dof(),
-        t.elapsed().as_secs_f64()
-    );
-    assert_eq!(sw.h.len(), 2000);
-}

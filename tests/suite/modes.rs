@@ -190,27 +190,3 @@ fn bad_inputs_are_errors_not_panics() {
     )
     .is_err());
 }
-
-/// Timing on a ~50k-DOF lattice (run with `cargo test --test suite modes:: -- --ignored --nocapture`).
-#[test]
-#[ignore]
-fn timing_large_lattice() {
-    let lat = lattice_model(&LatticeParams::new(80, 12, 18, 4));
-    let model = &lat.model;
-    let t = std::time::Instant::now();
-    let k = k_of(model, E0.re);
-    let (lam, _) = real_modes(&k, &model.m, 10, &EigenParams::default()).unwrap();
-    eprintln!(
-        "{} DOFs: 10 real modes in {:.2} s, f1 = {:.2} Hz",
-        model.n_dof(),
-        t.elapsed().as_secs_f64(),
-        lam[0].sqrt() / (2.0 * std::f64::consts::PI)
-    );
-    let t = std::time::Instant::now();
-    let modes = complex_modes(model, E0, 6, Some(&lat.dof_axes), &ModesParams::default()).unwrap();
-    eprintln!(
-        "6 complex modes in {:.2} s, max residual {:.1e}",
-        t.elapsed().as_secs_f64(),
-        modes.iter().map(|m| m.residual).fold(0.0, f64::max)
-    );
-}
