@@ -232,9 +232,14 @@ pub fn diagnose_into_as(
                         cmp.gain,
                         cmp.threshold,
                         if cmp.accepted {
-                            "the study's mesh was too coarse; the loop runs again on the refined mesh"
+                            "the study's mesh was too coarse; the loop runs again on the refined mesh".to_string()
+                        } else if cmp.gain >= cmp.threshold && cmp.gain_over_effects < 0.0 {
+                            format!(
+                                "{:.1} nats behind the accepted effects: the mesh does not explain the residual",
+                                -cmp.gain_over_effects
+                            )
                         } else {
-                            "the mesh does not explain the residual"
+                            "the mesh does not explain the residual".to_string()
                         }
                     ));
                     if cmp.accepted {

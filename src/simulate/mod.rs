@@ -154,8 +154,13 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
             m
         }
     };
-    let mut model =
-        crate::study::build::with_sensor_masses(&base, &ex.structure, &ex.sensors, &file)?;
+    let mut model = crate::study::build::with_sensor_masses_on(
+        &base,
+        &ex.structure,
+        &ex.sensors,
+        ex.base_springs.as_ref(),
+        &file,
+    )?;
     if let Some(((x0, x1), loss)) = ex.degraded_bond {
         let spec = mesher("degraded_bond")?;
         let region_of = if ex.base_springs.is_some() {

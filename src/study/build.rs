@@ -271,6 +271,19 @@ pub fn with_sensor_masses(
     sensors: &[super::experiment::Sensor],
     file: &str,
 ) -> Result<StructuralModel, StudyError> {
+    with_sensor_masses_on(model, structure, sensors, None, file)
+}
+
+/// [`with_sensor_masses`] for `model` built from `structure` with its base face free on
+/// `base_springs` when given ([`crate::fe::base::joint_model_on_springs`]): a three-direction
+/// sensor is then located on that model's DOFs (the free base face numbers its own).
+pub fn with_sensor_masses_on(
+    model: &StructuralModel,
+    structure: &Structure,
+    sensors: &[super::experiment::Sensor],
+    base_springs: Option<&crate::fe::base::BaseSprings>,
+    file: &str,
+) -> Result<StructuralModel, StudyError> {
     if sensors.is_empty() {
         return Ok(model.clone());
     }
@@ -284,16 +297,30 @@ pub fn with_sensor_masses(
     let located = if sensors.iter().any(|s| s.all_directions) {
         let mut all = structure.clone();
         all.points = points_in_all_directions(&structure.points);
-        let built = build_model(&all, file)?;
-        if built.model.n_dof() != model.n_dof() {
+        let built = match base_springs {
+            None => build_model(&all, file)?.model,
+            Some(springs) => {
+                let spec = joint_spec(&all).ok_or_else(|| {
+                    err("base springs need the mesher's structure (source = \"mesher\")".into())
+                })?;
+                crate::fe::base::joint_model_on_springs(&spec, springs, "base_springs")
+                    .map_err(|e| err(format!("the model on base springs: {e}")))?
+            }
+        };
+        if built.n_dof() != model.n_dof() {
             return Err(err(format!(
-                "directions = \"xyz\" needs the structure's own DOFs ({} here against {}): it cannot be combined with base_springs",
+                "directions = \"xyz\" needs the DOFs of the model the masses go into ({} here against {} for the points' other directions){}",
                 model.n_dof(),
-                built.model.n_dof()
+                built.n_dof(),
+                if base_springs.is_some() {
+                    ""
+                } else {
+                    ": a model on base springs has a free base face with DOFs of its own; locate the sensors with `with_sensor_masses_on` and its springs"
+                }
             )));
         }
         StructuralModel {
-            points: built.model.points,
+            points: built.points,
             ..model.clone()
         }
     } else {

@@ -201,3 +201,42 @@ fn simulated_sensor_adds_its_mass_in_the_directions_asked_for() {
     let err = rfmlab::study::experiment::parse_experiment(&bad, &path).unwrap_err();
     assert!(err.to_string().contains("sensors[0].directions"), "{err}");
 }
+
+/// A three-direction sensor on a joint whose base face is free on springs
+/// (`rfmlab::study::build::with_sensor_masses_on`): the free face numbers DOFs of its own, so the
+/// sensor is located on the model on springs, and the mass matrix gains the sensor's mass in
+/// each of x, y and z (`1^T dM 1 = 3 m`); located on the fixed-base model instead, it is refused
+/// with the reason, not placed at another DOF.
+#[test]
+fn simulated_three_direction_sensor_on_base_springs_adds_its_mass_in_x_y_and_z() {
+    use rfmlab::study::build::{joint_spec, with_sensor_masses, with_sensor_masses_on};
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("studies/data/closed_loop/cases/td_springs_mass3_pt4.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let ex = rfmlab::study::experiment::parse_experiment(&text, &path).unwrap();
+    let springs = ex.base_springs.clone().expect("the case has base springs");
+    assert!(ex.sensors[0].all_directions);
+    let spec = joint_spec(&ex.structure).unwrap();
+    let on_springs =
+        rfmlab::fe::base::joint_model_on_springs(&spec, &springs, "base_springs").unwrap();
+    let total = |m: &rfmlab::fe::StructuralModel| m.m.val().iter().sum::<f64>();
+    let xyz = with_sensor_masses_on(
+        &on_springs,
+        &ex.structure,
+        &ex.sensors,
+        Some(&springs),
+        "case",
+    )
+    .unwrap();
+    assert_eq!(
+        xyz.points, on_springs.points,
+        "the measured points are kept"
+    );
+    let added = total(&xyz) - total(&on_springs);
+    assert!(
+        (added - 3.0 * 0.012).abs() < 1e-9,
+        "{added:e} kg added over x, y and z, 0.036 expected"
+    );
+    let err = with_sensor_masses(&on_springs, &ex.structure, &ex.sensors, "case").unwrap_err();
+    assert!(err.to_string().contains("with_sensor_masses_on"), "{err}");
+}
