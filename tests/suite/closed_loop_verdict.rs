@@ -164,7 +164,13 @@ fn run_independent(dir: &Path, case: &str, level: &str) -> DiagnoseLevel {
 /// [`run_independent`] with `[closed_loop] candidates = <candidates>` (TOML).
 fn run_independent_with(dir: &Path, case: &str, level: &str, candidates: &str) -> DiagnoseLevel {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    let folder = data(&format!("virtual/{case}"));
+    // The repository's own independent data first (studies/data/virtual), then the shared.
+    let own = root.join(format!("studies/data/virtual/{case}"));
+    let folder = if own.is_dir() {
+        own
+    } else {
+        data(&format!("virtual/{case}"))
+    };
     let text = std::fs::read_to_string(root.join("studies/closed_loop_virtual_td.toml"))
         .unwrap()
         .replace(
@@ -281,6 +287,42 @@ fn independent_compliant_base_with_base_springs_is_confounded_around_the_truth()
         assert!(
             *lo <= t && t <= *hi,
             "{p}: truth {t:e} outside [{lo:e}, {hi:e}]"
+        );
+    }
+}
+
+/// The independent compliant base with a 12 g sensor acting in x, y and z at point 4
+/// (`springs_mass3_td`, made by scikit-fem on the study's own mesh), default candidates: the
+/// level must end `confounded` or `explained` with every adhesive parameter's truth inside what
+/// is reported. Known wrong: the three-direction pass is not run once base springs are
+/// accepted with a mass, so the measured-direction mass (12.03 g) stands in for the sensor's,
+/// the equal springs read 2.71e-11 m^3/N (truth 3.33e-11) and L2 ends `confounded` with E0 in
+/// [5.538, 5.558] MPa against 5.60 and E1 in [3.423, 3.453] MPa against 3.50 (L1 ends
+/// `unexplained`, which is honest).
+#[test]
+#[ignore = "known wrong: with base springs accepted the three-direction pass is skipped and L2 ends confounded with E0 and E1 about 1 % outside their ranges; about 4 minutes"]
+fn independent_compliant_base_with_a_three_direction_sensor_covers_the_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let l = run_independent_with(dir.path(), "springs_mass3_td", "L2", "\"all\"");
+    assert!(
+        l.status == "confounded" || l.status == "explained",
+        "{}: {}",
+        l.status,
+        l.verdict.sentence
+    );
+    for p in l.parameters.iter().filter(|p| p.truth.is_some()) {
+        let t = p.truth.unwrap();
+        let (lo, hi) = l
+            .verdict
+            .confounded
+            .first()
+            .and_then(|c| c.ranges.iter().find(|r| r.0 == p.name))
+            .map(|r| (r.1, r.2))
+            .unwrap_or((p.after - 2.0 * p.after_sd, p.after + 2.0 * p.after_sd));
+        assert!(
+            lo <= t && t <= hi,
+            "{}: truth {t:e} outside [{lo:e}, {hi:e}]",
+            p.name
         );
     }
 }
