@@ -350,6 +350,10 @@ pub struct ClosedLoopResult {
     /// Candidates of the last round that the model's parameters absorb (R^2 >= 0.99, law
     /// candidates aside), not accepted: a sentence each ([`confounding::Confounding::sentence`]).
     pub confounded: Vec<String>,
+    /// Wall time (s) of the loop's steps in order: the starting MAP, then per round its score
+    /// tests, its refits (profiles included) and its alternative laws (`round 1: refits`);
+    /// the verdict's steps are appended by its caller. The run's manifest lists them.
+    pub timings: Vec<(String, f64)>,
 }
 
 /// Residual analysis of `post` at physical parameters `phys` (law + free effects, then noise).
@@ -742,8 +746,15 @@ pub fn run_closed_loop_with_laws<'a>(
     } else {
         "MAP of the starting model".into()
     });
+    let mut timings: Vec<(String, f64)> = Vec::new();
+    let mut lap = std::time::Instant::now();
+    let mut time = |timings: &mut Vec<(String, f64)>, step: String| {
+        timings.push((step, lap.elapsed().as_secs_f64()));
+        lap = std::time::Instant::now();
+    };
     let mut current = find_map(&*post, Some(x0), &start_map, none)?;
     let before = fit_of(post, &current)?;
+    time(&mut timings, "starting MAP".into());
     // A starting fit pressed against its prior's edge cannot fit the data inside the prior
     // (named in the conclusion). Its refits stay warm: searching them from space-filling starts
     // as well moved the dense chain's beam-modulus case from one wrong basin to another (1.7 %
@@ -806,6 +817,7 @@ pub fn run_closed_loop_with_laws<'a>(
                 confounding: conf,
             });
         }
+        time(&mut timings, format!("round {}: score tests", round + 1));
         scored.sort_by(|a, b| b.score.total_cmp(&a.score));
         for (i, c) in scored.iter_mut().enumerate() {
             c.rank = i + 1;
@@ -1075,6 +1087,7 @@ pub fn run_closed_loop_with_laws<'a>(
                 break;
             }
         }
+        time(&mut timings, format!("round {}: refits", round + 1));
         // Alternative laws: refitted every round (no score test; see [`alternative`]).
         let mut best_law: Option<(usize, &'a dyn ConstitutiveModel, Vec<Prior>, MapResult)> = None;
         for &alt in laws {
@@ -1152,6 +1165,12 @@ pub fn run_closed_loop_with_laws<'a>(
                     best_law = Some((li, alt, priors, r));
                 }
             }
+        }
+        if !laws.is_empty() {
+            time(
+                &mut timings,
+                format!("round {}: alternative laws", round + 1),
+            );
         }
         if let Some((li, alt, priors, r)) = best_law {
             // The law is replaced: the round's effects are not accepted.
@@ -1256,6 +1275,7 @@ pub fn run_closed_loop_with_laws<'a>(
         law_candidates: law_table,
         conclusion,
         confounded,
+        timings,
     })
 }
 

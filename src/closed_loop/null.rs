@@ -19,7 +19,8 @@
 //!
 //! * With an estimator (`Chain::Welch`): the replicates are the virtual experiment's
 //!   frequency-domain mode ([`crate::experiment::simulate_level`], block spectra drawn with the
-//!   exact second-order statistics of the overlapped, windowed Welch chain, leakage included),
+//!   exact second-order statistics of the overlapped, windowed Welch chain, leakage included;
+//!   drawn as [`crate::experiment::Replicates`], the expected spectra computed once),
 //!   force band, window, block, rate and number of blocks as declared. The response sensors'
 //!   noise is not declared; it is read from the data's coherence: a trial replicate with noise
 //!   `s_0` per channel gives `(1 - g^2) / g^2` per line, proportional to the noise power, and
@@ -33,7 +34,7 @@
 //! replicates above it is reported beside it.
 
 use crate::common::C64;
-use crate::experiment::{simulate_level, ChainParams, ExperimentError, Mode, NoiseLevel, Plant};
+use crate::experiment::{ChainParams, ExperimentError, Mode, NoiseLevel, Plant, Replicates};
 use crate::forward::{ForwardError, ForwardModel, Observation};
 use crate::inference::likelihood::{FrfData, FrfLikelihood, FrfPosterior};
 use rand::SeedableRng;
@@ -282,14 +283,15 @@ pub fn calibrate(
             c.force_noise = NoiseLevel::Rms(0.0);
             c.response_noise = vec![NoiseLevel::Rms(s0); n];
             c.seed = params.seed.wrapping_add(1_000_003);
-            let trial = simulate_level(&plant, &c)?;
+            // The replicates share the plant and the expected spectra; each draws its blocks.
+            let replicates = Replicates::new(&plant, &c)?;
+            let trial = replicates.draw(&c)?;
             let sig: Vec<f64> = (0..n)
                 .map(|k| {
                     let nl = lik.data.freq_hz.len();
                     let r: Vec<f64> = (0..nl)
                         .map(|l| {
-                            noise_ratio(coh_data[l * n + k])
-                                / noise_ratio(trial.channels[k].coherence[l])
+                            noise_ratio(coh_data[l * n + k]) / noise_ratio(trial[k].coherence[l])
                         })
                         .collect();
                     let m = median(r);
@@ -303,12 +305,12 @@ pub fn calibrate(
             c.response_noise = sig.iter().map(|s| NoiseLevel::Rms(*s)).collect();
             for r in 0..params.replicates {
                 c.seed = params.seed.wrapping_add(r as u64);
-                let sim = simulate_level(&plant, &c)?;
-                let nl = sim.freq_hz.len();
+                let sim = replicates.draw(&c)?;
+                let nl = c.lines_hz.len();
                 let mut x = Vec::with_capacity(nl * n);
                 let mut g = Vec::with_capacity(nl * n);
                 for l in 0..nl {
-                    for ch in &sim.channels {
+                    for ch in &sim {
                         x.push(ch.values[l]);
                         g.push(ch.coherence[l]);
                     }

@@ -13,6 +13,7 @@ use super::params::{DiagnoseParams, LoopInputs};
 use super::summary::DiagnoseSummary;
 use crate::closed_loop::{ClosedLoopParams, StartingFit};
 use crate::output::{Manifest, Replace, ResultsDir};
+use crate::stage::setup::{LevelGrid, Setup};
 use crate::stage::RunError;
 use crate::study::Study;
 use std::path::Path;
@@ -83,7 +84,13 @@ pub fn diagnose_into_as(
     // and its reduced basis (about 30 s to build and certify on the paper's joint, cached).
     let asked = joint && wants_sensor_mass(study);
     let defaults = super::candidates::default_candidates(study.closed_loop.as_ref());
-    let mut outcome = loop_once(study, model, params, asked, &[])?;
+    let (mut outcome, first) = loop_once(study, model, params, asked, &[], None)?;
+    // Every pass's steps for the manifest: the first pass's as they are, a later pass's
+    // under its name.
+    let mut steps = outcome.timings.clone();
+    let mut add_steps = |pass: &str, o: &super::summary::LoopOutcome| {
+        steps.extend(o.timings.iter().map(|(s, t)| (format!("{pass}: {s}"), *t)));
+    };
     // Whether the later passes put every point's three directions in the model, and the
     // sections that say why a pass was run again (appended to the final pass's report).
     let mut three = asked;
@@ -120,15 +127,28 @@ pub fn diagnose_into_as(
         // passes model the same data, so the one with the larger evidence (summed over the
         // levels) is kept.
         // Its starting MAP searches from the first pass's starting fit (the same model on
-        // another basis), not from space-filling starts again.
-        let second = loop_once(
+        // another basis), not from space-filling starts again; it keeps the first pass's
+        // measurement grids, and what lies in the measured directions (its starting model,
+        // the measured-direction candidates, the null level) is swept on the first pass's
+        // basis (built for those points, a third of the cost per sweep).
+        let (second, _) = loop_once(
             &without_springs(study, defaults),
             model,
             params,
             true,
             &starting_fits(&outcome),
+            Some(&first),
         )?;
-        let gain = final_evidence(&second) - final_evidence(&outcome);
+        add_steps("three directions", &second);
+        // A difference within the evidences' rounding (1e-9 of their size) is none: the two
+        // passes then end at the same model (the second sweeps the measured directions on
+        // the first's basis), and the tie keeps the second pass, which tried the
+        // three-direction masses too.
+        let (second_ev, first_ev) = (final_evidence(&second), final_evidence(&outcome));
+        let gain = match second_ev - first_ev {
+            g if g.abs() <= 1e-9 * (second_ev.abs() + first_ev.abs()) => 0.0,
+            g => g,
+        };
         let keep_second = !(gain < 0.0);
         params.progress.say(&format!(
             "three directions: evidence {gain:+.1} nats against the first pass: {}",
@@ -154,6 +174,8 @@ pub fn diagnose_into_as(
             three = !accepted_of(&outcome, "sensor_mass").is_empty();
         }
     }
+    // The first pass's engines are not needed further.
+    drop(first);
     // The FE model's own discretisation error: a level left unexplained is tried on the mesh
     // refined twice per direction (module `mesh`); when it gains the loop's evidence threshold
     // at the starting fit, the loop runs again there and that pass is reported.
@@ -199,8 +221,10 @@ pub fn diagnose_into_as(
                 &start_only,
                 false,
                 &starting_fits(&outcome),
+                None,
             ) {
-                Ok(start) => {
+                Ok((start, _)) => {
+                    add_steps("refined mesh, starting fit", &start);
                     let cmp =
                         mesh::compare(&outcome, &start, words, params.threshold_nats, for_residual);
                     params.progress.say(&format!(
@@ -227,8 +251,9 @@ pub fn diagnose_into_as(
                         } else {
                             without_springs(&fine, defaults)
                         };
-                        let mut refined =
-                            loop_once(&rerun, model, params, three, &starting_fits(&start))?;
+                        let (mut refined, _) =
+                            loop_once(&rerun, model, params, three, &starting_fits(&start), None)?;
+                        add_steps("refined mesh", &refined);
                         mesh::name_in(&mut refined, &cmp, mesh::element_size(&fine.structure));
                         outcome = refined;
                     }
@@ -252,6 +277,7 @@ pub fn diagnose_into_as(
     }
     outcome.markdown += &sections;
     outcome.mesh = mesh_comparison;
+    let t_write = std::time::Instant::now();
     // The folder is filled as a temporary sibling and swapped in whole, with a manifest that
     // marks it as rfmlab's.
     crate::output::replace_dir_as(&target, replace, |tmp| {
@@ -263,6 +289,11 @@ pub fn diagnose_into_as(
         let mut dir = ResultsDir::create(tmp_parent, &tmp_name).map_err(RunError::Output)?;
         super::write_loop(&mut dir, &outcome, &study.name, figures)?;
         let mut manifest = Manifest::new(&study.file, Some(study.seed));
+        // The parts first, indented, then the whole (as `rfmlab run` lists a step's parts).
+        for (step, seconds) in &steps {
+            manifest.add_timing(format!("  {step}"), *seconds);
+        }
+        manifest.add_timing("  write results", t_write.elapsed().as_secs_f64());
         manifest.add_timing("closed loop", t0.elapsed().as_secs_f64());
         dir.write_manifest(&mut manifest)
             .map_err(RunError::Output)?;
@@ -326,57 +357,87 @@ fn without_springs(study: &Study, defaults: bool) -> Study {
 }
 
 /// Set up the study's model, data and engines (with every measured point's x, y and z
-/// directions when `all_directions`) and run the loop.
+/// directions when `all_directions`) and run the loop. With the setup of an `earlier` pass on
+/// the same structure and data (the measured directions' pass), its measurement grids are
+/// kept and its engine sweeps what lies in the measured directions
+/// ([`super::directions::ThreeDirections`]). The outcome's timings start with the setup's
+/// (`engine`); the setup is returned beside it (a later pass may build on it).
 fn loop_once(
     study: &Study,
     model: Option<&str>,
     params: &ClosedLoopParams,
     all_directions: bool,
     starting_fits: &[StartingFit],
-) -> Result<super::summary::LoopOutcome, RunError> {
+    earlier: Option<&Setup>,
+) -> Result<(super::summary::LoopOutcome, Setup), RunError> {
     let mut with_loop = study.clone();
     if all_directions {
         with_loop.structure.points =
             crate::study::build::points_in_all_directions(&with_loop.structure.points);
     }
     let study = &with_loop;
+    let t_engine = std::time::Instant::now();
     let n_points = study.structure.points.len();
     params.progress.say(&format!(
         "building the model and its certified reduced basis ({n_points} point directions; cached after the first run)"
     ));
-    let crate::stage::setup::Setup {
-        laws,
-        built,
-        levels,
-        engines,
-        warnings,
-    } = crate::stage::setup::setup(
+    // An earlier pass's measurement grids: the same structure and data (choosing them again
+    // on the twelve-input basis cost 3 s).
+    let grids: Vec<LevelGrid> = earlier.map_or_else(Vec::new, |e| {
+        e.levels
+            .iter()
+            .filter_map(|l| l.measurement.clone().map(|m| (l.name.clone(), m)))
+            .collect()
+    });
+    let setup = crate::stage::setup::setup_with_grids(
         study,
         // The loop's candidate masses act at every measured point.
         Some(crate::stage::engine::LikelihoodInputs::EveryMeasuredPoint),
         // The certified ROM is cached beside the results, as `rfmlab run` caches it.
         Some(&crate::stage::rom_cache_dir(&study.output_dir)),
+        &grids,
     )?;
     if starting_fits.is_empty() {
-        for w in &warnings {
+        for w in &setup.warnings {
             params.progress.say(&format!("warning: {w}"));
         }
     }
-    let engine = engines
+    let engine = setup
+        .engines
         .likelihood
         .as_deref()
-        .unwrap_or(engines.engine.as_ref());
-    params.progress.say(&engines.note);
+        .unwrap_or(setup.engines.engine.as_ref());
+    params.progress.say(&setup.engines.note);
+    // The measured directions on the earlier pass's engine.
+    let on_earlier = earlier.and_then(|e| {
+        super::directions::ThreeDirections::new(
+            engine,
+            &setup.built.model.points,
+            e.engines
+                .likelihood
+                .as_deref()
+                .unwrap_or(e.engines.engine.as_ref()),
+            &e.built.model.points,
+        )
+    });
+    let engine: &dyn crate::frf::FrfEngine = match &on_earlier {
+        Some(t) => t,
+        None => engine,
+    };
     let p = DiagnoseParams::of(study, model)?;
     let inputs = LoopInputs {
-        built: &built,
-        levels: &levels,
-        laws: &laws,
+        built: &setup.built,
+        levels: &setup.levels,
+        laws: &setup.laws,
         engine,
         posterior: &StudyPosterior(study),
         starting_fits,
     };
-    super::loop_stage(&p, params, &inputs)
+    let engine_seconds = t_engine.elapsed().as_secs_f64();
+    let mut outcome = super::loop_stage(&p, params, &inputs)?;
+    outcome.timings.insert(0, ("engine".into(), engine_seconds));
+    drop(on_earlier);
+    Ok((outcome, setup))
 }
 
 /// The starting fit of every level of `outcome` (see [`LoopInputs::starting_fits`]).

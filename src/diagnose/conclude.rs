@@ -9,7 +9,8 @@ use crate::stage::{LevelData, RunError};
 /// The null level of the level's measurement chain ([`crate::closed_loop::null`]: replicate
 /// Welch experiments of the fitted model through the declared estimator, else the noise
 /// model's own errors), then the drop-one check and the verdict
-/// ([`crate::closed_loop::conclude`]).
+/// ([`crate::closed_loop::conclude`]). Their wall times join the result's `timings`
+/// (`null level`, `verdict`).
 pub(crate) fn verdict_of(
     chain_params: &NullChainParams,
     level: &LevelData,
@@ -79,6 +80,7 @@ pub(crate) fn verdict_of(
     };
     let null = calibrate(post, &res.after.values, &chain, &level.response_ids, &np)
         .map_err(|e| fail(e.to_string()))?;
+    let t_verdict = std::time::Instant::now();
     let vp = crate::closed_loop::verdict::VerdictParams {
         threshold_nats: params.threshold_nats,
         p_threshold: params.p_threshold,
@@ -94,5 +96,9 @@ pub(crate) fn verdict_of(
         &vp,
     )
     .map_err(|e| fail(e.to_string()))?;
+    let mut res = res;
+    res.timings.push(("null level".into(), null.seconds));
+    res.timings
+        .push(("verdict".into(), t_verdict.elapsed().as_secs_f64()));
     Ok((res, v, null))
 }

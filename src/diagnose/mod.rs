@@ -19,6 +19,7 @@
 //! | `params.rs` | the stage's typed settings ([`DiagnoseParams`]) and what it runs on ([`LoopInputs`]) |
 //! | `of_study.rs` | the settings made from a validated study: the one file that reads a [`crate::study::Study`] |
 //! | `command.rs` | `rfmlab diagnose`: a study's loop into a results folder of its own |
+//! | `directions.rs` | the engine of a pass with every point's three directions, on the first pass's for the measured ones |
 //! | `stage.rs` | the loop at every level: its start, the term ROM, the loop, the verdict |
 //! | `candidates.rs` | the candidate effects, from the joint's model and `[closed_loop] candidates` |
 //! | `terms.rs` | the term ROM of the effects with matrices of their own |
@@ -35,6 +36,7 @@
 mod candidates;
 mod command;
 mod conclude;
+mod directions;
 mod level_tables;
 mod markdown;
 pub mod mesh;

@@ -68,6 +68,10 @@ pub fn loop_stage(
             t_terms.elapsed().as_secs_f64()
         ));
     }
+    let mut timings = Vec::new();
+    if term_rom.is_some() {
+        timings.push(("term ROM".to_string(), t_terms.elapsed().as_secs_f64()));
+    }
     let term_range = term_rom
         .as_ref()
         .map(|_| term_modulus_range(&p.terms, band_of(levels)));
@@ -108,6 +112,7 @@ pub fn loop_stage(
             .say(&format!("{}: {} candidates", level.name, candidates.len()));
         // With the channels' correlation, its estimate's MAP is the loop's start; from an
         // earlier pass's fit, that MAP searches from the fit alone.
+        let t_correlation = std::time::Instant::now();
         let x0 = match p.channel_correlation {
             Some((kind, window)) => {
                 let map = crate::inference::map::MapParams {
@@ -122,6 +127,12 @@ pub fn loop_stage(
             }
             None => x0,
         };
+        if p.channel_correlation.is_some() {
+            timings.push((
+                format!("{}: channel correlation", level.name),
+                t_correlation.elapsed().as_secs_f64(),
+            ));
+        }
         // A start that is a fit already is searched from alone.
         let warm;
         let params = if fit.is_some() || p.channel_correlation.is_some() {
@@ -139,6 +150,11 @@ pub fn loop_stage(
                 message: e.to_string(),
             })?;
         let (res, verdict, null) = verdict_of(&p.null, level, &mut post, res, params)?;
+        timings.extend(
+            res.timings
+                .iter()
+                .map(|(step, s)| (format!("{}: {step}", level.name), *s)),
+        );
         params.progress.say(&format!(
             "{}: {} (null level {:.3}, threshold {:.3}, {:.1} s)",
             level.name, verdict.status, null.mean, null.threshold, null.seconds
@@ -208,6 +224,7 @@ pub fn loop_stage(
         },
         levels: results,
         markdown: String::new(),
+        timings,
     };
     outcome.remake_markdown();
     Ok(outcome)

@@ -76,6 +76,10 @@ pub struct LoopOutcome {
     pub term_names: Vec<String>,
     /// The discretisation candidate's comparison of two meshes, when it was tried.
     pub mesh: Option<super::mesh::MeshComparison>,
+    /// Wall time (s) of the stage's steps in order: the term ROM, then per level the loop's
+    /// steps ([`crate::closed_loop::ClosedLoopResult::timings`], named `L1: round 1: refits`);
+    /// `rfmlab diagnose` adds each pass's engine and names the pass. The manifest lists them.
+    pub timings: Vec<(String, f64)>,
 }
 
 impl LoopOutcome {

@@ -81,10 +81,36 @@ pub(crate) fn banded_toeplitz_cholesky(rho: &[f64], n: usize) -> Vec<Vec<f64>> {
     l
 }
 
+/// The expected block spectral matrix (signal part, [`BandModel::expected`]) and the
+/// window-kernel average of the plain FRF at every line of `layout`, in parallel.
+pub(crate) fn line_expectations(
+    band: &BandModel,
+    chain: &ChainParams,
+    layout: &Layout,
+) -> Vec<(Vec<Vec<C64>>, Vec<C64>)> {
+    let df = 1.0 / chain.block_s;
+    layout
+        .line_bins
+        .par_iter()
+        .map(|&k| {
+            band.expected(
+                k as f64 * df,
+                chain.window,
+                layout.n_block,
+                chain.block_s,
+                chain.kernel.half_width_hz,
+            )
+        })
+        .collect()
+}
+
 /// Simulate the chain's block spectra at every line; returns the Welch sums per channel.
 /// `noise_power` = (force, per response channel) block noise power `sigma^2 sum w^2`.
+/// `expected`: every line's [`line_expectations`] (they do not depend on the noise or the
+/// seed, so replicates of a level share them).
 pub(crate) fn simulate(
     band: &BandModel,
+    expected: &[(Vec<Vec<C64>>, Vec<C64>)],
     chain: &ChainParams,
     layout: &Layout,
     noise_power: (f64, &[f64]),
@@ -93,19 +119,12 @@ pub(crate) fn simulate(
     let rho = chain.window.overlap_correlation(layout.n_block, layout.hop);
     let lr = banded_toeplitz_cholesky(&rho, chain.n_averages);
     let q = rho.len() - 1;
-    let df = 1.0 / chain.block_s;
     let per_line: Vec<(Vec<f64>, Vec<C64>, Vec<f64>)> = layout
         .line_bins
         .par_iter()
         .enumerate()
-        .map(|(li, &k)| {
-            let (mut cov, _) = band.expected(
-                k as f64 * df,
-                chain.window,
-                layout.n_block,
-                chain.block_s,
-                chain.kernel.half_width_hz,
-            );
+        .map(|(li, _)| {
+            let mut cov = expected[li].0.clone();
             cov[0][0] += noise_power.0;
             for i in 0..m {
                 cov[i + 1][i + 1] += noise_power.1[i];

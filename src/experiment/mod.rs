@@ -343,6 +343,87 @@ pub fn expected_coherence_at(
     Ok(all)
 }
 
+/// Replicates of one level in the frequency-domain mode that differ only in their seed and
+/// their sensors' noise: each draw's channels are [`simulate_level`]'s for that chain, bit for
+/// bit, but the plant is evaluated and every line's expected block spectra are computed once,
+/// and a draw only draws its blocks (the closed loop's null level draws twenty replicates of a
+/// fitted model, and the spectra were most of each).
+pub struct Replicates {
+    /// The chain the replicates share (its seed and noise are each draw's).
+    chain: ChainParams,
+    layout: spec::Layout,
+    band: BandModel,
+    expected: Vec<(Vec<Vec<C64>>, Vec<C64>)>,
+}
+
+impl Replicates {
+    /// The replicates of `chain` (frequency-domain mode) on `plant`.
+    pub fn new(plant: &dyn Plant, chain: &ChainParams) -> Result<Replicates, ExperimentError> {
+        if chain.mode != Mode::FrequencyDomain {
+            return Err(ExperimentError::InvalidParams {
+                field: "mode".into(),
+                message:
+                    "replicates share their expected spectra in the frequency-domain mode only"
+                        .into(),
+            });
+        }
+        let layout = chain.layout(plant.n_channels())?;
+        let band = band_model_fine(plant, chain)?;
+        let expected = freqdomain::line_expectations(&band, chain, &layout);
+        Ok(Replicates {
+            chain: chain.clone(),
+            layout,
+            band,
+            expected,
+        })
+    }
+
+    /// The channels of one replicate: [`simulate_level`]`(plant, chain).channels` for `chain`,
+    /// which must be the replicates' chain but for its seed and noise.
+    pub fn draw(&self, chain: &ChainParams) -> Result<Vec<SimulatedChannel>, ExperimentError> {
+        let same = ChainParams {
+            seed: self.chain.seed,
+            force_noise: self.chain.force_noise,
+            response_noise: self.chain.response_noise.clone(),
+            ..chain.clone()
+        };
+        if same != self.chain {
+            return Err(ExperimentError::InvalidParams {
+                field: "seed".into(),
+                message:
+                    "a replicate's chain differs from the replicates' in more than its seed and noise"
+                        .into(),
+            });
+        }
+        let m = self.band.resp.len();
+        let p_w = chain.window.power_sum(self.layout.n_block);
+        let force_noise = noise_rms(chain.force_noise, chain.force_rms_n);
+        let np: Vec<f64> = (0..m)
+            .map(|i| {
+                let s = noise_rms(
+                    chain.response_noise_of(i),
+                    self.band.response_mean_square(i).sqrt(),
+                );
+                s * s * p_w
+            })
+            .collect();
+        let sums = freqdomain::simulate(
+            &self.band,
+            &self.expected,
+            chain,
+            &self.layout,
+            (force_noise.powi(2) * p_w, &np),
+        );
+        Ok(sums
+            .iter()
+            .map(|s| {
+                let (values, coherence) = s.finish();
+                SimulatedChannel { values, coherence }
+            })
+            .collect())
+    }
+}
+
 /// Simulate one excitation level of the measurement chain on `plant`.
 ///
 /// Returns H1 and coherence per channel on `chain.lines_hz` plus the truth record.
@@ -386,8 +467,10 @@ pub fn simulate_level(
             random_error: Vec::new(),
         })
         .collect();
-    for (li, &k) in layout.line_bins.iter().enumerate() {
-        let (cov, kernel) = expected_at_bin(&band, chain, &layout, k);
+    // Every line's expected block spectra: the truth's, and the frequency-domain mode's
+    // covariances.
+    let expected = freqdomain::line_expectations(&band, chain, &layout);
+    for (li, (cov, kernel)) in expected.iter().enumerate() {
         let g_ff = cov[0][0].re + force_noise.powi(2) * p_w;
         for (i, c) in channels.iter_mut().enumerate() {
             let g_aa = cov[i + 1][i + 1].re + resp_noise[i].powi(2) * p_w;
@@ -430,7 +513,13 @@ pub fn simulate_level(
         }
         Mode::FrequencyDomain => {
             let np: Vec<f64> = resp_noise.iter().map(|s| s * s * p_w).collect();
-            freqdomain::simulate(&band, chain, &layout, (force_noise.powi(2) * p_w, &np))
+            freqdomain::simulate(
+                &band,
+                &expected,
+                chain,
+                &layout,
+                (force_noise.powi(2) * p_w, &np),
+            )
         }
     };
     let channels = sums

@@ -608,8 +608,14 @@ impl Effects {
         derivs: bool,
         values: &[f64],
     ) -> Result<StructuralColumns, super::ForwardError> {
-        // Only the columns the effects read: the excitation's and the loaded points'.
-        let fewer = crate::frf::narrowed(engine, &self.inputs_needed(input));
+        // Only the columns the effects read, the excitation's and the loaded points', at the
+        // rows they read: the outputs and those points. An effect with a term of its own
+        // sweeps the terms' engine whole.
+        let needed = self.inputs_needed(input);
+        let rows: Vec<usize> = outputs.iter().chain(&needed).copied().collect();
+        let fewer = (!self.has_term_matrices())
+            .then(|| crate::frf::narrowed(engine, &needed, &rows))
+            .flatten();
         let engine: &dyn FrfEngine = fewer.as_deref().unwrap_or(engine);
         let mut out =
             self.structural_values(engine, input, outputs, omega, modulus, derivs, values)?;

@@ -467,8 +467,9 @@ impl<'a> Observation<'a> {
         modulus: &[C64],
         derivs: bool,
     ) -> Result<Columns, ForwardError> {
-        // The excitation's column alone.
-        let fewer = crate::frf::narrowed(self.engine, &[self.input]);
+        // The excitation's column alone, read at the outputs and the drive point.
+        let rows: Vec<usize> = self.outputs.iter().copied().chain([self.input]).collect();
+        let fewer = crate::frf::narrowed(self.engine, &[self.input], &rows);
         let engine: &dyn FrfEngine = fewer.as_deref().unwrap_or(self.engine);
         let sw = engine.sweep(omega, modulus, derivs)?;
         let jpos = engine

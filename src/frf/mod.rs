@@ -141,11 +141,19 @@ pub trait FrfEngine: Send + Sync {
     }
 
     /// The same engine computing only the input columns `inputs` (a subset of
-    /// [`FrfEngine::inputs`]), with the same values bit for bit, when that costs less than the
-    /// whole sweep (the ROM's prepared pencils: the cost is proportional to the columns); `None`
-    /// when this engine cannot, and callers use it whole. A likelihood needs the excitation's
-    /// column, plus the columns of the points that carry masses.
-    fn with_fewer_inputs(&self, _inputs: &[usize]) -> Option<Box<dyn FrfEngine + '_>> {
+    /// [`FrfEngine::inputs`]) and, of them, at least the output rows `outputs`, with the same
+    /// values bit for bit, when that costs less than the whole sweep (the ROM's prepared
+    /// pencils: the cost is proportional to the entries computed); `None` when this engine
+    /// cannot, and callers use it whole. Rows outside `outputs` may hold NaN, and a sweep with
+    /// derivatives may leave [`Sweep::sh`] empty. A likelihood needs H and dH/dE' in the
+    /// excitation's column, plus the columns of the points that carry masses, read at the
+    /// measured outputs and those points. The narrowed engine sweeps the plain structure only
+    /// (no [`FrfEngine::sweep_terms`]).
+    fn with_fewer_points(
+        &self,
+        _inputs: &[usize],
+        _outputs: &[usize],
+    ) -> Option<Box<dyn FrfEngine + '_>> {
         None
     }
 
@@ -173,11 +181,14 @@ pub trait FrfEngine: Send + Sync {
     }
 }
 
-/// `engine` restricted to the inputs of `needed` ([`FrfEngine::with_fewer_inputs`]) when it has
-/// other inputs too and can sweep fewer; `None` to use it whole.
+/// `engine` restricted to the inputs of `needed` and the output rows `rows`
+/// ([`FrfEngine::with_fewer_points`]) when it has other inputs or outputs too and can sweep
+/// fewer; `None` to use it whole. The rows outside `rows` of its sweeps may hold NaN, and its
+/// sweeps with derivatives may leave `sh` empty.
 pub fn narrowed<'a>(
     engine: &'a dyn FrfEngine,
     needed: &[usize],
+    rows: &[usize],
 ) -> Option<Box<dyn FrfEngine + 'a>> {
     let inputs: Vec<usize> = engine
         .inputs()
@@ -185,10 +196,14 @@ pub fn narrowed<'a>(
         .copied()
         .filter(|j| needed.contains(j))
         .collect();
-    if inputs.is_empty() || inputs.len() == engine.inputs().len() {
+    let outputs: Vec<usize> = (0..engine.n_out()).filter(|i| rows.contains(i)).collect();
+    if inputs.is_empty()
+        || outputs.is_empty()
+        || (inputs.len() == engine.inputs().len() && outputs.len() == engine.n_out())
+    {
         return None;
     }
-    engine.with_fewer_inputs(&inputs)
+    engine.with_fewer_points(&inputs, &outputs)
 }
 
 /// Coefficient of an extra structural term G_k (index into [`FrfEngine::term_names`]):

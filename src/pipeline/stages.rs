@@ -340,6 +340,9 @@ pub(super) fn closed_loop(
     };
     let outcome = crate::diagnose::loop_stage(&stage, &params, &inputs)?;
     progress(Event::Finish);
+    for (step, seconds) in &outcome.timings {
+        ex.detail(format!("closed loop {step}"), *seconds);
+    }
     ex.lap("closed loop")?;
     Ok(Some(outcome))
 }

@@ -55,6 +55,23 @@ impl DenseLu {
         ok.then_some(DenseLu { lu: a, fwd, bwd })
     }
 
+    /// Solve A X = B in place for the columns of `b` (n x k), all at once.
+    pub fn solve_columns(&self, b: &mut Mat<C64>) {
+        let n = self.lu.nrows();
+        let k = b.ncols();
+        let mut mem = MemBuffer::new(solve::solve_in_place_scratch::<usize, C64>(n, k, Par::Seq));
+        let perm = faer::perm::PermRef::new_checked(&self.fwd, &self.bwd, n);
+        solve::solve_in_place_with_conj(
+            self.lu.as_ref(),
+            self.lu.as_ref(),
+            perm,
+            Conj::No,
+            b.as_mut(),
+            Par::Seq,
+            MemStack::new(&mut mem),
+        );
+    }
+
     /// Solve A x = b in place.
     pub fn solve(&self, b: &mut [C64]) {
         let n = self.lu.nrows();

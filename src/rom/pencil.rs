@@ -72,10 +72,11 @@ struct Line {
     fallback: bool,
     cond: f64,
     nu: Vec<C64>,
-    /// n_near x blk residues for h and sh.
+    /// n_near x blk residues for h and sh while the line is prepared (emptied once packed).
     a: Vec<C64>,
     s: Vec<C64>,
-    /// (P+1) x blk moments for h and sh.
+    /// (P+1) x blk moments for h and sh (p * blk + q while the line is prepared; entry-major,
+    /// q * (P+1) + p, once packed: an entry's series is contiguous).
     mh: Vec<C64>,
     ms: Vec<C64>,
     /// The explicit terms packed for the lane kernel: n_pad = n_near rounded up to LANES,
@@ -117,14 +118,41 @@ impl Line {
         };
         (self.a_re, self.a_im) = pk(&self.a);
         (self.s_re, self.s_im) = pk(&self.s);
+        // Entry-major moments: a sweep of a few entries reads their series only.
+        let count = self.mh.len() / blk.max(1);
+        let by_entry = |src: &[C64]| {
+            let mut out = vec![Z0; src.len()];
+            for p in 0..count {
+                for q in 0..blk {
+                    out[q * count + p] = src[p * blk + q];
+                }
+            }
+            out
+        };
+        self.mh = by_entry(&self.mh);
+        self.ms = by_entry(&self.ms);
+        // The sweep reads the packed copies only: a line of a 12-input basis holds about
+        // 50 terms of 144 residues each, and the unpacked copies doubled a fine grid's
+        // memory (2.4 GB for 4000 lines).
+        self.a = Vec::new();
+        self.s = Vec::new();
     }
 }
 
 /// Sum of the explicit terms for one line, lane-parallel over terms (fixed summation order:
 /// lanes accumulate terms k = lane mod LANES, then lanes are added 0..LANES), so the result
-/// does not depend on the instruction set used. acc: 6 rows of LANES per entry of `qs` (the block indices computed) (h, dh, sh; re, im).
+/// does not depend on the instruction set used. acc: 6 rows of LANES per entry of `qs` (the
+/// block indices computed) (h, dh, sh; re, im); dh with `with_d`, sh with `with_s` (each
+/// accumulates apart, so leaving one out changes no other).
 #[inline(always)]
-fn near_kernel(line: &Line, qs: &[usize], d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
+fn near_kernel(
+    line: &Line,
+    qs: &[usize],
+    d: C64,
+    with_d: bool,
+    with_s: bool,
+    acc: &mut [[f64; LANES]],
+) {
     // Fixed-size arrays (no slices, no aliasing between accumulators) so that every `t` loop
     // compiles to whole-register vector instructions; the arithmetic and its order are the
     // same per lane as a scalar loop would do.
@@ -162,17 +190,21 @@ fn near_kernel(line: &Line, qs: &[usize], d: C64, with_d: bool, acc: &mut [[f64;
             acc[6 * q] = hr;
             acc[6 * q + 1] = hi;
             if with_d {
-                let (sr, si) = (lanes(&line.s_re, o), lanes(&line.s_im, o));
                 let (mut dr, mut di) = (acc[6 * q + 2], acc[6 * q + 3]);
-                let (mut xr, mut xi) = (acc[6 * q + 4], acc[6 * q + 5]);
                 for t in 0..LANES {
                     dr[t] -= ar[t] * vr[t] - ai[t] * vi[t];
                     di[t] -= ar[t] * vi[t] + ai[t] * vr[t];
-                    xr[t] += sr[t] * wr[t] - si[t] * wi[t];
-                    xi[t] += sr[t] * wi[t] + si[t] * wr[t];
                 }
                 acc[6 * q + 2] = dr;
                 acc[6 * q + 3] = di;
+            }
+            if with_s {
+                let (sr, si) = (lanes(&line.s_re, o), lanes(&line.s_im, o));
+                let (mut xr, mut xi) = (acc[6 * q + 4], acc[6 * q + 5]);
+                for t in 0..LANES {
+                    xr[t] += sr[t] * wr[t] - si[t] * wi[t];
+                    xi[t] += sr[t] * wi[t] + si[t] * wr[t];
+                }
                 acc[6 * q + 4] = xr;
                 acc[6 * q + 5] = xi;
             }
@@ -187,9 +219,10 @@ unsafe fn near_kernel_avx512(
     qs: &[usize],
     d: C64,
     with_d: bool,
+    with_s: bool,
     acc: &mut [[f64; LANES]],
 ) {
-    near_kernel(line, qs, d, with_d, acc)
+    near_kernel(line, qs, d, with_d, with_s, acc)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -199,14 +232,22 @@ unsafe fn near_kernel_avx2(
     qs: &[usize],
     d: C64,
     with_d: bool,
+    with_s: bool,
     acc: &mut [[f64; LANES]],
 ) {
-    near_kernel(line, qs, d, with_d, acc)
+    near_kernel(line, qs, d, with_d, with_s, acc)
 }
 
 /// Dispatch to the widest available instruction set (no FMA contraction is allowed in
 /// Rust, so every path rounds identically).
-fn near_terms(line: &Line, qs: &[usize], d: C64, with_d: bool, acc: &mut [[f64; LANES]]) {
+fn near_terms(
+    line: &Line,
+    qs: &[usize],
+    d: C64,
+    with_d: bool,
+    with_s: bool,
+    acc: &mut [[f64; LANES]],
+) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx512f")
@@ -214,16 +255,217 @@ fn near_terms(line: &Line, qs: &[usize], d: C64, with_d: bool, acc: &mut [[f64; 
             && std::arch::is_x86_feature_detected!("avx512dq")
         {
             // SAFETY: the required CPU features were detected at run time.
-            unsafe { near_kernel_avx512(line, qs, d, with_d, acc) };
+            unsafe { near_kernel_avx512(line, qs, d, with_d, with_s, acc) };
             return;
         }
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: as above.
-            unsafe { near_kernel_avx2(line, qs, d, with_d, acc) };
+            unsafe { near_kernel_avx2(line, qs, d, with_d, with_s, acc) };
             return;
         }
     }
-    near_kernel(line, qs, d, with_d, acc)
+    near_kernel(line, qs, d, with_d, with_s, acc)
+}
+
+/// `mh += b pw` and `ms += bs pw` entry by entry (the far terms' moments), with exactly the
+/// complex arithmetic of `C64` (`b * pw` then `+`), on the widest available instruction set.
+#[inline(always)]
+fn add_scaled_kernel(mh: &mut [C64], ms: &mut [C64], b: &[C64], bs: &[C64], pw: C64) {
+    for (m, x) in mh.iter_mut().zip(b) {
+        *m += x * pw;
+    }
+    for (m, x) in ms.iter_mut().zip(bs) {
+        *m += x * pw;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512dq")]
+unsafe fn add_scaled_avx512(mh: &mut [C64], ms: &mut [C64], b: &[C64], bs: &[C64], pw: C64) {
+    add_scaled_kernel(mh, ms, b, bs, pw)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn add_scaled_avx2(mh: &mut [C64], ms: &mut [C64], b: &[C64], bs: &[C64], pw: C64) {
+    add_scaled_kernel(mh, ms, b, bs, pw)
+}
+
+/// [`add_scaled_kernel`] (every path rounds identically, as [`near_terms`]).
+fn add_scaled(mh: &mut [C64], ms: &mut [C64], b: &[C64], bs: &[C64], pw: C64) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+        {
+            // SAFETY: the required CPU features were detected at run time.
+            unsafe { add_scaled_avx512(mh, ms, b, bs, pw) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: as above.
+            unsafe { add_scaled_avx2(mh, ms, b, bs, pw) };
+            return;
+        }
+    }
+    add_scaled_kernel(mh, ms, b, bs, pw)
+}
+
+/// Right-hand sides from which a line's solves run as one blocked solve rather than one column
+/// at a time: a basis with every point's three directions has about 120 directions with
+/// adhesive strain, and its single-column solves (streaming the factor once per column) were
+/// a third of preparing a line; the blocked solve rounds differently, so smaller bases keep
+/// the column-by-column results.
+const BLOCKED_SOLVE_FROM: usize = 64;
+
+/// `lu^-1 m`: blocked from [`BLOCKED_SOLVE_FROM`] columns, else one column at a time.
+fn solve_all(lu: &DenseLu, m: &Mat<C64>) -> Mat<C64> {
+    let n = m.nrows();
+    if m.ncols() >= BLOCKED_SOLVE_FROM {
+        let mut out = m.clone();
+        lu.solve_columns(&mut out);
+        return out;
+    }
+    let mut out = Mat::<C64>::zeros(n, m.ncols());
+    for j in 0..m.ncols() {
+        let mut c: Vec<C64> = (0..n).map(|i| m[(i, j)]).collect();
+        lu.solve(&mut c);
+        for (i, v) in c.into_iter().enumerate() {
+            out[(i, j)] = v;
+        }
+    }
+    out
+}
+
+/// Entries of the block evaluated together by the far-pole series ([`series_kernel`]).
+const SERIES_GROUP: usize = 4;
+
+/// The far-pole series `sum_p m_p t^p` by Horner's rule for the block entries `qs` (with
+/// `t = -d`), with `with_d` its derivative `sum_p p m_p t^(p-1)` and with `with_s` the `S H`
+/// series: into `ser`, 6 values per entry of `qs` (v, dv, vs; re, im). The entries are evaluated
+/// [`SERIES_GROUP`] at a time, each lane with exactly the complex arithmetic, in the order, of
+/// `v = v * t + m` on one entry (Horner's chain is sequential in the order, so the lanes keep
+/// the independent chains of several entries in flight instead of one).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn series_kernel(
+    line: &Line,
+    qs: &[usize],
+    count: usize,
+    t: C64,
+    (with_d, with_s): (bool, bool),
+    ser: &mut [f64],
+) {
+    const G: usize = SERIES_GROUP;
+    for (g, group) in qs.chunks(G).enumerate() {
+        let mut vr = [0.0; G];
+        let mut vi = [0.0; G];
+        let mut dr = [0.0; G];
+        let mut di = [0.0; G];
+        let mut sr = [0.0; G];
+        let mut si = [0.0; G];
+        for pp in (0..count).rev() {
+            let mut mr = [0.0; G];
+            let mut mi = [0.0; G];
+            let mut nr = [0.0; G];
+            let mut ni = [0.0; G];
+            for (u, &q) in group.iter().enumerate() {
+                let m = line.mh[q * count + pp];
+                mr[u] = m.re;
+                mi[u] = m.im;
+                if with_s {
+                    let m = line.ms[q * count + pp];
+                    nr[u] = m.re;
+                    ni[u] = m.im;
+                }
+            }
+            if with_d {
+                for u in 0..G {
+                    // dv = dv * t + v (the old v)
+                    let (a, b) = (dr[u] * t.re - di[u] * t.im, dr[u] * t.im + di[u] * t.re);
+                    dr[u] = a + vr[u];
+                    di[u] = b + vi[u];
+                }
+            }
+            if with_s {
+                for u in 0..G {
+                    // vs = vs * t + ms
+                    let (a, b) = (sr[u] * t.re - si[u] * t.im, sr[u] * t.im + si[u] * t.re);
+                    sr[u] = a + nr[u];
+                    si[u] = b + ni[u];
+                }
+            }
+            for u in 0..G {
+                // v = v * t + mh
+                let (a, b) = (vr[u] * t.re - vi[u] * t.im, vr[u] * t.im + vi[u] * t.re);
+                vr[u] = a + mr[u];
+                vi[u] = b + mi[u];
+            }
+        }
+        for u in 0..group.len() {
+            let o = &mut ser[6 * (g * G + u)..6 * (g * G + u + 1)];
+            o.copy_from_slice(&[vr[u], vi[u], dr[u], di[u], sr[u], si[u]]);
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512dq")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn series_kernel_avx512(
+    line: &Line,
+    qs: &[usize],
+    count: usize,
+    t: C64,
+    with: (bool, bool),
+    ser: &mut [f64],
+) {
+    series_kernel(line, qs, count, t, with, ser)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn series_kernel_avx2(
+    line: &Line,
+    qs: &[usize],
+    count: usize,
+    t: C64,
+    with: (bool, bool),
+    ser: &mut [f64],
+) {
+    series_kernel(line, qs, count, t, with, ser)
+}
+
+/// [`series_kernel`] on the widest available instruction set (every path rounds identically,
+/// as [`near_terms`]).
+#[allow(clippy::too_many_arguments)]
+fn series_terms(
+    line: &Line,
+    qs: &[usize],
+    count: usize,
+    t: C64,
+    with: (bool, bool),
+    ser: &mut [f64],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx512vl")
+            && std::arch::is_x86_feature_detected!("avx512dq")
+        {
+            // SAFETY: the required CPU features were detected at run time.
+            unsafe { series_kernel_avx512(line, qs, count, t, with, ser) };
+            return;
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: as above.
+            unsafe { series_kernel_avx2(line, qs, count, t, with, ser) };
+            return;
+        }
+    }
+    series_kernel(line, qs, count, t, with, ser)
 }
 
 /// A reduced model prepared for a fixed list of frequency lines.
@@ -326,17 +568,7 @@ impl ReducedModel {
         // (nu = 0) for S_r's null space, which an eigensolver of the n x n F^-1 S_r resolves
         // only as an ill-conditioned cluster at zero.
         let r = w.ncols();
-        let solve_cols = |m: &Mat<C64>| -> Mat<C64> {
-            let mut out = Mat::<C64>::zeros(n, m.ncols());
-            for j in 0..m.ncols() {
-                let mut c: Vec<C64> = (0..n).map(|i| m[(i, j)]).collect();
-                flu.solve(&mut c);
-                for (i, v) in c.into_iter().enumerate() {
-                    out[(i, j)] = v;
-                }
-            }
-            out
-        };
+        let solve_cols = |m: &Mat<C64>| -> Mat<C64> { solve_all(&flu, m) };
         let y = solve_cols(w);
         let t = {
             let t = w.transpose() * &y;
@@ -386,17 +618,11 @@ impl ReducedModel {
             let Some(qlu) = DenseLu::factor(r, qr) else {
                 return fallback;
             };
-            for j in 0..r {
-                let mut e = vec![Z0; r];
-                e[j] = C64::new(1.0, 0.0);
-                qlu.solve(&mut e);
-                for i in 0..r {
-                    qinv[(i, j)] = e[i];
-                }
-            }
+            qinv = solve_all(&qlu, &Mat::<C64>::identity(r, r));
+            // (the moduli by their squares: the estimate is compared with `cond_max` only)
             let norm1 = |m: &Mat<C64>| {
                 (0..r)
-                    .map(|j| (0..r).map(|i| m[(i, j)].norm()).sum::<f64>())
+                    .map(|j| (0..r).map(|i| m[(i, j)].norm_sqr().sqrt()).sum::<f64>())
                     .fold(0.0, f64::max)
             };
             cond = norm1(&q) * norm1(&qinv);
@@ -449,15 +675,29 @@ impl ReducedModel {
         };
         let (scale_h, scale_s) = (max_abs(&c_h), max_abs(&c_s));
         // order terms by |nu| descending (stable: ties by index)
+        let nu_abs: Vec<f64> = nu.iter().map(|z| z.norm()).collect();
         let mut order: Vec<usize> = (0..n).collect();
-        order.sort_by(|&i, &j| nu[j].norm().total_cmp(&nu[i].norm()).then(i.cmp(&j)));
-        // |a_k| = |b_k| / |nu_k|, largest over the block
+        order.sort_by(|&i, &j| nu_abs[j].total_cmp(&nu_abs[i]).then(i.cmp(&j)));
+        // |a_k| = |b_k| / |nu_k|, largest over the block: the entry found by its square, then
+        // its modulus (one hypot per term instead of one per entry: with twelve inputs a
+        // line's 35 000 moduli were 7 % of preparing it); by the moduli themselves where the
+        // squares underflow.
         let amax = |v: &[C64], k: usize| {
-            v[k * blk..(k + 1) * blk]
-                .iter()
-                .map(|z| z.norm())
-                .fold(0.0, f64::max)
-                / nu[k].norm()
+            let block = &v[k * blk..(k + 1) * blk];
+            let (at, sq) = block.iter().enumerate().fold((0, 0.0), |(i, m), (j, z)| {
+                let s = z.norm_sqr();
+                if s > m {
+                    (j, s)
+                } else {
+                    (i, m)
+                }
+            });
+            let largest = if sq >= f64::MIN_POSITIVE && sq.is_finite() {
+                block[at].norm()
+            } else {
+                block.iter().map(|z| z.norm()).fold(0.0, f64::max)
+            };
+            largest / nu_abs[k]
         };
         // suffix sums of residue sizes in sorted order
         let mut suf_a = vec![0.0; n + 1];
@@ -469,7 +709,7 @@ impl ReducedModel {
         let mut best = (n, 0usize, usize::MAX); // (n_near, order P+1 count, cost)
         best.2 = 3 * n;
         for n_near in 0..n {
-            let rho = nu[order[n_near]].norm() * radius;
+            let rho = nu_abs[order[n_near]] * radius;
             if rho >= p.rho_max {
                 continue;
             }
@@ -533,10 +773,13 @@ impl ReducedModel {
         for &k in &order[n_near..] {
             let mut pw = C64::new(1.0, 0.0);
             for pp in 1..count {
-                for q in 0..blk {
-                    line.mh[pp * blk + q] += b[k * blk + q] * pw;
-                    line.ms[pp * blk + q] += bs[k * blk + q] * pw;
-                }
+                add_scaled(
+                    &mut line.mh[pp * blk..(pp + 1) * blk],
+                    &mut line.ms[pp * blk..(pp + 1) * blk],
+                    &b[k * blk..(k + 1) * blk],
+                    &bs[k * blk..(k + 1) * blk],
+                    pw,
+                );
                 pw *= nu[k];
             }
         }
@@ -595,27 +838,33 @@ impl PencilSweep {
             .sum()
     }
 
-    /// Evaluate one line into (h, dh, sh) slices of length blk.
-    #[inline]
     /// Line `l` at modulus `e` for the block entries `qs` (indices into the n_out x n_in
-    /// row-major block), into `h` (and `dh`) in the order of `qs`.
+    /// row-major block), into `h` (and `dh`, `sh` when given) at the positions `slots` (one per
+    /// entry of `qs`).
+    #[inline]
+    #[allow(clippy::too_many_arguments)]
     fn eval_line(
         &self,
         l: usize,
         e: C64,
         qs: &[usize],
+        slots: &[usize],
         h: &mut [C64],
-        mut dh: Option<(&mut [C64], &mut [C64])>,
+        mut dh: Option<&mut [C64]>,
+        mut sh: Option<&mut [C64]>,
         acc: &mut Vec<[f64; LANES]>,
+        ser: &mut Vec<f64>,
     ) -> Result<(), FrfError> {
         let line = &self.lines[l];
         let blk = self.rom.n_out * self.rom.inputs.len();
         if line.fallback {
             let [hh, dd, ss] = self.rom.lu_line(self.omega[l], e, dh.is_some())?;
-            for (k, &q) in qs.iter().enumerate() {
+            for (&k, &q) in slots.iter().zip(qs) {
                 h[k] = hh[q];
-                if let Some((d, s)) = dh.as_mut() {
+                if let Some(d) = dh.as_mut() {
                     d[k] = dd[q];
+                }
+                if let Some(s) = sh.as_mut() {
                     s[k] = ss[q];
                 }
             }
@@ -624,24 +873,27 @@ impl PencilSweep {
         let d = e - self.e0;
         let t = -d;
         let count = line.mh.len() / blk.max(1);
-        let with_d = dh.is_some();
+        let (with_d, with_s) = (dh.is_some(), sh.is_some());
         acc.clear();
         acc.resize(6 * qs.len(), [0.0; LANES]);
-        near_terms(line, qs, d, with_d, acc);
+        near_terms(line, qs, d, with_d, with_s, acc);
+        ser.clear();
+        ser.resize(6 * qs.len(), 0.0);
+        series_terms(line, qs, count, t, (with_d, with_s), ser);
         let lanesum = |r: &[f64; LANES]| r.iter().fold(0.0, |a, b| a + b);
-        for (k, &q) in qs.iter().enumerate() {
-            let (mut v, mut dv, mut vs) = (Z0, Z0, Z0);
-            for pp in (0..count).rev() {
-                if with_d {
-                    dv = dv * t + v;
-                    vs = vs * t + line.ms[pp * blk + q];
-                }
-                v = v * t + line.mh[pp * blk + q];
+        for (k, &at) in slots.iter().enumerate() {
+            let sk = &ser[6 * k..6 * k + 6];
+            let (v, dv, vs) = (
+                C64::new(sk[0], sk[1]),
+                C64::new(sk[2], sk[3]),
+                C64::new(sk[4], sk[5]),
+            );
+            h[at] = C64::new(lanesum(&acc[6 * k]), lanesum(&acc[6 * k + 1])) + v;
+            if let Some(dd) = dh.as_mut() {
+                dd[at] = C64::new(lanesum(&acc[6 * k + 2]), lanesum(&acc[6 * k + 3])) - dv;
             }
-            h[k] = C64::new(lanesum(&acc[6 * k]), lanesum(&acc[6 * k + 1])) + v;
-            if let Some((dd, ss)) = dh.as_mut() {
-                dd[k] = C64::new(lanesum(&acc[6 * k + 2]), lanesum(&acc[6 * k + 3])) - dv;
-                ss[k] = C64::new(lanesum(&acc[6 * k + 4]), lanesum(&acc[6 * k + 5])) + vs;
+            if let Some(ss) = sh.as_mut() {
+                ss[at] = C64::new(lanesum(&acc[6 * k + 4]), lanesum(&acc[6 * k + 5])) + vs;
             }
         }
         Ok(())
@@ -669,6 +921,33 @@ impl PencilSweep {
         with_derivatives: bool,
         out: &mut Sweep,
     ) -> Result<(), FrfError> {
+        self.sweep_block_into(
+            modulus_pa,
+            None,
+            cols,
+            with_derivatives,
+            with_derivatives,
+            out,
+        )
+    }
+
+    /// [`PencilSweep::sweep_columns_into`] for the output rows `rows` only (every output when
+    /// `None`), and with derivatives, `S H` only when `with_sh`: `out` keeps every output, the
+    /// rows not computed hold NaN and `out.sh` is empty without `with_sh`. The cost is
+    /// proportional to the entries computed: a likelihood reads H and dH/dE' at the measured
+    /// outputs and the points that carry masses, a few of a basis's twelve outputs when every
+    /// measured point's three directions are outputs. Each value equals the full sweep's bit for
+    /// bit.
+    pub fn sweep_block_into(
+        &self,
+        modulus_pa: &[C64],
+        rows: Option<&[usize]>,
+        cols: &[usize],
+        with_derivatives: bool,
+        with_sh: bool,
+        out: &mut Sweep,
+    ) -> Result<(), FrfError> {
+        let with_sh = with_sh && with_derivatives;
         let nl = self.omega.len();
         if modulus_pa.len() != nl {
             return Err(FrfError::Length {
@@ -682,71 +961,91 @@ impl PencilSweep {
         if let Some(&c) = cols.iter().find(|&&c| c >= ni_all) {
             return Err(FrfError::BadInput(c));
         }
+        if let Some(&r) = rows.and_then(|r| r.iter().find(|&&r| r >= no)) {
+            return Err(FrfError::BadInput(r));
+        }
         let ni = cols.len();
         let blk = no * ni;
-        let qs: Vec<usize> = (0..no)
-            .flat_map(|i| cols.iter().map(move |&c| i * ni_all + c))
+        // The rows computed, in increasing order; per entry its index in the ROM's block and
+        // its slot in a line of `out`.
+        let computed: Vec<usize> = match rows {
+            Some(r) => (0..no).filter(|i| r.contains(i)).collect(),
+            None => (0..no).collect(),
+        };
+        let qs: Vec<usize> = computed
+            .iter()
+            .flat_map(|&i| cols.iter().map(move |&c| i * ni_all + c))
+            .collect();
+        let slots: Vec<usize> = computed
+            .iter()
+            .flat_map(|&i| (0..ni).map(move |cc| i * ni + cc))
             .collect();
         if out.n_lines != nl
             || out.n_out != no
             || out.n_in != ni
             || out.h.len() != nl * blk
-            || (with_derivatives && (out.dh_de.len() != nl * blk || out.sh.len() != nl * blk))
+            || (with_derivatives && out.dh_de.len() != nl * blk)
+            || (with_sh && out.sh.len() != nl * blk)
         {
             *out = Sweep::zeros(nl, no, ni, with_derivatives);
         }
         if !with_derivatives {
             out.dh_de.clear();
+        }
+        if !with_sh {
             out.sh.clear();
+        }
+        if computed.len() < no {
+            // The rows not computed read NaN, so that a caller that reads one fails loudly.
+            let nan = C64::new(f64::NAN, f64::NAN);
+            for v in [&mut out.h, &mut out.dh_de, &mut out.sh] {
+                for line in v.chunks_mut(blk.max(1)) {
+                    for i in (0..no).filter(|i| !computed.contains(i)) {
+                        line[i * ni..(i + 1) * ni].fill(nan);
+                    }
+                }
+            }
         }
         const CHUNK: usize = 64;
         let run = |c: usize,
                    h: &mut [C64],
-                   dh: Option<(&mut [C64], &mut [C64])>|
+                   mut dh: Option<&mut [C64]>,
+                   mut sh: Option<&mut [C64]>|
          -> Result<(), FrfError> {
             let l0 = c * CHUNK;
             let mut acc: Vec<[f64; LANES]> = Vec::with_capacity(6 * blk);
-            match dh {
-                None => {
-                    for (i, hl) in h.chunks_mut(blk).enumerate() {
-                        self.eval_line(l0 + i, modulus_pa[l0 + i], &qs, hl, None, &mut acc)?;
-                    }
-                }
-                Some((d, s)) => {
-                    for (i, ((hl, dl), sl)) in h
-                        .chunks_mut(blk)
-                        .zip(d.chunks_mut(blk))
-                        .zip(s.chunks_mut(blk))
-                        .enumerate()
-                    {
-                        self.eval_line(
-                            l0 + i,
-                            modulus_pa[l0 + i],
-                            &qs,
-                            hl,
-                            Some((dl, sl)),
-                            &mut acc,
-                        )?;
-                    }
-                }
+            let mut ser: Vec<f64> = Vec::with_capacity(6 * blk);
+            for (i, hl) in h.chunks_mut(blk).enumerate() {
+                let span = i * blk..(i + 1) * blk;
+                self.eval_line(
+                    l0 + i,
+                    modulus_pa[l0 + i],
+                    &qs,
+                    &slots,
+                    hl,
+                    dh.as_deref_mut().map(|d| &mut d[span.clone()]),
+                    sh.as_deref_mut().map(|s| &mut s[span]),
+                    &mut acc,
+                    &mut ser,
+                )?;
             }
             Ok(())
         };
         if blk == 0 {
             return Ok(());
         }
-        if with_derivatives {
-            out.h
-                .par_chunks_mut(CHUNK * blk)
+        let hs = out.h.par_chunks_mut(CHUNK * blk);
+        match (with_derivatives, with_sh) {
+            (true, true) => hs
                 .zip(out.dh_de.par_chunks_mut(CHUNK * blk))
                 .zip(out.sh.par_chunks_mut(CHUNK * blk))
                 .enumerate()
-                .try_for_each(|(c, ((h, d), s))| run(c, h, Some((d, s))))
-        } else {
-            out.h
-                .par_chunks_mut(CHUNK * blk)
+                .try_for_each(|(c, ((h, d), s))| run(c, h, Some(d), Some(s))),
+            (true, false) => hs
+                .zip(out.dh_de.par_chunks_mut(CHUNK * blk))
                 .enumerate()
-                .try_for_each(|(c, h)| run(c, h, None))
+                .try_for_each(|(c, (h, d))| run(c, h, Some(d), None)),
+            _ => hs.enumerate().try_for_each(|(c, h)| run(c, h, None, None)),
         }
     }
 }

@@ -704,6 +704,15 @@ impl FrfEngine for WithTerms<'_> {
     fn term_names(&self) -> Vec<String> {
         self.terms.term_names()
     }
+    /// The plain engine's narrowed sweep (without the terms): a likelihood whose effects
+    /// have no term of their own evaluates the plain structure's few columns and rows.
+    fn with_fewer_points(
+        &self,
+        inputs: &[usize],
+        outputs: &[usize],
+    ) -> Option<Box<dyn FrfEngine + '_>> {
+        self.plain.with_fewer_points(inputs, outputs)
+    }
     fn sweep_terms(
         &self,
         omega_rad_s: &[f64],

@@ -192,7 +192,10 @@ pub fn build_engine(
             };
             let mut grid_note = String::new();
             // The measurement model's grid, chosen per level by convergence at the first
-            // model's initial values (on the unprepared ROM: a one-off cost).
+            // model's initial values (on the unprepared ROM: a one-off cost), unless the
+            // caller chose it already (another pass of the closed loop on the same structure
+            // and data: the grid depends on the measured FRFs, which every basis certified for
+            // them reproduces).
             if let (Some(est), Some((law, m0))) = (estimator, laws.iter().zip(models).next()) {
                 let probe = RomEngine {
                     rom: rom.clone(),
@@ -200,6 +203,13 @@ pub fn build_engine(
                 };
                 let modulus = |w: f64| law.modulus(&m0.initial, w);
                 for level in levels.iter_mut() {
+                    if let Some((_, g)) = &level.measurement {
+                        grid_note += &format!(
+                            "; H1 measurement model of {}: {} points per line (chosen before)",
+                            level.name, g.points_per_line
+                        );
+                        continue;
+                    }
                     let spec = estimator_spec(est, &level.freq_hz);
                     let c = &level.column;
                     let obs = crate::forward::Observation::new(
@@ -245,6 +255,10 @@ pub fn build_engine(
                     let lik_rom = rom
                         .with_inputs(&lik_inputs)
                         .map_err(|e| RunError::Engine(e.to_string()))?;
+                    // With every input (the closed loop's engine), the likelihood's ROM is the
+                    // run's: its pencil on the lines is the one prepared above (preparing it
+                    // again cost 1.5 s with every point's three directions).
+                    let same_rom = lik_inputs == rom.inputs();
                     let mut lp: Vec<crate::rom::PencilSweep> = Vec::new();
                     for level in levels {
                         let mut grids = vec![level.column.omega_rad_s.clone()];
@@ -252,13 +266,18 @@ pub fn build_engine(
                             grids.push(m.fine_omega());
                         }
                         for g in grids {
-                            if !lp.iter().any(|p| p.omega_rad_s() == g.as_slice()) {
-                                lp.push(
-                                    lik_rom
-                                        .prepare(&g)
-                                        .map_err(|e| RunError::Engine(e.to_string()))?,
-                                );
+                            if lp.iter().any(|p| p.omega_rad_s() == g.as_slice()) {
+                                continue;
                             }
+                            let prepared = pencils
+                                .iter()
+                                .find(|p| same_rom && p.omega_rad_s() == g.as_slice());
+                            lp.push(match prepared {
+                                Some(p) => p.clone(),
+                                None => lik_rom
+                                    .prepare(&g)
+                                    .map_err(|e| RunError::Engine(e.to_string()))?,
+                            });
                         }
                     }
                     Some(Box::new(RomEngine {

@@ -76,9 +76,9 @@ pub struct LevelData {
     /// Number of averaged blocks of the H1 estimate, when the file says.
     pub n_averages: Option<u32>,
     /// The H1 estimator's model on these lines with its grid chosen by convergence
-    /// ([`crate::forward::Observation::converged_measurement`]), set with the engine; `None`
-    /// before, or without an estimator (then [`crate::stage::measurement::measurement_model`]
-    /// uses the default grid).
+    /// ([`crate::forward::Observation::converged_measurement`]), set with the engine (or
+    /// before it, by [`crate::stage::setup::setup_with_grids`]); `None` before, or without an
+    /// estimator (then [`crate::stage::measurement::measurement_model`] uses the default grid).
     pub measurement: Option<(crate::forward::MeasurementModel, crate::forward::GridChoice)>,
 }
 

@@ -37,12 +37,15 @@ impl RomEngine {
     }
 }
 
-/// A [`RomEngine`] computing a subset of its input columns ([`FrfEngine::with_fewer_inputs`]).
+/// A [`RomEngine`] computing a subset of its input columns, read at a subset of its outputs,
+/// without `S H` on its prepared grids ([`FrfEngine::with_fewer_points`]).
 struct RomColumns<'a> {
     whole: &'a RomEngine,
     inputs: Vec<usize>,
     /// positions of `inputs` in the whole engine's inputs
     cols: Vec<usize>,
+    /// the output rows computed on a prepared grid (None: every output)
+    rows: Option<Vec<usize>>,
 }
 
 impl FrfEngine for RomColumns<'_> {
@@ -60,7 +63,15 @@ impl FrfEngine for RomColumns<'_> {
         out: &mut Sweep,
     ) -> Result<(), FrfError> {
         if let Some(p) = self.whole.pencil_for(omega_rad_s) {
-            return p.sweep_columns_into(modulus_pa, &self.cols, with_derivatives, out);
+            // The likelihood reads H and dH/dE' only: no S H.
+            return p.sweep_block_into(
+                modulus_pa,
+                self.rows.as_deref(),
+                &self.cols,
+                with_derivatives,
+                false,
+                out,
+            );
         }
         // An unprepared grid: the reduced model's LU sweep of these columns.
         self.whole
@@ -91,15 +102,25 @@ impl FrfEngine for RomEngine {
     fn n_out(&self) -> usize {
         self.rom.n_out()
     }
-    fn with_fewer_inputs(&self, inputs: &[usize]) -> Option<Box<dyn FrfEngine + '_>> {
+    fn with_fewer_points(
+        &self,
+        inputs: &[usize],
+        outputs: &[usize],
+    ) -> Option<Box<dyn FrfEngine + '_>> {
         let cols = inputs
             .iter()
             .map(|j| self.rom.inputs().iter().position(|k| k == j))
             .collect::<Option<Vec<usize>>>()?;
+        let n_out = self.rom.n_out();
+        if outputs.iter().any(|&i| i >= n_out) {
+            return None;
+        }
+        let rows = (outputs.len() < n_out).then(|| outputs.to_vec());
         Some(Box::new(RomColumns {
             whole: self,
             inputs: inputs.to_vec(),
             cols,
+            rows,
         }))
     }
     fn inputs(&self) -> &[usize] {

@@ -28,6 +28,25 @@ pub fn setup(
     likelihood: Option<LikelihoodInputs>,
     rom_cache: Option<&Path>,
 ) -> Result<Setup, RunError> {
+    setup_with_grids(study, likelihood, rom_cache, &[])
+}
+
+/// A level's H1 measurement model with the grid chosen for it
+/// ([`LevelData::measurement`](super::LevelData::measurement)), by level name.
+pub type LevelGrid = (
+    String,
+    (crate::forward::MeasurementModel, crate::forward::GridChoice),
+);
+
+/// [`setup`] with the measurement models' grids of the levels named in `grids` already
+/// chosen (by an earlier setup of the same structure and data, e.g. the closed loop's first
+/// pass): the engine does not choose them again.
+pub fn setup_with_grids(
+    study: &crate::study::Study,
+    likelihood: Option<LikelihoodInputs>,
+    rom_cache: Option<&Path>,
+    grids: &[LevelGrid],
+) -> Result<Setup, RunError> {
     let file = study.file.as_path();
     let laws = crate::stage::model_laws(&study.models, file)?;
     let built = build(&study.structure, file)?;
@@ -46,6 +65,11 @@ pub fn setup(
         },
         &built,
     )?;
+    for level in levels.iter_mut() {
+        if let Some((_, chosen)) = grids.iter().find(|(name, _)| *name == level.name) {
+            level.measurement = Some(chosen.clone());
+        }
+    }
     let models = ModelsAndData {
         models: &study.models,
         laws: &laws,
