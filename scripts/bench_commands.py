@@ -38,6 +38,11 @@ COMMANDS = {
     "bayes": (["run", "studies/bayes.toml", "--no-figures"], True),
     "diagnose_mass": (["diagnose", "studies/closed_loop_mass.toml", "--no-figures"], True),
     "diagnose_springs": (["diagnose", "studies/closed_loop_virtual_springs.toml", "--no-figures"], True),
+    # a fresh machine: the ROM and the springs' term ROM built and certified in the run
+    "diagnose_springs_uncached": (
+        ["diagnose", "studies/closed_loop_virtual_springs.toml", "--no-figures", "--no-cache"],
+        False,
+    ),
     "check_default": (["check", "studies/default.toml"], True),
 }
 
