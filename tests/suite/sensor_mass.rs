@@ -214,7 +214,7 @@ fn simulated_three_direction_sensor_on_base_springs_adds_its_mass_in_x_y_and_z()
         .join("studies/data/closed_loop/cases/td_springs_mass3_pt4.toml");
     let text = std::fs::read_to_string(&path).unwrap();
     let ex = rfmlab::study::experiment::parse_experiment(&text, &path).unwrap();
-    let springs = ex.base_springs.clone().expect("the case has base springs");
+    let springs = ex.base_springs.expect("the case has base springs");
     assert!(ex.sensors[0].all_directions);
     let spec = joint_spec(&ex.structure).unwrap();
     let on_springs =
