@@ -232,7 +232,10 @@ fn design_section_errors_name_the_key() {
 /// design recommends: the study's own design's worst predicted sd drops (2.16 % to 1.29 % on
 /// this grid: the masses move the modes) and the best four sensors are not the same places as
 /// without the mass.
+/// The suite checks the sensor mass's effect on the design on the paper's joint
+/// (`a_sensor_mass_changes_the_predicted_sds`).
 #[test]
+#[ignore = "slow: 86 s in the test profile; the suite checks a sensor mass's effect on the design on the paper's joint; run with --ignored"]
 fn a_sensor_mass_moves_the_recommended_sensors_on_a_light_lap_joint() {
     let dir = tempfile::tempdir().unwrap();
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies");
