@@ -325,7 +325,7 @@ fn time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds() {
 /// The mesh error with every default candidate in the first pass (the study's `"all"`; about 4
 /// minutes: the first pass accepts a delay, a beam factor and a gain on the way).
 #[test]
-#[ignore = "slow: the mesh-error case with every default candidate, about 4 minutes; run with --ignored"]
+#[ignore = "slow: the mesh-error case with every default candidate, 135 s in release; run with --ignored"]
 fn time_domain_mesh_error_is_explained_with_every_default_candidate() {
     let dir = tempfile::tempdir().unwrap();
     mesh_error_is_explained_by_the_refined_mesh(dir.path(), None);
