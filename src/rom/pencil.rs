@@ -238,6 +238,30 @@ unsafe fn near_kernel_avx2(
     near_kernel(line, qs, d, with_d, with_s, acc)
 }
 
+/// The widest instruction set of the kernels' compiled variants that this CPU has (one
+/// detection for every dispatcher below; the standard library caches it).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+enum Isa {
+    Avx512,
+    Avx2,
+    Baseline,
+}
+
+#[cfg(target_arch = "x86_64")]
+fn isa() -> Isa {
+    if std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+        && std::arch::is_x86_feature_detected!("avx512dq")
+    {
+        Isa::Avx512
+    } else if std::arch::is_x86_feature_detected!("avx2") {
+        Isa::Avx2
+    } else {
+        Isa::Baseline
+    }
+}
+
 /// Dispatch to the widest available instruction set (no FMA contraction is allowed in
 /// Rust, so every path rounds identically).
 fn near_terms(
@@ -249,20 +273,12 @@ fn near_terms(
     acc: &mut [[f64; LANES]],
 ) {
     #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512vl")
-            && std::arch::is_x86_feature_detected!("avx512dq")
-        {
-            // SAFETY: the required CPU features were detected at run time.
-            unsafe { near_kernel_avx512(line, qs, d, with_d, with_s, acc) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: as above.
-            unsafe { near_kernel_avx2(line, qs, d, with_d, with_s, acc) };
-            return;
-        }
+    match isa() {
+        // SAFETY: `isa` detected the required CPU features at run time.
+        Isa::Avx512 => return unsafe { near_kernel_avx512(line, qs, d, with_d, with_s, acc) },
+        // SAFETY: as above.
+        Isa::Avx2 => return unsafe { near_kernel_avx2(line, qs, d, with_d, with_s, acc) },
+        Isa::Baseline => {}
     }
     near_kernel(line, qs, d, with_d, with_s, acc)
 }
@@ -294,20 +310,12 @@ unsafe fn add_scaled_avx2(mh: &mut [C64], ms: &mut [C64], b: &[C64], bs: &[C64],
 /// [`add_scaled_kernel`] (every path rounds identically, as [`near_terms`]).
 fn add_scaled(mh: &mut [C64], ms: &mut [C64], b: &[C64], bs: &[C64], pw: C64) {
     #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512vl")
-            && std::arch::is_x86_feature_detected!("avx512dq")
-        {
-            // SAFETY: the required CPU features were detected at run time.
-            unsafe { add_scaled_avx512(mh, ms, b, bs, pw) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: as above.
-            unsafe { add_scaled_avx2(mh, ms, b, bs, pw) };
-            return;
-        }
+    match isa() {
+        // SAFETY: `isa` detected the required CPU features at run time.
+        Isa::Avx512 => return unsafe { add_scaled_avx512(mh, ms, b, bs, pw) },
+        // SAFETY: as above.
+        Isa::Avx2 => return unsafe { add_scaled_avx2(mh, ms, b, bs, pw) },
+        Isa::Baseline => {}
     }
     add_scaled_kernel(mh, ms, b, bs, pw)
 }
@@ -450,20 +458,12 @@ fn series_terms(
     ser: &mut [f64],
 ) {
     #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("avx512vl")
-            && std::arch::is_x86_feature_detected!("avx512dq")
-        {
-            // SAFETY: the required CPU features were detected at run time.
-            unsafe { series_kernel_avx512(line, qs, count, t, with, ser) };
-            return;
-        }
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: as above.
-            unsafe { series_kernel_avx2(line, qs, count, t, with, ser) };
-            return;
-        }
+    match isa() {
+        // SAFETY: `isa` detected the required CPU features at run time.
+        Isa::Avx512 => return unsafe { series_kernel_avx512(line, qs, count, t, with, ser) },
+        // SAFETY: as above.
+        Isa::Avx2 => return unsafe { series_kernel_avx2(line, qs, count, t, with, ser) },
+        Isa::Baseline => {}
     }
     series_kernel(line, qs, count, t, with, ser)
 }
