@@ -233,7 +233,7 @@ pub fn diagnose_into_as(
                         cmp.threshold,
                         if cmp.accepted {
                             "the study's mesh was too coarse; the loop runs again on the refined mesh".to_string()
-                        } else if cmp.gain >= cmp.threshold && cmp.gain_over_effects < 0.0 {
+                        } else if cmp.behind_the_effects() {
                             format!(
                                 "{:.1} nats behind the accepted effects: the mesh does not explain the residual",
                                 -cmp.gain_over_effects

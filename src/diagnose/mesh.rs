@@ -100,6 +100,14 @@ pub struct MeshComparison {
     pub for_residual: bool,
 }
 
+impl MeshComparison {
+    /// The refined mesh gained the threshold at the starting fit but stayed behind the study
+    /// mesh's model with the accepted effects, so it was not taken.
+    pub fn behind_the_effects(&self) -> bool {
+        self.gain >= self.threshold && self.gain_over_effects < 0.0
+    }
+}
+
 /// Compare the starting fits of `coarse` and of `refined` (the same levels, the loop run on
 /// the refined mesh, or only its start). The refined mesh is accepted when it was tried for the
 /// residual (`for_residual`), gains at least `threshold` and its starting model is not behind
@@ -263,7 +271,7 @@ pub(crate) fn section(cmp: &MeshComparison) -> String {
             "The residual stayed above the null level on the study's mesh. The same model on the mesh refined twice per direction ({}) gains {:.1} nats of evidence at the starting fit (threshold {:.1}): **the study's mesh was too coarse**. The loop ran again on the refined mesh; the results above are that pass's, and `discretisation` is named among the accepted effects. Refine the study's mesh (`[structure.mesh]`) for later runs.\n",
             cmp.meshes, cmp.gain, cmp.threshold
         );
-    } else if cmp.for_residual && cmp.gain >= cmp.threshold && cmp.gain_over_effects < 0.0 {
+    } else if cmp.for_residual && cmp.behind_the_effects() {
         let _ = writeln!(
             s,
             "{why_tried}: the same model on the mesh refined twice per direction ({}) gains {:.1} nats of evidence at the starting fit (threshold {:.1}), but it stays {:.1} nats behind the study mesh's model with the effects the loop accepted: a finer mesh is a softer joint and takes up part of those effects' shape, so **the mesh does not explain the residual**. The results above are the study mesh's. The change of the adhesive's parameters below is not a discretisation uncertainty: the starting fits on both meshes lack the effects.\n",
