@@ -1335,6 +1335,7 @@ fn same_attachment_point(a: &Effect, b: &Effect) -> bool {
     let id = |e: &Effect| match e {
         Effect::PointMass { id, .. }
         | Effect::SensorMass { id, .. }
+        | Effect::SensorMassTerm { id }
         | Effect::Resonator { id, .. } => Some(*id),
         _ => None,
     };

@@ -168,6 +168,10 @@ pub struct ConfoundedEffect {
     pub size_range: (f64, f64),
     /// The law's parameters (name, low, high) over those sizes.
     pub ranges: Vec<(String, f64, f64)>,
+    /// The other accepted effects' sizes (name, low, high) over those sizes (an accepted
+    /// effect's only): each one's 95 % interval widened by its regression on the effect, as
+    /// the law's parameters are (a sensor's mass trades against base springs too).
+    pub effects: Vec<(String, f64, f64)>,
     pub accepted: bool,
 }
 
@@ -296,14 +300,31 @@ fn confounded_effects(res: &ClosedLoopResult, params: &VerdictParams) -> Vec<Con
         }
         let (lo, hi) = prior_range(e);
         let (e_lo, e_hi) = ((size - 2.0 * sd).max(lo), (size + 2.0 * sd).min(hi));
+        // A parameter of value p, sd s and regression b on the effect, over its sizes.
+        let over = |p: f64, s: f64, b: f64| {
+            let ends = [p + b * (e_lo - size), p + b * (e_hi - size)];
+            (
+                ends[0].min(ends[1]).min(p - 1.96 * s),
+                ends[0].max(ends[1]).max(p + 1.96 * s),
+            )
+        };
         let ranges = law_params(a)
             .into_iter()
             .zip(&reg)
             .map(|((n, p, s), b)| {
-                let ends = [p + b * (e_lo - size), p + b * (e_hi - size)];
-                let lo = ends[0].min(ends[1]).min(p - 1.96 * s);
-                let hi = ends[0].max(ends[1]).max(p + 1.96 * s);
+                let (lo, hi) = over(p, s, *b);
                 (n, lo, hi)
+            })
+            .collect();
+        let see = a.cov[i * d + i];
+        let effects = res
+            .accepted
+            .iter()
+            .filter(|(o, _, _)| o != e)
+            .filter_map(|(o, _, _)| {
+                let j = a.names.iter().position(|n| *n == o.name())?;
+                let (lo, hi) = over(a.values[j], a.sd[j], a.cov[j * d + i] / see);
+                Some((o.name(), lo, hi))
             })
             .collect();
         out.push(ConfoundedEffect {
@@ -317,6 +338,7 @@ fn confounded_effects(res: &ClosedLoopResult, params: &VerdictParams) -> Vec<Con
                 .collect(),
             size_range: (e_lo, e_hi),
             ranges,
+            effects,
             accepted: true,
         });
     }
@@ -364,6 +386,7 @@ fn confounded_effects(res: &ClosedLoopResult, params: &VerdictParams) -> Vec<Con
             combination: c.confounding.absorbed.clone(),
             size_range: (e_lo, e_hi),
             ranges,
+            effects: Vec::new(),
             accepted: false,
         });
     }
@@ -500,6 +523,18 @@ pub fn assess(
                 .map(|(n, lo, hi)| format!("{n} in [{lo:.4e}, {hi:.4e}]"))
                 .collect::<Vec<_>>()
                 .join(", ");
+            let others = if c.effects.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    ", and the other effects {}",
+                    c.effects
+                        .iter()
+                        .map(|(n, lo, hi)| format!("{n} in [{lo:.4e}, {hi:.4e}]"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )
+            };
             let comb = c
                 .combination
                 .iter()
@@ -510,7 +545,7 @@ pub fn assess(
                 Vec::new(),
                 None,
                 format!(
-                    "confounded: {} ({}) cannot be separated from the adhesive's parameters (multiple correlation {:.4}; relative change per unit: {comb}); over its plausible sizes [{:.3e}, {:.3e}] {} the adhesive's parameters range {ranges}; {level}",
+                    "confounded: {} ({}) cannot be separated from the adhesive's parameters (multiple correlation {:.4}; relative change per unit: {comb}); over its plausible sizes [{:.3e}, {:.3e}] {} the adhesive's parameters range {ranges}{others}; {level}",
                     c.effect,
                     if c.accepted { "accepted" } else { "not accepted" },
                     c.correlation,

@@ -84,7 +84,7 @@ pub fn diagnose_into_as(
     // and its reduced basis (about 30 s to build and certify on the paper's joint, cached).
     let asked = joint && wants_sensor_mass(study);
     let defaults = super::candidates::default_candidates(study.closed_loop.as_ref());
-    let (mut outcome, first) = loop_once(study, model, params, asked, &[], None)?;
+    let (mut outcome, first) = loop_once(study, model, params, asked, &[], None, &[])?;
     // Every pass's steps for the manifest: the first pass's as they are, a later pass's
     // under its name.
     let mut steps = outcome.timings.clone();
@@ -107,38 +107,62 @@ pub fn diagnose_into_as(
     // Every point's three directions, not only the accepted masses' points: with the x and z
     // directions of one point only, the basis certified no better than 1.4e-6 after 527
     // vectors (250 s); with all twelve directions, 127 vectors certify at 8.3e-7 (30 s).
-    // Base springs accepted with the mass: the second pass would need their term ROM on every
-    // point's three directions (12 inputs), so it is not run; the measured-direction mass
-    // stands for the sensor's (the report says so).
+    // With base springs accepted too, the springs' term ROM on every point's three directions
+    // (12 inputs) would cost several times more per line: the pass keeps the measured
+    // directions as inputs, and the three-direction mass at each accepted mass's point joins
+    // the springs' term ROM as a term of its own (`-w^2 m G`, the point's x, y and z loads
+    // among those that start its basis).
     let springs = accepted_of(&outcome, "base_springs");
-    if joint && !asked && admitted && !masses.is_empty() && !springs.is_empty() {
-        sections += &format!(
-            "\n## Three directions\n\nThe loop accepted {} together with {}. A sensor's mass acts in x, y and z, but a pass with every point's three directions would need the springs' reduced model on twelve inputs, so it was not run: the mass acts in the measured direction only. Ask for `\"sensor_mass\"` in `[closed_loop] candidates` (without base springs) to test the three-direction mass.\n",
-            masses.join(", "),
-            springs.join(", ")
-        );
-    } else if joint && !asked && admitted && !masses.is_empty() {
+    // The points (ids) whose three-direction mass is a term of the term ROM, in every later
+    // pass.
+    let mut sensor_terms: Vec<u32> = Vec::new();
+    if joint && !asked && admitted && !masses.is_empty() {
+        let on_springs = !springs.is_empty();
         params.progress.say(&format!(
-            "{} accepted: a sensor's mass acts in x, y and z, so the loop runs again with every point's three directions",
-            masses.join(", ")
+            "{} accepted: a sensor's mass acts in x, y and z, so the loop runs again {}",
+            masses.join(", "),
+            if on_springs {
+                "with the three-direction mass of those points as terms of the springs' reduced model"
+            } else {
+                "with every point's three directions"
+            }
         ));
-        // The second pass leaves base springs out (their term ROM on every point's three
-        // directions would have 12 inputs: far costlier than on the measured 4). The two
-        // passes model the same data, so the one with the larger evidence (summed over the
-        // levels) is kept.
+        // The two passes model the same data, so the one with the larger evidence (summed over
+        // the levels) is kept.
         // Its starting MAP searches from the first pass's starting fit (the same model on
         // another basis), not from space-filling starts again; it keeps the first pass's
         // measurement grids, and what lies in the measured directions (its starting model,
         // the measured-direction candidates, the null level) is swept on the first pass's
         // basis (built for those points, a third of the cost per sweep).
-        let (second, _) = loop_once(
-            &without_springs(study, defaults),
-            model,
-            params,
-            true,
-            &starting_fits(&outcome),
-            Some(&first),
-        )?;
+        let ids = if on_springs {
+            accepted_mass_points(&outcome)
+        } else {
+            Vec::new()
+        };
+        let (second, _) = if on_springs {
+            // The same candidates (base springs among them), the measured directions.
+            loop_once(
+                study,
+                model,
+                params,
+                false,
+                &starting_fits(&outcome),
+                Some(&first),
+                &ids,
+            )?
+        } else {
+            // Base springs left out (their term ROM on every point's three directions would
+            // have 12 inputs).
+            loop_once(
+                &without_springs(study, defaults),
+                model,
+                params,
+                true,
+                &starting_fits(&outcome),
+                Some(&first),
+                &[],
+            )?
+        };
         add_steps("three directions", &second);
         // A difference within the evidences' rounding (1e-9 of their size) is none: the two
         // passes then end at the same model (the second sweeps the measured directions on
@@ -158,9 +182,19 @@ pub fn diagnose_into_as(
                 "the first pass is kept"
             }
         ));
+        let how = if on_springs {
+            format!(
+                "together with {}. A sensor's mass acts in x, y and z, so the loop ran again with the three-direction mass of {} (`mass3_ptN`) among the candidates: a term of the springs' reduced model, whose basis starts from the unit loads of those points' x, y and z directions too (the springs' reduced model with every point's three directions as inputs would cost several times more per line)",
+                springs.join(", "),
+                if ids.len() == 1 { "that point" } else { "those points" }
+            )
+        } else {
+            "A sensor's mass acts in x, y and z, so the loop ran again with every measured point's x, y and z directions in the model and the three-direction sensor masses (`mass3_ptN`) among the candidates (base springs left out: their reduced model on twelve inputs costs too much)".to_string()
+        };
         sections += &format!(
-            "\n## Three directions\n\nA first pass on the measured directions accepted {}. A sensor's mass acts in x, y and z, so the loop ran again with every measured point's x, y and z directions in the model and the three-direction sensor masses (`mass3_ptN`) among the candidates (base springs left out: their reduced model on twelve inputs costs too much). The two passes explain the same data; the second's final model has {gain:+.1} nats of evidence against the first's (summed over the levels), so {}.\n",
+            "\n## Three directions\n\nA first pass on the measured directions accepted {}{}{how}. The two passes explain the same data; the second's final model has {gain:+.1} nats of evidence against the first's (summed over the levels), so {}.\n",
             masses.join(", "),
+            if on_springs { " " } else { ". " },
             if keep_second {
                 "the results above are the second pass's"
             } else {
@@ -169,9 +203,16 @@ pub fn diagnose_into_as(
         );
         if keep_second {
             outcome = second;
-            // The later passes keep the three directions only when a three-direction mass
-            // was accepted.
-            three = !accepted_of(&outcome, "sensor_mass").is_empty();
+            // The later passes keep the three directions (or the sensor terms) only when a
+            // three-direction mass was accepted.
+            let kept = !accepted_of(&outcome, "sensor_mass").is_empty();
+            if on_springs {
+                if kept {
+                    sensor_terms = ids;
+                }
+            } else {
+                three = kept;
+            }
         }
     }
     // The first pass's engines are not needed further.
@@ -222,6 +263,7 @@ pub fn diagnose_into_as(
                 false,
                 &starting_fits(&outcome),
                 None,
+                &[],
             ) {
                 Ok((start, _)) => {
                     add_steps("refined mesh, starting fit", &start);
@@ -251,8 +293,15 @@ pub fn diagnose_into_as(
                         } else {
                             without_springs(&fine, defaults)
                         };
-                        let (mut refined, _) =
-                            loop_once(&rerun, model, params, three, &starting_fits(&start), None)?;
+                        let (mut refined, _) = loop_once(
+                            &rerun,
+                            model,
+                            params,
+                            three,
+                            &starting_fits(&start),
+                            None,
+                            &sensor_terms,
+                        )?;
                         add_steps("refined mesh", &refined);
                         mesh::name_in(&mut refined, &cmp, mesh::element_size(&fine.structure));
                         outcome = refined;
@@ -356,8 +405,24 @@ fn without_springs(study: &Study, defaults: bool) -> Study {
     out
 }
 
+/// The ids of the points where `outcome` accepted a point mass (at any level), in order.
+fn accepted_mass_points(outcome: &super::summary::LoopOutcome) -> Vec<u32> {
+    let mut ids = Vec::new();
+    for l in &outcome.levels {
+        for (e, _, _) in &l.3.accepted {
+            if let crate::forward::Effect::PointMass { id, .. } = e {
+                if !ids.contains(id) {
+                    ids.push(*id);
+                }
+            }
+        }
+    }
+    ids
+}
+
 /// Set up the study's model, data and engines (with every measured point's x, y and z
-/// directions when `all_directions`) and run the loop. With the setup of an `earlier` pass on
+/// directions when `all_directions`) and run the loop, with the three-direction masses of
+/// the points `sensor_terms` as terms of the term ROM ([`super::TermParams::sensor_masses`]). With the setup of an `earlier` pass on
 /// the same structure and data (the measured directions' pass), its measurement grids are
 /// kept and its engine sweeps what lies in the measured directions
 /// ([`super::directions::ThreeDirections`]). The outcome's timings start with the setup's
@@ -369,6 +434,7 @@ fn loop_once(
     all_directions: bool,
     starting_fits: &[StartingFit],
     earlier: Option<&Setup>,
+    sensor_terms: &[u32],
 ) -> Result<(super::summary::LoopOutcome, Setup), RunError> {
     let mut with_loop = study.clone();
     if all_directions {
@@ -424,7 +490,8 @@ fn loop_once(
         Some(t) => t,
         None => engine,
     };
-    let p = DiagnoseParams::of(study, model)?;
+    let mut p = DiagnoseParams::of(study, model)?;
+    p.terms.sensor_masses = sensor_terms.to_vec();
     let inputs = LoopInputs {
         built: &setup.built,
         levels: &setup.levels,

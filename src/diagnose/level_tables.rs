@@ -11,8 +11,8 @@ use crate::stage::RunError;
 /// `closed_loop`: per level and quantity, before and after (parameters with sds, and the
 /// residual statistics), and the truth where the data are simulated.
 /// Every row carries the level's `status`; the law's parameters of an `unexplained` level
-/// carry its warning, those of a `confounded` level their range over the effect's plausible
-/// sizes.
+/// carry its warning, those of a `confounded` level (and its other accepted effects) their
+/// range over the effect's plausible sizes.
 pub(crate) fn closed_loop_table(
     results: &[LevelResult],
     summary: &[DiagnoseLevel],
@@ -29,16 +29,20 @@ pub(crate) fn closed_loop_table(
         for pc in parameter_changes(res, truth.as_deref()) {
             let law_param = res.after.names[..res.after.n_law].contains(&pc.name);
             let range = v.confounded.first().and_then(|c| {
-                c.ranges.iter().find(|r| r.0 == pc.name).map(|(_, lo, hi)| {
-                    format!(
-                        "confounded with {} (correlation {:.4}): range [{lo:.4e}, {hi:.4e}]",
-                        c.effect, c.correlation
-                    )
-                })
+                c.ranges
+                    .iter()
+                    .chain(&c.effects)
+                    .find(|r| r.0 == pc.name)
+                    .map(|(_, lo, hi)| {
+                        format!(
+                            "confounded with {} (correlation {:.4}): range [{lo:.4e}, {hi:.4e}]",
+                            c.effect, c.correlation
+                        )
+                    })
             });
             warning.push(match (law_param, &v.warning, range) {
                 (true, Some(w), _) => w.clone(),
-                (true, None, Some(r)) => r,
+                (_, None, Some(r)) => r,
                 _ => String::new(),
             });
             lv.push(level.clone());

@@ -173,6 +173,7 @@ impl TermParams {
             all_models: study.models.clone(),
             cache: crate::stage::rom_cache_dir(&study.output_dir),
             study_file: study.file.clone(),
+            sensor_masses: Vec::new(),
         }
     }
 }

@@ -58,6 +58,10 @@ pub struct TermParams {
     pub cache: PathBuf,
     /// The study file, named with the key in errors.
     pub study_file: PathBuf,
+    /// Points (ids) whose sensor mass in x, y and z joins the term ROM and the candidates as
+    /// a term ([`crate::forward::Effect::SensorMassTerm`]): the three-direction pass of a
+    /// joint on base springs. Empty by default.
+    pub sensor_masses: Vec<u32>,
 }
 
 /// The measurement chain of the verdict's null level ([`crate::closed_loop::null`]).

@@ -40,7 +40,15 @@ pub fn loop_stage(
     let law = &laws[p.model_index];
     // Degraded-bond, adherend-damping and base-spring candidates, and declared ones, need a
     // ROM with their terms.
-    let bonds = opt_in_term_candidates(p.terms.joint.as_ref(), p.settings.as_ref());
+    let mut bonds = opt_in_term_candidates(p.terms.joint.as_ref(), p.settings.as_ref());
+    // Sensor masses in x, y and z as terms of the term ROM (the three-direction pass on base
+    // springs).
+    bonds.extend(
+        p.terms
+            .sensor_masses
+            .iter()
+            .map(|&id| crate::forward::Effect::SensorMassTerm { id }),
+    );
     if !bonds.is_empty() {
         let names: Vec<String> = bonds.iter().map(|e| e.name()).collect();
         params.progress.say(&format!(
@@ -105,7 +113,13 @@ pub fn loop_stage(
             Some(f) => post.unconstrained(&f.values),
             None => crate::bayes::posterior::initial_x(&post, &p.initial),
         };
-        let candidates = level_candidates(level, engine, built, &bonds, p.settings.as_ref());
+        let mut candidates = level_candidates(level, engine, built, &bonds, p.settings.as_ref());
+        // A point whose three-direction mass is a term: that mass stands in place of the
+        // measured-direction one, which an earlier pass tried (the two at one point are
+        // alternatives, and the first accepted would bar the other).
+        candidates.retain(|c| {
+            !matches!(c, crate::forward::Effect::PointMass { id, .. } if p.terms.sensor_masses.contains(id))
+        });
         let t_loop = std::time::Instant::now();
         params
             .progress

@@ -60,6 +60,13 @@ pub enum Effect {
     /// A sensor's mass (kg) at a point, acting in all three translations: `points` are the
     /// engine points (inputs) of the point's x, y and z directions; `id` the point's id.
     SensorMass { points: [usize; 3], id: u32 },
+    /// The same sensor's mass (kg) at point `id`, in x, y and z, as a term of the engine's
+    /// term ROM (`-w^2 m G`, `G` the mass matrix per unit mass over the point's three
+    /// directions, [`crate::rom::terms::TermMap::Inertia`]): for an engine whose inputs are
+    /// the measured directions only, such as the model on base springs (whose term ROM with
+    /// every point's three directions as inputs would cost several times more per line).
+    /// Named and typed as [`Effect::SensorMass`]: the two are the same physics.
+    SensorMassTerm { id: u32 },
     /// Relative change of the adherends' (beam) modulus, `E_beam = (1 + b) E_beam,declared`.
     BeamModulus,
     /// A shaker's moving mass m_s (kg) on a stinger of stiffness `stiffness_n_m` at the drive
@@ -138,7 +145,9 @@ impl Effect {
             Effect::Gain { id, .. } => format!("gain_ch{id}"),
             Effect::Delay { id, .. } => format!("delay_ch{id}"),
             Effect::PointMass { id, .. } => format!("mass_pt{id}"),
-            Effect::SensorMass { id, .. } => format!("mass3_pt{id}"),
+            Effect::SensorMass { id, .. } | Effect::SensorMassTerm { id } => {
+                format!("mass3_pt{id}")
+            }
             Effect::BeamModulus => "beam_modulus".into(),
             Effect::Shaker { .. } => "shaker_mass".into(),
             Effect::Resonator { id, .. } => format!("resonator_pt{id}"),
@@ -160,7 +169,7 @@ impl Effect {
             Effect::Gain { .. } => "gain",
             Effect::Delay { .. } => "delay",
             Effect::PointMass { .. } => "point_mass",
-            Effect::SensorMass { .. } => "sensor_mass",
+            Effect::SensorMass { .. } | Effect::SensorMassTerm { .. } => "sensor_mass",
             Effect::BeamModulus => "beam_modulus",
             Effect::Shaker { .. } => "shaker",
             Effect::Resonator { .. } => "resonator",
@@ -180,6 +189,7 @@ impl Effect {
             Effect::Delay { .. } => "s",
             Effect::PointMass { .. }
             | Effect::SensorMass { .. }
+            | Effect::SensorMassTerm { .. }
             | Effect::Shaker { .. }
             | Effect::Resonator { .. } => "kg",
             Effect::MaxwellBranch { .. } => "Pa",
@@ -198,7 +208,7 @@ impl Effect {
             Effect::PointMass { id, .. } => format!(
                 "an undeclared mass m at point {id} (a sensor, cable or fixture) lowers the modes that move that point"
             ),
-            Effect::SensorMass { id, .. } => format!(
+            Effect::SensorMass { id, .. } | Effect::SensorMassTerm { id } => format!(
                 "an undeclared mass m at point {id} (a sensor, cable or fixture) with its inertia in x, y and z lowers the modes that move that point in any direction"
             ),
             Effect::BeamModulus => "the adherends' modulus differs from the declared one by a factor (1 + b): all beam-dominated modes shift by sqrt(1 + b)".into(),
@@ -234,6 +244,7 @@ impl Effect {
             self,
             Effect::PointMass { .. }
                 | Effect::SensorMass { .. }
+                | Effect::SensorMassTerm { .. }
                 | Effect::Shaker { .. }
                 | Effect::Resonator { .. }
                 | Effect::MaxwellBranch { .. }
@@ -248,7 +259,10 @@ impl Effect {
     pub fn has_term_matrices(&self) -> bool {
         matches!(
             self,
-            Effect::DegradedBond { .. } | Effect::BaseSprings { .. } | Effect::AdherendDamping
+            Effect::DegradedBond { .. }
+                | Effect::BaseSprings { .. }
+                | Effect::AdherendDamping
+                | Effect::SensorMassTerm { .. }
         )
     }
     /// Whether the score test at zero is one-sided: that of a one-sided effect whose column at
@@ -265,6 +279,7 @@ impl Effect {
             Effect::Delay { .. } => (-0.01, 0.01),
             Effect::PointMass { .. }
             | Effect::SensorMass { .. }
+            | Effect::SensorMassTerm { .. }
             | Effect::Shaker { .. }
             | Effect::Resonator { .. } => (-1e-12, 10.0),
             Effect::BeamModulus => (-0.9, 9.0),
@@ -290,6 +305,7 @@ impl Effect {
             },
             Effect::PointMass { .. }
             | Effect::SensorMass { .. }
+            | Effect::SensorMassTerm { .. }
             | Effect::Shaker { .. }
             | Effect::Resonator { .. } => Prior::Uniform { lo: 0.0, hi: 0.1 },
             Effect::MaxwellBranch { .. } => Prior::Uniform { lo: 0.0, hi: 2e7 },
@@ -316,6 +332,7 @@ impl Effect {
             self,
             Effect::PointMass { .. }
                 | Effect::SensorMass { .. }
+                | Effect::SensorMassTerm { .. }
                 | Effect::Resonator { .. }
                 | Effect::BeamModulus
                 | Effect::Shaker { .. }
@@ -492,10 +509,11 @@ impl Effects {
                 Effect::DegradedBond { .. }
                 | Effect::BaseSprings { .. }
                 | Effect::AdherendDamping
+                | Effect::SensorMassTerm { .. }
                     if !engine.term_names().contains(&name) =>
                 {
                     return Err(super::ForwardError::Setup(format!(
-                        "effect {name}: the engine has no term for this region (build it with rom::term_build::build_term_rom; terms: {:?})",
+                        "effect {name}: the engine has no term for this effect (build it with rom::term_build::build_term_rom; terms: {:?})",
                         engine.term_names()
                     )));
                 }
@@ -672,6 +690,8 @@ impl Effects {
                 // (1 + b) j g K_b of the actual beam is j g K_b of the engine's.
                 Effect::AdherendDamping => (*v, C64::new(0.0, 1.0), 0.0, scale),
                 Effect::BaseSprings { .. } => (*v * scale, C64::new(1.0, 0.0), 0.0, scale * scale),
+                // -w^2 m G of the actual structure is -w_eng^2 m G of the engine's.
+                Effect::SensorMassTerm { .. } => (*v, C64::new(1.0, 0.0), 0.0, scale),
                 _ => continue,
             };
             let name = term.effect.name();

@@ -255,6 +255,7 @@ pub fn term_key(
         s.cert_values.iter().for_each(|v| f(&mut h, *v));
         match s.map {
             TermMap::Linear => h.update(b"linear"),
+            TermMap::Inertia => h.update(b"inertia"),
             TermMap::Compliance { v_ref, v_floor } => {
                 // (its POD keeps the springs' null space apart: compress::pod_basis_split)
                 h.update(b"compliance-split-pod");

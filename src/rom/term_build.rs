@@ -38,7 +38,7 @@ pub fn add_scaled(a: &SpMat, b: &SpMat, c: f64) -> Result<SpMat, RomError> {
 }
 
 /// The full model with one term on at value `v` (real part of `c G` into K_b and S, imaginary
-/// part into D_b).
+/// part into D_b; an inertia term's `v G` into M).
 pub fn model_with_term(
     model: &StructuralModel,
     spec: &TermSpec,
@@ -78,6 +78,18 @@ pub fn model_with_term(
         return Ok(out);
     }
     let fv = spec.map.f(v);
+    if let TermMap::Inertia = spec.map {
+        // A mass: v G (offset real) into M.
+        if spec.per_modulus != 0.0 || spec.offset.im != 0.0 {
+            return Err(RomError::Model(format!(
+                "term {}: an inertia term must have a real offset and no modulus part",
+                spec.name
+            )));
+        }
+        out.m = add_scaled(&out.m, &spec.matrix, spec.offset.re * fv)?;
+        out.description = format!("{} + term {} at {v}", model.description, spec.name);
+        return Ok(out);
+    }
     let p = spec.offset * fv;
     if p.re != 0.0 {
         out.k_b = add_scaled(&out.k_b, &spec.matrix, p.re)?;

@@ -1,12 +1,16 @@
 //! A reduced model with extra structural terms: effects that need new
-//! matrices in the ROM (a degraded bond region, a structural damping of the beam).
+//! matrices in the ROM (a degraded bond region, a structural damping of the beam, base
+//! springs, a sensor's inertia in x, y and z).
 //!
 //! ```text
-//!   Z(w, E*; v) = Z(w, E*) + sum_k c_k G_k,     c_k = v_k (p_k + q_k E*)
+//!   Z(w, E*; v) = Z(w, E*) + sum_k c_k G_k,     c_k = f_k(v_k) r_k(w) (p_k + q_k E*)
 //!   Z_r         = V^T Z V,   G_k,r = V^T G_k V,   X = Z_r^-1 B_r,   H_ij = b_i^T x_j
-//!   dH_ij/dE'   = -x_i^T (S_r + sum_k v_k q_k G_k,r) x_j
-//!   dH_ij/dv_k  = -(p_k + q_k E*) x_i^T G_k,r x_j              (-H_oG G_k H_Gi, reduced)
+//!   dH_ij/dE'   = -x_i^T (S_r + sum_k f_k r_k q_k G_k,r) x_j
+//!   dH_ij/dv_k  = -f_k'(v_k) r_k(w) (p_k + q_k E*) x_i^T G_k,r x_j   (-H_oG G_k H_Gi, reduced)
 //! ```
+//!
+//! `f_k` is [`TermMap::f`] (the value itself, or a compliance's stiffness) and `r_k` its
+//! [`TermMap::line_factor`]: 1, or `-w^2` for a mass (an inertia term's `G` is a mass matrix).
 //!
 //! The basis is the certified ROM's (block Krylov of (K_b + e S, M) at log-spaced e,
 //! [`super::basis`]) enriched, at every enrichment level, with the Krylov vectors of the full
@@ -101,6 +105,9 @@ pub enum TermMap {
     /// `G` their stiffness matrix per unit stiffness) over a model that already holds the
     /// term at `1 / v_ref`; `v -> 0` is the rigid limit, kept finite by `v_floor`.
     Compliance { v_ref: f64, v_floor: f64 },
+    /// `f(v) = v` times `-w^2`: `v` a mass (kg) and `G` its mass matrix per unit mass (the
+    /// term `-w^2 v G` of `Z = K - w^2 (M + v G)`), e.g. a sensor's inertia in x, y and z.
+    Inertia,
 }
 
 impl TermMap {
@@ -108,17 +115,25 @@ impl TermMap {
     pub fn is_compliance(&self) -> bool {
         matches!(self, TermMap::Compliance { .. })
     }
+    /// The factor of the line at `omega` (rad/s) on `f(v)`: `-w^2` for an inertia term, 1
+    /// for the others.
+    pub fn line_factor(&self, omega: f64) -> f64 {
+        match self {
+            TermMap::Inertia => -omega * omega,
+            _ => 1.0,
+        }
+    }
     /// `f(v)`.
     pub fn f(&self, v: f64) -> f64 {
         match *self {
-            TermMap::Linear => v,
+            TermMap::Linear | TermMap::Inertia => v,
             TermMap::Compliance { v_ref, v_floor } => 1.0 / v.max(v_floor) - 1.0 / v_ref,
         }
     }
     /// `df/dv` (at the floor below it).
     pub fn df(&self, v: f64) -> f64 {
         match *self {
-            TermMap::Linear => 1.0,
+            TermMap::Linear | TermMap::Inertia => 1.0,
             TermMap::Compliance { v_floor, .. } => -1.0 / v.max(v_floor).powi(2),
         }
     }
@@ -259,7 +274,7 @@ pub(crate) fn pinvs(g_r: &[Mat<f64>], maps: &[TermMap]) -> Vec<Option<Mat<f64>>>
     g_r.iter()
         .zip(maps)
         .map(|(g, m)| match m {
-            TermMap::Linear => None,
+            TermMap::Linear | TermMap::Inertia => None,
             TermMap::Compliance { .. } => psd_pinv(g),
         })
         .collect()
@@ -317,7 +332,8 @@ impl TermRom {
     ) -> (Vec<C64>, Option<Vec<C64>>) {
         let n = self.rom.n_r;
         let add = |z: &mut [C64], t: &TermCoef| {
-            let c = self.maps[t.index].f(t.value) * (t.offset + t.per_modulus * e);
+            let map = self.maps[t.index];
+            let c = map.f(t.value) * map.line_factor(omega) * (t.offset + t.per_modulus * e);
             let g = &self.g_r[t.index];
             // (G symmetric: its column i, contiguous, is its row i.)
             for i in 0..n {
@@ -379,7 +395,7 @@ impl TermRom {
         // derivative is a forward difference (below), which needs no `z_other`.
         let near_rigid = |t: &TermCoef| match self.maps[t.index] {
             TermMap::Compliance { v_ref, .. } => t.value < COMPLIANCE_FD_BELOW * v_ref,
-            TermMap::Linear => false,
+            TermMap::Linear | TermMap::Inertia => false,
         };
         let (z, z_other) = self.assemble(
             omega,
@@ -512,7 +528,11 @@ impl TermRom {
                     let mut v = sx.col(k, jj);
                     for (t, g) in terms.iter().zip(&gx) {
                         if let (true, Some(g)) = (t.per_modulus != 0.0, g) {
-                            v += self.maps[t.index].f(t.value) * t.per_modulus * g.col(k, jj);
+                            let map = self.maps[t.index];
+                            v += map.f(t.value)
+                                * map.line_factor(omega)
+                                * t.per_modulus
+                                * g.col(k, jj);
                         }
                     }
                     v
@@ -533,7 +553,9 @@ impl TermRom {
                         dt[k][i * ni + jj] = dot(yi, gy_j, jj) / (t.offset + t.per_modulus * e);
                         continue;
                     }
-                    let dc = self.maps[t.index].df(t.value) * (t.offset + t.per_modulus * e);
+                    let map = self.maps[t.index];
+                    let dc =
+                        map.df(t.value) * map.line_factor(omega) * (t.offset + t.per_modulus * e);
                     let g = gx[k].as_ref().expect("computed for this term's own column");
                     dt[k][i * ni + jj] = -dc * dot(xi, g, jj);
                 }
