@@ -20,7 +20,7 @@
 //! the alternative then pays the same prior width per parameter as the study's model does for
 //! its initial values.
 
-use super::{install, ClosedLoopError, LawCandidate};
+use super::{install, ClosedLoopError, LawCandidate, RefitVerdict};
 use crate::common::C64;
 use crate::inference::likelihood::FrfPosterior;
 use crate::inference::map::{find_map, MapParams, MapResult};
@@ -353,7 +353,8 @@ pub fn refit_law<'a>(
     let n_old = old.n_params();
     let phys = &current.map_physical;
     let effects = post.likelihood.forward.effects.clone();
-    let mut row = LawCandidate::not_refitted(0, alt.name(), String::new());
+    let mut row =
+        LawCandidate::not_refitted(0, alt.name(), RefitVerdict::NotRefitted(String::new()));
     let omega = post.likelihood.forward.obs.omega_rad_s.clone();
     let n_model = post.likelihood.forward.n_params();
     let starts =
@@ -391,10 +392,9 @@ pub fn refit_law<'a>(
     }
     let Some((start, p_start, _)) = best else {
         post.likelihood.forward.law = old;
-        row.refit.verdict = format!(
-            "no admissible start: {} does not fit the current E*(w)",
-            alt.name()
-        );
+        row.refit.verdict = RefitVerdict::NoAdmissibleStart {
+            law: alt.name().to_string(),
+        };
         return Ok((row, None));
     };
     let n_new = alt.n_params();
@@ -423,7 +423,7 @@ pub fn refit_law<'a>(
     let r = match fit {
         Ok(r) => r,
         Err(e) => {
-            row.refit.verdict = format!("refit failed: {e}");
+            row.refit.verdict = RefitVerdict::Failed(e);
             return Ok((row, None));
         }
     };
@@ -440,20 +440,27 @@ pub fn refit_law<'a>(
     row.refit.evidence_gain = gain;
     let gave_up = r.gave_up();
     row.refit.verdict = if gave_up {
-        format!(
-            "cannot reach the current fit: its search gave up {:.0} nats short (evidence gain {gain:.0} nats where it stopped)",
-            current.laplace.log_posterior() - r.laplace.log_posterior()
-        )
+        RefitVerdict::CannotReach {
+            short_nats: current.laplace.log_posterior() - r.laplace.log_posterior(),
+            gain,
+        }
     } else if !r.laplace.positive_definite {
-        "Laplace Hessian not positive definite".to_string()
+        RefitVerdict::NotPositiveDefinite {
+            law_candidate: false,
+        }
     } else if !(gain >= threshold_nats) {
-        format!("evidence gain {gain:.2} nats < {threshold_nats}")
+        RefitVerdict::BelowThreshold {
+            gain,
+            threshold: threshold_nats,
+        }
     } else if super::start::at_prior_edge(&priors, &row.params) {
-        format!("a parameter of {} at its prior's edge", alt.name())
+        RefitVerdict::LawAtPriorEdge {
+            law: alt.name().to_string(),
+        }
     } else {
-        "passes".into()
+        RefitVerdict::Passes
     };
-    let passes = row.refit.verdict == "passes";
+    let passes = row.refit.verdict.passes();
     Ok((row, passes.then_some((priors, r))))
 }
 

@@ -140,7 +140,7 @@ fn remove_accepted(
         if let Some(refit) = c.refit.as_mut().filter(|r| r.accepted) {
             if let Some(reason) = why(&c.effect.name()) {
                 refit.accepted = false;
-                refit.verdict = reason;
+                refit.verdict = super::RefitVerdict::Removed(reason);
             }
         }
     }

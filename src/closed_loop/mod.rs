@@ -267,8 +267,92 @@ pub struct Refit {
     pub size: f64,
     pub sd: f64,
     pub accepted: bool,
-    /// Why not accepted (or "accepted").
-    pub verdict: String,
+    /// Why not accepted (or accepted).
+    pub verdict: RefitVerdict,
+}
+
+/// What a refit's tests concluded ([`Refit::verdict`]): the loop decides on it, the report and
+/// the candidates table write it in words (`Display`).
+#[derive(Clone, Debug, PartialEq)]
+pub enum RefitVerdict {
+    /// Every test passed: a candidate for the round's acceptance.
+    Passes,
+    /// Accepted: the round's best passing refit (or alternative law).
+    Accepted,
+    /// Its search gave up `short_nats` short of the round's passing refit of `name`.
+    CannotBeat { name: String, short_nats: f64 },
+    /// An alternative law's search gave up `short_nats` short of the current fit (its evidence
+    /// gain `gain` where it stopped).
+    CannotReach { short_nats: f64, gain: f64 },
+    /// The Laplace Hessian is not positive definite (`law_candidate`: after the warm refit of a
+    /// law candidate, which has no multistart search).
+    NotPositiveDefinite { law_candidate: bool },
+    /// The evidence gain (nats) is below the threshold.
+    BelowThreshold { gain: f64, threshold: f64 },
+    /// The size is within `min_z` sds of the effect's null value.
+    NearZero { size: f64, min_z: f64 },
+    /// The size is at the edge of its prior `[lo, hi]`.
+    AtPriorEdge { size: f64, lo: f64, hi: f64 },
+    /// A parameter of the alternative law `law` is at its prior's edge.
+    LawAtPriorEdge { law: String },
+    /// The alternative law `law` has no admissible start (it does not fit the current E*(w)).
+    NoAdmissibleStart { law: String },
+    /// The refit failed (the error in words).
+    Failed(String),
+    /// Not refitted, and why.
+    NotRefitted(String),
+    /// Accepted, then removed by the verdict (dropped, or not needed for a residual within the
+    /// noise), and why.
+    Removed(String),
+}
+
+impl RefitVerdict {
+    /// Whether every test passed ([`RefitVerdict::Passes`]).
+    pub fn passes(&self) -> bool {
+        matches!(self, RefitVerdict::Passes)
+    }
+}
+
+impl std::fmt::Display for RefitVerdict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            RefitVerdict::Passes => f.write_str("passes"),
+            RefitVerdict::Accepted => f.write_str("accepted"),
+            RefitVerdict::CannotBeat { name, short_nats } => write!(
+                f,
+                "cannot beat {name}'s refit: its search gave up {short_nats:.0} nats short"
+            ),
+            RefitVerdict::CannotReach { short_nats, gain } => write!(
+                f,
+                "cannot reach the current fit: its search gave up {short_nats:.0} nats short (evidence gain {gain:.0} nats where it stopped)"
+            ),
+            RefitVerdict::NotPositiveDefinite { law_candidate: true } => f.write_str(
+                "Laplace Hessian not positive definite after the warm refit (law candidate: no multistart search)",
+            ),
+            RefitVerdict::NotPositiveDefinite { law_candidate: false } => {
+                f.write_str("Laplace Hessian not positive definite")
+            }
+            RefitVerdict::BelowThreshold { gain, threshold } => {
+                write!(f, "evidence gain {gain:.2} nats < {threshold}")
+            }
+            RefitVerdict::NearZero { size, min_z } => {
+                write!(f, "size {size:.4e} within {min_z} sd of zero")
+            }
+            RefitVerdict::AtPriorEdge { size, lo, hi } => {
+                write!(f, "size {size:.4e} at the edge of its prior [{lo}, {hi}]")
+            }
+            RefitVerdict::LawAtPriorEdge { law } => {
+                write!(f, "a parameter of {law} at its prior's edge")
+            }
+            RefitVerdict::NoAdmissibleStart { law } => write!(
+                f,
+                "no admissible start: {law} does not fit the current E*(w)"
+            ),
+            RefitVerdict::Failed(e) => write!(f, "refit failed: {e}"),
+            RefitVerdict::NotRefitted(why) => write!(f, "not refitted: {why}"),
+            RefitVerdict::Removed(why) => f.write_str(why),
+        }
+    }
 }
 
 /// A fit of the current model: physical parameters (law, free effects, noise) and names.
@@ -313,7 +397,7 @@ pub struct LawCandidate {
 
 impl LawCandidate {
     /// A row for `law` in `round` without a refit (yet): NaN evidence, no parameters.
-    pub fn not_refitted(round: usize, law: &str, verdict: String) -> Self {
+    pub fn not_refitted(round: usize, law: &str, verdict: RefitVerdict) -> Self {
         LawCandidate {
             round,
             law: law.to_string(),
@@ -987,7 +1071,7 @@ pub fn run_closed_loop_with_laws<'a>(
                             size: f64::NAN,
                             sd: f64::NAN,
                             accepted: false,
-                            verdict: format!("refit failed: {e}"),
+                            verdict: RefitVerdict::Failed(e.to_string()),
                         });
                         continue;
                     }
@@ -1012,24 +1096,28 @@ pub fn run_closed_loop_with_laws<'a>(
                 let gain = evidence_gain(&r, &current, 1, post.likelihood.data.values.len());
                 let at_edge = size < lo + 0.02 * span || size > hi - 0.02 * span;
                 let verdict = if let (true, Some((name, f, _))) = (r.gave_up(), &to_beat) {
-                    format!(
-                        "cannot beat {name}'s refit: its search gave up {:.0} nats short",
-                        -r.laplace.log_posterior() - f
-                    )
-                } else if !r.laplace.positive_definite && law_candidate {
-                    "Laplace Hessian not positive definite after the warm refit (law candidate: no multistart search)".to_string()
+                    RefitVerdict::CannotBeat {
+                        name: name.clone(),
+                        short_nats: -r.laplace.log_posterior() - f,
+                    }
                 } else if !r.laplace.positive_definite {
-                    "Laplace Hessian not positive definite".to_string()
+                    RefitVerdict::NotPositiveDefinite { law_candidate }
                 } else if !(gain >= params.threshold_nats) {
-                    format!("evidence gain {gain:.2} nats < {}", params.threshold_nats)
+                    RefitVerdict::BelowThreshold {
+                        gain,
+                        threshold: params.threshold_nats,
+                    }
                 } else if (size - c.effect.null_value()).abs() < params.min_z * sd {
-                    format!("size {size:.4e} within {} sd of zero", params.min_z)
+                    RefitVerdict::NearZero {
+                        size,
+                        min_z: params.min_z,
+                    }
                 } else if at_edge {
-                    format!("size {size:.4e} at the edge of its prior [{lo}, {hi}]")
+                    RefitVerdict::AtPriorEdge { size, lo, hi }
                 } else {
-                    "passes".into()
+                    RefitVerdict::Passes
                 };
-                let passes = verdict == "passes";
+                let passes = verdict.passes();
                 if matches!(c.effect, Effect::BaseSprings { .. }) && r.laplace.positive_definite {
                     springs_fit = Some(r.map_physical.clone());
                 }
@@ -1111,10 +1199,10 @@ pub fn run_closed_loop_with_laws<'a>(
                 let short = -last.refit.evidence_gain;
                 let gained: f64 = accepted_gains[last.round..].iter().sum();
                 if short > LAW_SKIP_FACTOR * gained.max(params.threshold_nats) {
-                    let verdict = format!(
-                        "not refitted: {short:.0} nats short in round {}, more than {LAW_SKIP_FACTOR} times the {gained:.1} nats gained since",
+                    let verdict = RefitVerdict::NotRefitted(format!(
+                        "{short:.0} nats short in round {}, more than {LAW_SKIP_FACTOR} times the {gained:.1} nats gained since",
                         last.round + 1
-                    );
+                    ));
                     say(format!("round {}: {}: {verdict}", round + 1, alt.name()));
                     law_table.push(LawCandidate::not_refitted(round, alt.name(), verdict));
                     continue;
@@ -1177,7 +1265,7 @@ pub fn run_closed_loop_with_laws<'a>(
             let old = post.likelihood.forward.law;
             let n_old = old.n_params();
             law_table[li].refit.accepted = true;
-            law_table[li].refit.verdict = "accepted".into();
+            law_table[li].refit.verdict = RefitVerdict::Accepted;
             law_changes.push(format!(
                 "law {} replaced by {} (evidence gain {:.1} nats)",
                 old.name(),
@@ -1207,7 +1295,7 @@ pub fn run_closed_loop_with_laws<'a>(
                 let c = &mut scored[ci];
                 if let Some(rf) = c.refit.as_mut() {
                     rf.accepted = true;
-                    rf.verdict = "accepted".into();
+                    rf.verdict = RefitVerdict::Accepted;
                 }
                 let size = r.map_physical[np_now];
                 let sd = r.laplace.sd_physical()[np_now];

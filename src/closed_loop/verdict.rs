@@ -401,7 +401,7 @@ fn closest(res: &ClosedLoopResult) -> Vec<Closest> {
         .filter(|c| !c.refit.as_ref().is_some_and(|r| r.accepted))
         .filter_map(|c| {
             let (gain, size, sd, verdict) = match (&c.refit, c.profile_gain) {
-                (Some(r), _) => (r.evidence_gain, r.size, r.sd, r.verdict.clone()),
+                (Some(r), _) => (r.evidence_gain, r.size, r.sd, r.verdict.to_string()),
                 (None, Some(g)) => (g, f64::NAN, f64::NAN, "profile only".to_string()),
                 _ => return None,
             };
@@ -424,7 +424,7 @@ fn closest(res: &ClosedLoopResult) -> Vec<Closest> {
                     gain: c.refit.evidence_gain,
                     size: f64::NAN,
                     sd: f64::NAN,
-                    verdict: c.refit.verdict.clone(),
+                    verdict: c.refit.verdict.to_string(),
                 }),
         )
         .filter(|c| c.gain.is_finite())

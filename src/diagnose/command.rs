@@ -184,7 +184,7 @@ pub fn diagnose_into_as(
         ));
         let how = if on_springs {
             format!(
-                "together with {}. A sensor's mass acts in x, y and z, so the loop ran again with the three-direction mass of {} (`mass3_ptN`) among the candidates: a term of the springs' reduced model, whose basis starts from the unit loads of those points' x, y and z directions too (the springs' reduced model with every point's three directions as inputs would cost several times more per line)",
+                "together with {}. A sensor's mass acts in x, y and z, so the loop ran again with the three-direction mass of {} (`mass3_ptN`) among the candidates: a term of the springs' reduced model (`-w^2 m` times the point's x, y and z mass matrix, its basis enriched with the full model's responses with the mass on; the springs' reduced model with every point's three directions as inputs would cost several times more per line), in place of the measured-direction mass there",
                 springs.join(", "),
                 if ids.len() == 1 { "that point" } else { "those points" }
             )
@@ -380,7 +380,7 @@ fn unexplained_levels(outcome: &super::summary::LoopOutcome) -> Vec<String> {
         .summary
         .levels
         .iter()
-        .filter(|l| l.status == "unexplained")
+        .filter(|l| l.verdict.status == crate::closed_loop::verdict::Status::Unexplained)
         .map(|l| l.level.clone())
         .collect()
 }

@@ -112,7 +112,7 @@ pub(crate) fn markdown(
                         r.size - 1.96 * r.sd,
                         r.size + 1.96 * r.sd
                     ),
-                    r.verdict.clone(),
+                    r.verdict.to_string(),
                 ),
                 None if c.predicted_gain.is_finite() => (
                     "".into(),

@@ -165,7 +165,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
             refit[2].push(r.map(|r| r.size));
             refit[3].push(r.map(|r| r.sd));
             acc.push(r.is_some_and(|r| r.accepted));
-            verdict.push(r.map_or("not refitted".to_string(), |r| r.verdict.clone()));
+            verdict.push(r.map_or("not refitted".to_string(), |r| r.verdict.to_string()));
             predicted.push(c.predicted_gain);
             profile.push(c.profile_gain);
             r2.push(c.confounding.r2);
@@ -195,7 +195,7 @@ fn candidates_table(results: &[LevelResult]) -> Result<Table, RunError> {
             refit[2].push(None);
             refit[3].push(None);
             acc.push(r.accepted);
-            verdict.push(r.verdict.clone());
+            verdict.push(r.verdict.to_string());
             predicted.push(f64::NAN);
             profile.push(None);
             // A whole law is not a column beside the law's own: no confounding measure.
