@@ -344,7 +344,7 @@ pub(crate) fn assert_every_truth_inside(l: &DiagnoseLevel, effects: &[(&str, f64
 /// equal springs, and the level ends `confounded` with every truth inside what is reported
 /// (the adhesive's parameters, the springs' compliance 1 / 3.0e10 m^3/N and the 12 g).
 #[test]
-#[ignore = "slow: both passes of the loop on the term ROMs of the springs (and of the sensor), about 11 minutes in release; run with --ignored"]
+#[ignore = "slow: both passes of the loop on the term ROMs of the springs (and of the sensor), about 5 minutes in release with the ROMs cached; run with --ignored"]
 fn independent_compliant_base_with_a_three_direction_sensor_covers_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let l = run_independent_with(dir.path(), "springs_mass3_td", "L2", "\"all\"");
