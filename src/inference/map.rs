@@ -19,7 +19,7 @@
 
 use super::lm::Quadratic;
 use super::{unit_rng, DensityError, Posterior};
-use crate::linalg::dense::{chol_inverse, chol_solve, cholesky};
+use crate::linalg::dense::{chol_inverse, cholesky};
 use argmin::core::{CostFunction, Executor, Gradient, State};
 use argmin::solver::linesearch::MoreThuenteLineSearch;
 use argmin::solver::quasinewton::LBFGS;
@@ -526,7 +526,11 @@ pub fn laplace_at(post: &dyn Posterior, x: &[f64]) -> Result<Laplace, DensityErr
 }
 
 /// Newton polishing from `x` of the physical-space MAP objective (`physical`) or of the
-/// density in x (returns the polished point and the steps taken).
+/// density in x (returns the polished point and the iterations taken): the crate's
+/// Levenberg-Marquardt ([`super::lm`]) with the finite-difference Hessian as its curvature, at
+/// most [`POLISH_ITERATIONS`] iterations, until the Newton decrement is below `tol`. Where the
+/// Hessian is not positive definite (a saddle, a flat ridge) the search stops there: at the
+/// start the point is returned as it was.
 fn polish(
     post: &dyn Posterior,
     x: &[f64],
@@ -534,42 +538,49 @@ fn polish(
     physical: bool,
 ) -> Result<(Vec<f64>, usize), DensityError> {
     let d = x.len();
-    let mut x = x.to_vec();
+    // The start's value, gradient and Hessian: their errors are the caller's.
     let mut g = vec![0.0; d];
-    let mut f = -objective(post, &x, Some(&mut g), physical)?;
-    let mut steps = 0;
-    for _ in 0..20 {
-        let a = hessian_of(post, &x, physical)?;
-        let Some(l) = cholesky(&a, d) else { break };
-        // g holds the gradient of log p: the Newton step on -log p is A^-1 g.
-        let s = chol_solve(&l, d, &g);
-        let dec = 0.5 * s.iter().zip(&g).map(|(a, b)| a * b).sum::<f64>();
-        if dec < tol {
-            break;
-        }
-        let mut t = 1.0;
-        let mut improved = false;
-        for _ in 0..30 {
-            let xn: Vec<f64> = x.iter().zip(&s).map(|(a, b)| a + t * b).collect();
-            let mut gn = vec![0.0; d];
-            if let Ok(v) = objective(post, &xn, Some(&mut gn), physical) {
-                if v.is_finite() && -v <= f {
-                    x = xn;
-                    g = gn;
-                    f = -v;
-                    improved = true;
-                    break;
-                }
-            }
-            t *= 0.5;
-        }
-        steps += 1;
-        if !improved {
-            break;
-        }
+    let v = objective(post, x, Some(&mut g), physical)?;
+    let h = hessian_of(post, x, physical)?;
+    if cholesky(&h, d).is_none() {
+        return Ok((x.to_vec(), 0));
     }
-    Ok((x, steps))
+    // (g holds the gradient of log p: the objective is -log p)
+    let mut first = Some((-v, g.iter().map(|a| -a).collect::<Vec<f64>>(), h));
+    let quadratic = |x: &[f64]| -> Result<Quadratic, String> {
+        if let Some(q) = first.take() {
+            return Ok(q);
+        }
+        let mut g = vec![0.0; d];
+        let v = objective(post, x, Some(&mut g), physical).map_err(|e| e.to_string())?;
+        let h = hessian_of(post, x, physical).map_err(|e| e.to_string())?;
+        if !v.is_finite() || cholesky(&h, d).is_none() {
+            return Err("the Hessian is not positive definite".to_string());
+        }
+        Ok((-v, g.iter().map(|a| -a).collect(), h))
+    };
+    let value = |x: &[f64]| {
+        objective(post, x, None, physical)
+            .ok()
+            .filter(|v| v.is_finite())
+            .map_or(f64::INFINITY, |v| -v)
+    };
+    let out = super::lm::levenberg_marquardt(
+        x,
+        quadratic,
+        value,
+        &super::lm::LmParams {
+            max_iters: POLISH_ITERATIONS,
+            tol,
+            rel_tol: 0.0,
+            give_up_above: f64::INFINITY,
+        },
+    );
+    Ok((out.x, out.iterations as usize))
 }
+
+/// Iterations of [`polish`] at most.
+pub const POLISH_ITERATIONS: u64 = 20;
 
 /// Newton-polish an end point of a local search to the stationary point of its basin (the
 /// physical-MAP objective, as the search uses): L-BFGS stops on a gradient tolerance, which
