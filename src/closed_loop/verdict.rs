@@ -517,23 +517,18 @@ pub fn assess(
         ),
         Status::Confounded => {
             let c = &confounded[0];
-            let ranges = c
-                .ranges
-                .iter()
-                .map(|(n, lo, hi)| format!("{n} in [{lo:.4e}, {hi:.4e}]"))
-                .collect::<Vec<_>>()
-                .join(", ");
+            // "name in [lo, hi], ..."
+            let in_ranges = |r: &[(String, f64, f64)]| {
+                r.iter()
+                    .map(|(n, lo, hi)| format!("{n} in [{lo:.4e}, {hi:.4e}]"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            };
+            let ranges = in_ranges(&c.ranges);
             let others = if c.effects.is_empty() {
                 String::new()
             } else {
-                format!(
-                    ", and the other effects {}",
-                    c.effects
-                        .iter()
-                        .map(|(n, lo, hi)| format!("{n} in [{lo:.4e}, {hi:.4e}]"))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )
+                format!(", and the other effects {}", in_ranges(&c.effects))
             };
             let comb = c
                 .combination

@@ -110,8 +110,8 @@ pub fn diagnose_into_as(
     // With base springs accepted too, the springs' term ROM on every point's three directions
     // (12 inputs) would cost several times more per line: the pass keeps the measured
     // directions as inputs, and the three-direction mass at each accepted mass's point joins
-    // the springs' term ROM as a term of its own (`-w^2 m G`, the point's x, y and z loads
-    // among those that start its basis).
+    // the springs' term ROM as a term of its own (`-w^2 m G`, its basis enriched with the full
+    // model's responses with the mass on).
     let springs = accepted_of(&outcome, "base_springs");
     // The points (ids) whose three-direction mass is a term of the term ROM, in every later
     // pass.
@@ -421,12 +421,12 @@ fn accepted_mass_points(outcome: &super::summary::LoopOutcome) -> Vec<u32> {
 }
 
 /// Set up the study's model, data and engines (with every measured point's x, y and z
-/// directions when `all_directions`) and run the loop, with the three-direction masses of
-/// the points `sensor_terms` as terms of the term ROM ([`super::TermParams::sensor_masses`]). With the setup of an `earlier` pass on
-/// the same structure and data (the measured directions' pass), its measurement grids are
-/// kept and its engine sweeps what lies in the measured directions
-/// ([`super::directions::ThreeDirections`]). The outcome's timings start with the setup's
-/// (`engine`); the setup is returned beside it (a later pass may build on it).
+/// directions when `all_directions`) and run the loop, with the three-direction masses of the
+/// points `sensor_terms` as terms of the term ROM ([`super::TermParams::sensor_masses`]). With
+/// the setup of an `earlier` pass on the same structure and data (the measured directions'
+/// pass), its measurement grids are kept and its engine sweeps what lies in the measured
+/// directions ([`super::directions::ThreeDirections`]). The outcome's timings start with the
+/// setup's (`engine`); the setup is returned beside it (a later pass may build on it).
 fn loop_once(
     study: &Study,
     model: Option<&str>,

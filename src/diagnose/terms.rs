@@ -152,29 +152,17 @@ pub fn with_sensor_directions(
 
 /// The term of a sensor's mass at point `id` in x, y and z on `model`, whose observation
 /// points `at` are that point's x, y and z directions ([`with_sensor_directions`]): `G =
-/// sum_d w_d w_d^T` per unit mass (`w_d` a direction's DOF weights), the mass matrix
-/// [`crate::fe::StructuralModel::with_point_masses`] adds, with the coefficient `-w^2 m`
+/// sum_d w_d w_d^T` per unit mass (`w_d` a direction's DOF weights,
+/// [`crate::fe::StructuralModel::point_mass_matrix`]), with the coefficient `-w^2 m`
 /// ([`TermMap::Inertia`]).
 pub fn sensor_mass_term(
     model: &crate::fe::StructuralModel,
     id: u32,
     at: [usize; 3],
 ) -> Result<TermSpec, String> {
-    let n = model.n_dof();
-    let mut t = Vec::new();
-    for k in at {
-        let p = model
-            .points
-            .get(k)
-            .ok_or_else(|| format!("point index {k} is not a point of the model"))?;
-        for &(a, wa) in &p.dofs {
-            for &(b, wb) in &p.dofs {
-                t.push(faer::sparse::Triplet::new(a, b, wa * wb));
-            }
-        }
-    }
-    let g = crate::fe::model::SpMat::try_new_from_triplets(n, n, &t)
-        .map_err(|e| format!("a sensor's mass matrix: {e:?}"))?;
+    let g = model
+        .point_mass_matrix(&at.map(|k| (k, 1.0)))
+        .map_err(|e| format!("a sensor's mass matrix: {e}"))?;
     Ok(TermSpec {
         name: Effect::SensorMassTerm { id }.name(),
         matrix: g,
@@ -255,19 +243,16 @@ pub fn term_rom_for(
         .collect();
     let ids: Vec<u32> = sensors.iter().map(|(id, _)| *id).collect();
     let sensor_key = sensors.first().map(|(_, key)| (*key).clone());
+    let sensor_error =
+        |err: String| key_error(&p.study_file, sensor_key.clone().unwrap_or_default(), err);
     let located = |spec: &crate::fe::joint::JointSpec| {
-        with_sensor_directions(spec, &ids)
-            .map_err(|err| key_error(&p.study_file, sensor_key.clone().unwrap_or_default(), err))
+        with_sensor_directions(spec, &ids).map_err(sensor_error)
     };
     // The sensors' terms on `m`, whose points include their directions at `at`.
     let sensor_terms = |m: &crate::fe::StructuralModel, at: &[[usize; 3]]| {
         ids.iter()
             .zip(at)
-            .map(|(&id, &at)| {
-                sensor_mass_term(m, id, at).map_err(|err| {
-                    key_error(&p.study_file, sensor_key.clone().unwrap_or_default(), err)
-                })
-            })
+            .map(|(&id, &at)| sensor_mass_term(m, id, at).map_err(sensor_error))
             .collect::<Result<Vec<_>, _>>()
     };
     let mut model = None;

@@ -76,17 +76,7 @@ impl StructuralModel {
                 trip.push(Triplet::new(ri[p], j, vals[p]));
             }
         }
-        for &(k, mass) in masses {
-            let pt = self.points.get(k).ok_or(ModelEditError::PointOutOfRange {
-                index: k,
-                n_points: self.points.len(),
-            })?;
-            for &(a, wa) in &pt.dofs {
-                for &(b, wb) in &pt.dofs {
-                    trip.push(Triplet::new(a, b, mass * wa * wb));
-                }
-            }
-        }
+        trip.extend(self.point_mass_triplets(masses)?);
         let m = SpMat::try_new_from_triplets(n, n, &trip).map_err(|e| ModelEditError::Sparse {
             what: "the mass matrix with point masses",
             detail: format!("{e:?}"),
@@ -95,6 +85,38 @@ impl StructuralModel {
         out.m = m;
         out.description = format!("{} + point masses {:?}", self.description, masses);
         Ok(out)
+    }
+
+    /// The mass matrix [`Self::with_point_masses`] adds for `masses`, alone:
+    /// `sum m_k w_k w_k^T` (n x n).
+    pub fn point_mass_matrix(&self, masses: &[(usize, f64)]) -> Result<SpMat, ModelEditError> {
+        let n = self.n_dof();
+        SpMat::try_new_from_triplets(n, n, &self.point_mass_triplets(masses)?).map_err(|e| {
+            ModelEditError::Sparse {
+                what: "the point masses' mass matrix",
+                detail: format!("{e:?}"),
+            }
+        })
+    }
+
+    /// The entries `m_k w_k w_k^T` of `masses` (point index, kg).
+    fn point_mass_triplets(
+        &self,
+        masses: &[(usize, f64)],
+    ) -> Result<Vec<faer::sparse::Triplet<usize, usize, f64>>, ModelEditError> {
+        let mut trip = Vec::new();
+        for &(k, mass) in masses {
+            let pt = self.points.get(k).ok_or(ModelEditError::PointOutOfRange {
+                index: k,
+                n_points: self.points.len(),
+            })?;
+            for &(a, wa) in &pt.dofs {
+                for &(b, wb) in &pt.dofs {
+                    trip.push(faer::sparse::Triplet::new(a, b, mass * wa * wb));
+                }
+            }
+        }
+        Ok(trip)
     }
 }
 

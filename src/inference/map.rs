@@ -538,26 +538,28 @@ fn polish(
     physical: bool,
 ) -> Result<(Vec<f64>, usize), DensityError> {
     let d = x.len();
-    // The start's value, gradient and Hessian: their errors are the caller's.
-    let mut g = vec![0.0; d];
-    let v = objective(post, x, Some(&mut g), physical)?;
-    let h = hessian_of(post, x, physical)?;
-    if cholesky(&h, d).is_none() {
+    // The objective -log p, its gradient (g holds that of log p) and its Hessian at `x`.
+    let at = |x: &[f64]| -> Result<Quadratic, DensityError> {
+        let mut g = vec![0.0; d];
+        let v = objective(post, x, Some(&mut g), physical)?;
+        let h = hessian_of(post, x, physical)?;
+        Ok((-v, g.iter().map(|a| -a).collect(), h))
+    };
+    // The start's: their errors are the caller's.
+    let start = at(x)?;
+    if cholesky(&start.2, d).is_none() {
         return Ok((x.to_vec(), 0));
     }
-    // (g holds the gradient of log p: the objective is -log p)
-    let mut first = Some((-v, g.iter().map(|a| -a).collect::<Vec<f64>>(), h));
+    let mut first = Some(start);
     let quadratic = |x: &[f64]| -> Result<Quadratic, String> {
         if let Some(q) = first.take() {
             return Ok(q);
         }
-        let mut g = vec![0.0; d];
-        let v = objective(post, x, Some(&mut g), physical).map_err(|e| e.to_string())?;
-        let h = hessian_of(post, x, physical).map_err(|e| e.to_string())?;
-        if !v.is_finite() || cholesky(&h, d).is_none() {
+        let q = at(x).map_err(|e| e.to_string())?;
+        if !q.0.is_finite() || cholesky(&q.2, d).is_none() {
             return Err("the Hessian is not positive definite".to_string());
         }
-        Ok((-v, g.iter().map(|a| -a).collect(), h))
+        Ok(q)
     };
     let value = |x: &[f64]| {
         objective(post, x, None, physical)

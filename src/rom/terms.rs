@@ -123,6 +123,14 @@ impl TermMap {
             _ => 1.0,
         }
     }
+    /// `f(v)` at the line `omega`: `f(v) r(w)`, the factor of `(offset + per_modulus E*) G`.
+    pub fn f_at(&self, v: f64, omega: f64) -> f64 {
+        self.f(v) * self.line_factor(omega)
+    }
+    /// Its derivative in `v`, `f'(v) r(w)`.
+    pub fn df_at(&self, v: f64, omega: f64) -> f64 {
+        self.df(v) * self.line_factor(omega)
+    }
     /// `f(v)`.
     pub fn f(&self, v: f64) -> f64 {
         match *self {
@@ -332,8 +340,7 @@ impl TermRom {
     ) -> (Vec<C64>, Option<Vec<C64>>) {
         let n = self.rom.n_r;
         let add = |z: &mut [C64], t: &TermCoef| {
-            let map = self.maps[t.index];
-            let c = map.f(t.value) * map.line_factor(omega) * (t.offset + t.per_modulus * e);
+            let c = self.maps[t.index].f_at(t.value, omega) * (t.offset + t.per_modulus * e);
             let g = &self.g_r[t.index];
             // (G symmetric: its column i, contiguous, is its row i.)
             for i in 0..n {
@@ -528,9 +535,7 @@ impl TermRom {
                     let mut v = sx.col(k, jj);
                     for (t, g) in terms.iter().zip(&gx) {
                         if let (true, Some(g)) = (t.per_modulus != 0.0, g) {
-                            let map = self.maps[t.index];
-                            v += map.f(t.value)
-                                * map.line_factor(omega)
+                            v += self.maps[t.index].f_at(t.value, omega)
                                 * t.per_modulus
                                 * g.col(k, jj);
                         }
@@ -553,9 +558,8 @@ impl TermRom {
                         dt[k][i * ni + jj] = dot(yi, gy_j, jj) / (t.offset + t.per_modulus * e);
                         continue;
                     }
-                    let map = self.maps[t.index];
                     let dc =
-                        map.df(t.value) * map.line_factor(omega) * (t.offset + t.per_modulus * e);
+                        self.maps[t.index].df_at(t.value, omega) * (t.offset + t.per_modulus * e);
                     let g = gx[k].as_ref().expect("computed for this term's own column");
                     dt[k][i * ni + jj] = -dc * dot(xi, g, jj);
                 }

@@ -34,6 +34,33 @@ fn term(effect: Effect, value: f64, free: bool) -> EffectTerm {
     }
 }
 
+/// 40 lines over the band that are not a certificate's (rad/s).
+fn check_lines() -> Vec<f64> {
+    (0..40)
+        .map(|k| TAU * (2.0 + 495.0 * k as f64 / 39.0 + 0.29))
+        .collect()
+}
+
+/// The accelerance of the full sparse `model` with `m` kg at each of the points `xyz` (a
+/// point's x, y and z directions), driven at `drive`, at `outs` and the lines `w`, Model 4 at
+/// [`TRUTH`].
+fn full_model_with_sensor(
+    model: &rfmlab::fe::StructuralModel,
+    xyz: [usize; 3],
+    m: f64,
+    drive: usize,
+    outs: &[usize],
+    w: &[f64],
+) -> Vec<rfmlab::common::C64> {
+    let heavy = model.with_point_masses(&xyz.map(|k| (k, m))).unwrap();
+    let full = FullModel::new(&heavy, &[drive], FullParams::default()).unwrap();
+    ForwardModel::new(&full, &Model4, w, drive, outs, None)
+        .unwrap()
+        .exact(&TRUTH, false)
+        .unwrap()
+        .values
+}
+
 #[test]
 fn sensor_mass_on_the_rom_equals_the_full_model_with_the_mass_on() {
     let mut spec = JointSpec::paper();
@@ -77,21 +104,9 @@ fn sensor_mass_on_the_rom_equals_the_full_model_with_the_mass_on() {
         cert.max_rel_error,
         cert.error_history
     );
-    let w: Vec<f64> = (0..40)
-        .map(|k| TAU * (2.0 + 495.0 * k as f64 / 39.0 + 0.29))
-        .collect();
+    let w = check_lines();
     let m = 0.009;
-    let reference = {
-        let heavy = model
-            .with_point_masses(&[(ix, m), (iy, m), (iz, m)])
-            .unwrap();
-        let full = FullModel::new(&heavy, &[drive], FullParams::default()).unwrap();
-        ForwardModel::new(&full, &Model4, &w, drive, &outs, None)
-            .unwrap()
-            .exact(&TRUTH, false)
-            .unwrap()
-            .values
-    };
+    let reference = full_model_with_sensor(&model, [ix, iy, iz], m, drive, &outs, &w);
     let with = |effect: Effect| {
         let mut fm = ForwardModel::new(&rom, &Model4, &w, drive, &outs, None).unwrap();
         fm.set_effects(Effects {
@@ -294,21 +309,9 @@ fn sensor_mass_as_a_term_equals_the_full_model_with_the_mass_on() {
         4,
         "the measured points only"
     );
-    let w: Vec<f64> = (0..40)
-        .map(|k| TAU * (2.0 + 495.0 * k as f64 / 39.0 + 0.29))
-        .collect();
+    let w = check_lines();
     let m = 0.012;
-    let reference = {
-        let heavy = model
-            .with_point_masses(&[(ix, m), (iy, m), (iz, m)])
-            .unwrap();
-        let full = FullModel::new(&heavy, &[drive], FullParams::default()).unwrap();
-        ForwardModel::new(&full, &Model4, &w, drive, &outs, None)
-            .unwrap()
-            .exact(&TRUTH, false)
-            .unwrap()
-            .values
-    };
+    let reference = full_model_with_sensor(&model, [ix, iy, iz], m, drive, &outs, &w);
     let forward = |effect: Effect, value: f64, free: bool| {
         let mut fm = ForwardModel::new(&rom, &Model4, &w, drive, &outs, None).unwrap();
         fm.set_effects(Effects {
