@@ -363,8 +363,9 @@ pub fn refit_law<'a>(
             None => law_starts(alt, old, &phys[..n_old], &omega),
         };
     post.likelihood.forward.law = alt;
-    // The profile: each start's other parameters (effects too) follow by Gauss-Newton steps
-    // on the data with the profiled parameter held; the smallest weighted residual wins.
+    // The profile: each start's other parameters (effects too) follow by Levenberg-Marquardt
+    // iterations on the data with the profiled parameter held; the smallest weighted residual
+    // wins.
     let v = post.likelihood.variances(&phys[n_model..]);
     let held: Vec<usize> = profiled_index(alt).into_iter().collect();
     // With a term of the term ROM, the profile and the refit run on the measurement bias
@@ -383,7 +384,7 @@ pub fn refit_law<'a>(
         {
             continue;
         }
-        let Ok(Some((p, q))) = profile_point(&post.likelihood, &v, p, &held) else {
+        let Some((p, q)) = profile_point(&post.likelihood, &v, p, &held) else {
             continue;
         };
         if best.as_ref().is_none_or(|b| q < b.2) {
@@ -464,65 +465,67 @@ pub fn refit_law<'a>(
     Ok((row, passes.then_some((priors, r))))
 }
 
-/// Gauss-Newton steps per start in [`refit_law`]'s profile.
+/// Levenberg-Marquardt iterations per start in [`refit_law`]'s profile.
 pub const PROFILE_STEPS: usize = 6;
 
-/// [`PROFILE_STEPS`] Gauss-Newton steps of the forward model's parameters `p` except `held`
-/// (columns scaled by `|p_i|`, step halved until the weighted residual sum of squares
-/// `sum |X - E[H1]|^2 / v` drops and the parameters stay admissible). Returns the end point
-/// and its sum, None when `p` itself is not admissible.
+/// The profile's stop: a Newton decrement (the decrease of `-log L` the Gauss-Newton model
+/// still predicts) below this many nats. The profile picks a start; the refit polishes it.
+pub const PROFILE_TOL_NATS: f64 = 1e-2;
+
+/// The forward model's parameters `p` except `held` followed by at most [`PROFILE_STEPS`]
+/// iterations of the crate's Levenberg-Marquardt ([`crate::inference::lm`]) on half the
+/// weighted residual sum of squares `sum |X - E[H1]|^2 / v` with its Gauss-Newton curvature
+/// (columns scaled by `|p_i|` at the start; an inadmissible point has an infinite value).
+/// Returns the end point and its sum, None when `p` itself is not admissible or the forward
+/// model fails there.
 fn profile_point(
     lik: &crate::inference::likelihood::FrfLikelihood<'_>,
     v: &[f64],
-    mut p: Vec<f64>,
+    p: Vec<f64>,
     held: &[usize],
-) -> Result<Option<(Vec<f64>, f64)>, ClosedLoopError> {
+) -> Option<(Vec<f64>, f64)> {
+    use crate::inference::lm::{levenberg_marquardt, LmParams, Quadratic};
     let fm = &lik.forward;
-    let np = p.len();
     let wrss = |p: &[f64]| -> Option<f64> {
         fm.check(p).ok()?;
         let pred = fm.predict(p, false).ok()?;
         let s = super::weighted_rss(&lik.data.values, &pred.values, v);
         s.is_finite().then_some(s)
     };
-    let Some(mut q) = wrss(&p) else {
-        return Ok(None);
+    wrss(&p)?;
+    let free: Vec<usize> = (0..p.len()).filter(|i| !held.contains(i)).collect();
+    let scale: Vec<f64> = free
+        .iter()
+        .map(|&i| if p[i] != 0.0 { p[i].abs() } else { 1.0 })
+        .collect();
+    // The search's coordinates: p_i = p0_i + scale_i y_i for the free parameters.
+    let at = |y: &[f64]| {
+        let mut q = p.clone();
+        for ((&i, s), y) in free.iter().zip(&scale).zip(y) {
+            q[i] += s * y;
+        }
+        q
     };
-    for _ in 0..PROFILE_STEPS {
-        let pred = fm.predict(&p, true)?;
-        let free: Vec<usize> = (0..np).filter(|i| !held.contains(i)).collect();
-        let k = free.len();
-        let scale: Vec<f64> = free
-            .iter()
-            .map(|&i| if p[i] != 0.0 { p[i].abs() } else { 1.0 })
-            .collect();
-        let (g, a) = super::normal_equations(&lik.data.values, &pred, v, &free, &scale);
-        let Some(l) = crate::linalg::dense::cholesky(&a, k) else {
-            break;
-        };
-        let d = crate::linalg::dense::chol_solve(&l, k, &g);
-        let mut f = 1.0;
-        let mut moved = false;
-        for _ in 0..8 {
-            let mut trial = p.clone();
-            for (ii, &i) in free.iter().enumerate() {
-                trial[i] += f * d[ii] * scale[ii];
-            }
-            if let Some(qt) = wrss(&trial) {
-                if qt < q {
-                    p = trial;
-                    q = qt;
-                    moved = true;
-                    break;
-                }
-            }
-            f *= 0.5;
-        }
-        if !moved {
-            break;
-        }
-    }
-    Ok(Some((p, q)))
+    let quadratic = |y: &[f64]| -> Result<Quadratic, String> {
+        let q = at(y);
+        let s = wrss(&q).ok_or("the forward model is not admissible or not finite")?;
+        let pred = fm.predict(&q, true).map_err(|e| e.to_string())?;
+        let (score, info) = super::normal_equations(&lik.data.values, &pred, v, &free, &scale);
+        Ok((0.5 * s, score.iter().map(|g| -g).collect(), info))
+    };
+    let value = |y: &[f64]| wrss(&at(y)).map_or(f64::INFINITY, |s| 0.5 * s);
+    let out = levenberg_marquardt(
+        &vec![0.0; free.len()],
+        quadratic,
+        value,
+        &LmParams {
+            max_iters: PROFILE_STEPS as u64,
+            tol: PROFILE_TOL_NATS,
+            rel_tol: 0.0,
+            give_up_above: f64::INFINITY,
+        },
+    );
+    out.f.is_finite().then(|| (at(&out.x), 2.0 * out.f))
 }
 
 #[cfg(test)]

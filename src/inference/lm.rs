@@ -1,6 +1,9 @@
 //! Levenberg-Marquardt on an objective with a Gauss-Newton curvature: the one damped
-//! Newton loop of the crate (the MAP's polish and Gauss-Newton search, the closed loop's law
-//! fits to a modulus curve).
+//! Newton loop of the crate (the MAP's polish and Gauss-Newton search, the closed loop's
+//! refits, its alternative laws' fits to a modulus curve and their profiles on the data, the
+//! circle fit). The profile race of a candidate effect's start
+//! ([`crate::closed_loop::start`]) takes single Gauss-Newton steps of many points in turn,
+//! not a search to a stop.
 //!
 //! At `x` with value `f`, gradient `g` and curvature `H` (positive semi-definite), the step
 //! `s = -(H + lambda D)^-1 g`, `D = diag(max(|H_ii|, 1e-12 max_j |H_jj|))`, is taken when the

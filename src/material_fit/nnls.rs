@@ -1,51 +1,57 @@
 //! Non-negative least squares, min ||A x - b|| subject to x >= 0, by the active-set method of
 //! Lawson and Hanson (1974, *Solving Least Squares Problems*, ch. 23, algorithm NNLS). The
-//! unconstrained sub-problems on the passive set are solved by Householder QR on
-//! unit-norm columns.
+//! unconstrained sub-problems on the passive set are solved by faer's Householder QR
+//! (sequential, so bit-identical whatever the thread count) on unit-norm columns.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::householder;
+use faer::linalg::qr::no_pivoting::factor;
+use faer::{Conj, Mat, Par};
 
 /// Least squares `min ||A z - b||` over the columns `cols` of the row-major `m x n` matrix `a`
-/// (Householder QR; columns are expected scaled). Returns `z` (one value per entry of `cols`).
+/// (Householder QR; columns are expected scaled, and no more of them than rows). A column whose
+/// diagonal entry of `R` is below 1e-12 (numerically dependent on the others) gets `z = 0`.
+/// Returns `z` (one value per entry of `cols`).
 fn lstsq(a: &[f64], m: usize, n: usize, cols: &[usize], b: &[f64]) -> Vec<f64> {
     let k = cols.len();
-    // Column-major copy of the selected columns.
-    let mut q: Vec<Vec<f64>> = cols
-        .iter()
-        .map(|&j| (0..m).map(|i| a[i * n + j]).collect())
-        .collect();
-    let mut r = b.to_vec();
-    for c in 0..k {
-        let norm = q[c][c..].iter().map(|v| v * v).sum::<f64>().sqrt();
-        if norm == 0.0 {
-            continue;
-        }
-        let alpha = if q[c][c] > 0.0 { -norm } else { norm };
-        let mut v: Vec<f64> = q[c][c..].to_vec();
-        v[0] -= alpha;
-        let vn = v.iter().map(|x| x * x).sum::<f64>();
-        if vn == 0.0 {
-            continue;
-        }
-        for col in q.iter_mut().skip(c) {
-            let d = v.iter().zip(&col[c..]).map(|(a, b)| a * b).sum::<f64>() * 2.0 / vn;
-            for (t, vi) in col[c..].iter_mut().zip(&v) {
-                *t -= d * vi;
-            }
-        }
-        let d = v.iter().zip(&r[c..]).map(|(a, b)| a * b).sum::<f64>() * 2.0 / vn;
-        for (t, vi) in r[c..].iter_mut().zip(&v) {
-            *t -= d * vi;
-        }
-    }
+    let size = m.min(k);
+    let mut qr = Mat::from_fn(m, k, |i, c| a[i * n + cols[c]]);
+    let block = factor::recommended_block_size::<f64>(m, k);
+    let mut coeff = Mat::<f64>::zeros(block, size);
+    factor::qr_in_place(
+        qr.as_mut(),
+        coeff.as_mut(),
+        Par::Seq,
+        MemStack::new(&mut MemBuffer::new(factor::qr_in_place_scratch::<f64>(
+            m,
+            k,
+            block,
+            Par::Seq,
+            Default::default(),
+        ))),
+        Default::default(),
+    );
+    // Q^T b.
+    let mut qtb = Mat::from_fn(m, 1, |i, _| b[i]);
+    householder::apply_block_householder_sequence_transpose_on_the_left_in_place_with_conj(
+        qr.as_ref().get(.., ..size),
+        coeff.as_ref(),
+        Conj::No,
+        qtb.as_mut(),
+        Par::Seq,
+        MemStack::new(&mut MemBuffer::new(
+            householder::apply_block_householder_sequence_transpose_on_the_left_in_place_scratch::<
+                f64,
+            >(m, block, 1),
+        )),
+    );
     // Back substitution R z = Q^T b, dropping numerically dependent columns.
     let tol = 1e-12;
     let mut z = vec![0.0; k];
-    for c in (0..k).rev() {
-        let mut s = r[c];
-        for j in c + 1..k {
-            s -= q[j][c] * z[j];
-        }
-        z[c] = if q[c][c].abs() > tol {
-            s / q[c][c]
+    for c in (0..size).rev() {
+        let s = qtb[(c, 0)] - (c + 1..k).map(|j| qr[(c, j)] * z[j]).sum::<f64>();
+        z[c] = if qr[(c, c)].abs() > tol {
+            s / qr[(c, c)]
         } else {
             0.0
         };

@@ -31,6 +31,9 @@
 use super::ModalError;
 use crate::common::{C64, J};
 use crate::data::Quantity;
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::lu::partial_pivoting::{factor, solve};
+use faer::{Conj, Mat, Par};
 
 const TWO_PI: f64 = 2.0 * std::f64::consts::PI;
 
@@ -347,32 +350,40 @@ fn parabola_vertex(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> Option<(f64, 
     Some((xv, yv))
 }
 
-/// Solve the 3x3 system m x = b by Gaussian elimination with partial pivoting.
-fn solve3(mut m: [[f64; 3]; 3], mut b: [f64; 3]) -> Option<[f64; 3]> {
-    for col in 0..3 {
-        let piv = (col..3).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs()))?;
-        if m[piv][col].abs() < 1e-300 {
-            return None;
-        }
-        m.swap(col, piv);
-        b.swap(col, piv);
-        let pivot_row = m[col];
-        for row in col + 1..3 {
-            let f = m[row][col] / pivot_row[col];
-            for (mk, pk) in m[row].iter_mut().zip(&pivot_row).skip(col) {
-                *mk -= f * pk;
-            }
-            b[row] -= f * b[col];
-        }
+/// Solve the 3x3 system m x = b by faer's LU with partial pivoting (sequential); None when a
+/// pivot is below 1e-12 of the largest entry of `m` (numerically singular: collinear points
+/// have no circle) or the solution is not finite.
+fn solve3(m: [[f64; 3]; 3], b: [f64; 3]) -> Option<[f64; 3]> {
+    let largest = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
+    let mut lu = Mat::from_fn(3, 3, |i, j| m[i][j]);
+    let (mut fwd, mut bwd) = ([0usize; 3], [0usize; 3]);
+    factor::lu_in_place(
+        lu.as_mut(),
+        &mut fwd,
+        &mut bwd,
+        Par::Seq,
+        MemStack::new(&mut MemBuffer::new(
+            factor::lu_in_place_scratch::<usize, f64>(3, 3, Par::Seq, Default::default()),
+        )),
+        Default::default(),
+    );
+    if !(0..3).all(|i| lu[(i, i)].abs() > 1e-12 * largest) {
+        return None;
     }
-    let mut x = [0.0; 3];
-    for row in (0..3).rev() {
-        let mut acc = b[row];
-        for k in row + 1..3 {
-            acc -= m[row][k] * x[k];
-        }
-        x[row] = acc / m[row][row];
-    }
+    let mut x = Mat::from_fn(3, 1, |i, _| b[i]);
+    solve::solve_in_place_with_conj(
+        lu.as_ref(),
+        lu.as_ref(),
+        faer::perm::PermRef::new_checked(&fwd, &bwd, 3),
+        Conj::No,
+        x.as_mut(),
+        Par::Seq,
+        MemStack::new(&mut MemBuffer::new(solve::solve_in_place_scratch::<
+            usize,
+            f64,
+        >(3, 1, Par::Seq))),
+    );
+    let x = [x[(0, 0)], x[(1, 0)], x[(2, 0)]];
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
