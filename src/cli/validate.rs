@@ -92,7 +92,7 @@ fn run_shard_into(
     let secs = run_and_write(spec, &setup, setup_s, shard, dir, &|| {
         pb.inc(1);
         let k = done.fetch_add(1, Ordering::Relaxed) + 1;
-        if k % step == 0 || k == n {
+        if k.is_multiple_of(step) || k == n {
             log.say(&format!("{k} of {n} units done"));
         }
     })?;

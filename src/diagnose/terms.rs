@@ -338,12 +338,17 @@ pub fn term_rom_for(
     let model = model.as_ref().unwrap_or(&built.model);
     let key = crate::rom::cache::term_key(model, engine.inputs(), &params, &specs);
     let file = p.cache.join(format!("terms-{}.json", &key[..16]));
-    if let Some(hit) = crate::rom::cache::load_terms(&file, &key) {
-        return Ok(Some(hit));
-    }
-    let (rom, cert) = build_term_rom(model, engine.inputs(), &params, &specs)
-        .map_err(|e| RunError::Engine(e.to_string()))?;
-    // A cache that cannot be written costs time next run, nothing else.
-    let _ = crate::rom::cache::save_terms(&file, &key, &rom, &cert);
-    Ok(Some((rom, cert)))
+    let (hit, _) = crate::rom::cache::load_or_build(
+        &file,
+        |f| crate::rom::cache::load_terms(f, &key),
+        || {
+            build_term_rom(model, engine.inputs(), &params, &specs)
+                .map_err(|e| RunError::Engine(e.to_string()))
+        },
+        // A cache that cannot be written costs time next run, nothing else.
+        |f, (rom, cert)| {
+            let _ = crate::rom::cache::save_terms(f, &key, rom, cert);
+        },
+    )?;
+    Ok(Some(hit))
 }

@@ -222,7 +222,7 @@ pub fn structured_mesh(
         }
     }
     let coord = |v: &[f64], l: usize| {
-        if l % 2 == 0 {
+        if l.is_multiple_of(2) {
             v[l / 2]
         } else {
             0.5 * (v[l / 2] + v[l / 2 + 1])

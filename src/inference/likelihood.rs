@@ -159,7 +159,7 @@ impl ChannelCorrelation {
     /// Estimate from standardised residuals `s` (`[line * n + k]`) over a window of `window`
     /// lines centred on each line (clipped at the ends), shrunk towards the identity.
     pub fn estimate(s: &[C64], n: usize, window: usize) -> Result<Self, LikelihoodError> {
-        if n == 0 || s.len() % n != 0 || window < 2 {
+        if n == 0 || !s.len().is_multiple_of(n) || window < 2 {
             return Err(LikelihoodError::Data(format!(
                 "channel correlation: {} residuals for {n} channels, window {window} (at least 2 lines)",
                 s.len()

@@ -9,6 +9,11 @@
 //! ROMs with terms (degraded bond strips, adherend damping, base springs; minutes to build,
 //! certify and compress) are cached the same way ([`term_key`], [`save_terms`],
 //! [`load_terms`]), their key adding every term's matrix and settings.
+//!
+//! Runs may share a cache folder (two studies of one joint, a test suite's threads). Through
+//! [`load_or_build`], an entry missing from the cache is built by one of them while the others
+//! that want the same key wait (an exclusive lock on its `.lock` file beside it) and then read
+//! it, instead of each building it again.
 
 use super::reduced::ReducedModel;
 use super::terms::{pinvs, TermCertificate, TermMap, TermRom, TermSpec};
@@ -201,6 +206,49 @@ fn write_atomic<T: Serialize>(path: &Path, value: &T) -> std::io::Result<()> {
     crate::fs_atomic::write_atomic_bytes(path, &text)
 }
 
+/// The cached entry at `path` if `load` reads it, else the one `build` makes, saved with
+/// `save`; and whether it came from the cache. Between the first miss and the save, the
+/// entry's lock (`path` with the extension `lock`, created beside it) is held exclusively: a
+/// run, in this process or another, that misses the same entry meanwhile waits and then reads
+/// what this one saved. Where the lock cannot be taken (a read-only folder, a file system
+/// without locks) each run builds its own, as without it. The lock is released when the build
+/// ends, also by an error or a panic (and by the system when a process dies).
+pub fn load_or_build<T, E>(
+    path: &Path,
+    load: impl Fn(&Path) -> Option<T>,
+    build: impl FnOnce() -> Result<T, E>,
+    save: impl FnOnce(&Path, &T),
+) -> Result<(T, bool), E> {
+    if let Some(hit) = load(path) {
+        return Ok((hit, true));
+    }
+    let _lock = lock_entry(path);
+    // Built by another run while this one waited for the lock.
+    if let Some(hit) = load(path) {
+        return Ok((hit, true));
+    }
+    let value = build()?;
+    save(path, &value);
+    Ok((value, false))
+}
+
+/// The exclusive lock of the entry at `path` (held while the file is open); None where it
+/// cannot be taken.
+fn lock_entry(path: &Path) -> Option<std::fs::File> {
+    let lock = path.with_extension("lock");
+    if let Some(dir) = lock.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).ok()?;
+    }
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .truncate(false)
+        .write(true)
+        .open(&lock)
+        .ok()?;
+    file.lock().ok()?;
+    Some(file)
+}
+
 /// Save a ROM and its certificate under `key` (atomic write).
 pub fn save(path: &Path, key: &str, rom: &ReducedModel, cert: &Certificate) -> std::io::Result<()> {
     write_atomic(
@@ -353,4 +401,52 @@ pub fn load_terms(path: &Path, key: &str) -> Option<(TermRom, TermCertificate)> 
         },
         j.certificate,
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::load_or_build;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    #[test]
+    fn a_missing_entry_is_built_once_by_runs_that_want_it_at_the_same_time() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cache").join("rom-0123456789abcdef.json");
+        let builds = AtomicUsize::new(0);
+        let from_cache = AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            for _ in 0..4 {
+                s.spawn(|| {
+                    let (value, hit) = load_or_build(
+                        &path,
+                        |p| std::fs::read_to_string(p).ok(),
+                        || {
+                            builds.fetch_add(1, Ordering::SeqCst);
+                            std::thread::sleep(std::time::Duration::from_millis(200));
+                            Ok::<_, String>("the entry".to_string())
+                        },
+                        |p, v| crate::fs_atomic::write_atomic_bytes(p, v.as_bytes()).unwrap(),
+                    )
+                    .unwrap();
+                    assert_eq!(value, "the entry");
+                    if hit {
+                        from_cache.fetch_add(1, Ordering::SeqCst);
+                    }
+                });
+            }
+        });
+        assert_eq!(builds.load(Ordering::SeqCst), 1, "built once");
+        assert_eq!(from_cache.load(Ordering::SeqCst), 3, "read by the others");
+        assert!(path.with_extension("lock").is_file());
+        // A build that fails saves nothing and leaves the entry to the next run.
+        let other = dir.path().join("cache").join("rom-fedcba9876543210.json");
+        let failed = load_or_build(
+            &other,
+            |p| std::fs::read_to_string(p).ok(),
+            || Err::<String, _>("no basis".to_string()),
+            |_, _| unreachable!(),
+        );
+        assert_eq!(failed.unwrap_err(), "no basis");
+        assert!(!other.exists());
+    }
 }

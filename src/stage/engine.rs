@@ -174,21 +174,21 @@ pub fn build_engine(
             };
             let key = crate::rom::cache::key(&built.model, &inputs, &params);
             let cache_file = rom_cache.map(|d| d.join(format!("rom-{}.json", &key[..16])));
-            let cached = cache_file
-                .as_deref()
-                .and_then(|f| crate::rom::cache::load(f, &key));
-            let from_cache = cached.is_some();
-            let (rom, cert) = match cached {
-                Some(rc) => rc,
-                None => {
-                    let rc = crate::rom::build_rom(&built.model, &inputs, &params)
-                        .map_err(|e| RunError::Engine(e.to_string()))?;
-                    if let Some(f) = &cache_file {
-                        // A cache that cannot be written costs time next run, nothing else.
+            let build = || {
+                crate::rom::build_rom(&built.model, &inputs, &params)
+                    .map_err(|e| RunError::Engine(e.to_string()))
+            };
+            let ((rom, cert), from_cache) = match &cache_file {
+                Some(f) => crate::rom::cache::load_or_build(
+                    f,
+                    |f| crate::rom::cache::load(f, &key),
+                    build,
+                    // A cache that cannot be written costs time next run, nothing else.
+                    |f, rc| {
                         let _ = crate::rom::cache::save(f, &key, &rc.0, &rc.1);
-                    }
-                    rc
-                }
+                    },
+                )?,
+                None => (build()?, false),
             };
             let mut grid_note = String::new();
             // The measurement model's grid, chosen per level by convergence at the first
