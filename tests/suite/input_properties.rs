@@ -31,7 +31,7 @@
 //!
 //! RFMLAB_PROPTEST_VERBOSE=1 prints every case with its exit code and time.
 //!
-//! The number of generated cases is RFMLAB_PROPTEST_CASES (default 360, plus the fixed cases),
+//! The number of generated cases is RFMLAB_PROPTEST_CASES (default 180, plus the fixed cases),
 //! split between study files and data files; the seed is fixed, so a run is reproducible. More:
 //! `RFMLAB_PROPTEST_CASES=5000 cargo test --release --test suite input_properties:: -- --nocapture`.
 
@@ -55,7 +55,7 @@ fn case_budget() -> usize {
     std::env::var("RFMLAB_PROPTEST_CASES")
         .ok()
         .and_then(|s| s.parse().ok())
-        .unwrap_or(360)
+        .unwrap_or(180)
 }
 
 /// SplitMix64: a small deterministic generator, the same stream on every machine.
