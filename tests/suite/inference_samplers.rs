@@ -15,48 +15,14 @@ use rfmlab::inference::{
 
 // ---------------------------------------------------------------- small dense linear algebra
 
-/// Lower Cholesky factor of a row-major SPD matrix.
+/// Lower Cholesky factor of a row-major SPD matrix (the library's, unit-tested in
+/// `linalg::dense`).
 fn chol(a: &[f64], d: usize) -> Vec<f64> {
-    let mut l = vec![0.0; d * d];
-    for i in 0..d {
-        for j in 0..=i {
-            let mut s = a[i * d + j];
-            for k in 0..j {
-                s -= l[i * d + k] * l[j * d + k];
-            }
-            l[i * d + j] = if i == j {
-                assert!(s > 0.0, "not SPD");
-                s.sqrt()
-            } else {
-                s / l[j * d + j]
-            };
-        }
-    }
-    l
+    rfmlab::linalg::dense::cholesky(a, d).expect("not SPD")
 }
 
 fn inverse(a: &[f64], d: usize) -> Vec<f64> {
-    let l = chol(a, d);
-    let mut inv = vec![0.0; d * d];
-    for c in 0..d {
-        // Solve L y = e_c, then L^T x = y.
-        let mut y = vec![0.0; d];
-        for i in 0..d {
-            let mut s = if i == c { 1.0 } else { 0.0 };
-            for k in 0..i {
-                s -= l[i * d + k] * y[k];
-            }
-            y[i] = s / l[i * d + i];
-        }
-        for i in (0..d).rev() {
-            let mut s = y[i];
-            for k in i + 1..d {
-                s -= l[k * d + i] * inv[k * d + c];
-            }
-            inv[i * d + c] = s / l[i * d + i];
-        }
-    }
-    inv
+    rfmlab::linalg::dense::chol_inverse(&chol(a, d), d)
 }
 
 fn log_det(a: &[f64], d: usize) -> f64 {
