@@ -202,7 +202,7 @@ impl<'p, 'a> ClosedLoop<'p, 'a> {
     /// One round: score, rank, refit, the alternative laws, accept.
     pub(super) fn round(&mut self, index: usize) -> Result<RoundOutcome, ClosedLoopError> {
         let mut round = self.score(index)?;
-        let queue = self.rank(&mut round)?;
+        let queue = self.rank(&mut round);
         self.refit(&mut round, queue)?;
         self.refit_laws(&mut round)?;
         self.accept(round)
@@ -249,6 +249,9 @@ impl<'p, 'a> ClosedLoop<'p, 'a> {
             });
         }
         self.clock.time(format!("round {}: score tests", index + 1));
+        // The current model's residual (post holds it until the first refit): whether the
+        // score is trusted in `rank`, and the profile ranking's reference.
+        let now = super::residuals(self.post, &phys)?;
         let n = scored.len();
         Ok(Round {
             index,
@@ -258,8 +261,8 @@ impl<'p, 'a> ClosedLoop<'p, 'a> {
             scored,
             starts,
             profiles: vec![None; n],
-            wrss: f64::NAN,
-            chi2: f64::NAN,
+            wrss: now.chi2,
+            chi2: now.chi2_normalised,
             best: None,
             best_law: None,
             springs_fit: None,
@@ -269,22 +272,18 @@ impl<'p, 'a> ClosedLoop<'p, 'a> {
     /// Rank the candidates by score and return the refit queue: the `top` with p below the
     /// threshold and, where the score is trusted (the residual near noise), a predicted
     /// evidence gain within the margin of the threshold.
-    fn rank(&mut self, round: &mut Round<'a>) -> Result<Vec<usize>, ClosedLoopError> {
+    fn rank(&self, round: &mut Round<'a>) -> Vec<usize> {
         round.scored.sort_by(|a, b| b.score.total_cmp(&a.score));
         for (i, c) in round.scored.iter_mut().enumerate() {
             c.rank = i + 1;
         }
-        // The current model's residual (post holds it until the first refit): whether the
-        // score is trusted here, and the profile ranking's reference.
-        let now = super::residuals(self.post, &round.phys)?;
-        (round.wrss, round.chi2) = (now.chi2, now.chi2_normalised);
         let p = self.params;
         let trusted = round.chi2 <= p.profile_rank_above;
         let cut = p.threshold_nats - p.predicted_gain_margin;
-        Ok((0..p.top.min(round.scored.len()))
+        (0..p.top.min(round.scored.len()))
             .filter(|&ci| round.scored[ci].p_value < p.p_threshold)
             .filter(|&ci| !(trusted && round.scored[ci].predicted_gain < cut))
-            .collect())
+            .collect()
     }
 
     /// Refit the queued candidates; when none passes and the residual is far from noise, the

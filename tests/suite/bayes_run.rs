@@ -14,7 +14,7 @@ use std::time::{Duration, Instant};
 const BIN: &str = env!("CARGO_BIN_EXE_rfmlab");
 
 /// studies/bayes.toml cut down to seconds: band 10-60 Hz, Level 1, Model 4, 2 short chains.
-fn study_text(out: &Path, extra_solver: &str) -> String {
+fn study_text(out: &Path) -> String {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("studies");
     let s = std::fs::read_to_string(root.join("bayes.toml")).unwrap();
     let data = root.join("data");
@@ -37,7 +37,7 @@ fn study_text(out: &Path, extra_solver: &str) -> String {
     .replace(
         "[solver]\nengine = \"rom\"",
         // Model 5 takes about 170 updates over 10-60 Hz: within the budget, not flagged.
-        &format!("[solver]\nengine = \"rom\"\nmax_iterations = 300\n{extra_solver}"),
+        "[solver]\nengine = \"rom\"\nmax_iterations = 300\n",
     )
     .replace(
         "sensitivity = false",
@@ -45,17 +45,16 @@ fn study_text(out: &Path, extra_solver: &str) -> String {
     )
 }
 
-fn write_study(dir: &Path, name: &str, extra_solver: &str) -> (PathBuf, PathBuf) {
+fn write_study(dir: &Path, name: &str) -> (PathBuf, PathBuf) {
     let out = dir.join(format!("results_{name}")).join("bayes_test");
     std::fs::create_dir_all(out.parent().unwrap()).unwrap();
     let file = dir.join(format!("{name}.toml"));
-    std::fs::write(&file, study_text(&out, extra_solver)).unwrap();
+    std::fs::write(&file, study_text(&out)).unwrap();
     (file, out)
 }
 
-/// `rfmlab run file`: with `cache` its certified ROM is read from (or saved to) that folder,
-/// without it the ROM is built (`--no-cache`).
-fn run(file: &Path, cache: Option<&Path>) -> (i32, String) {
+/// `rfmlab run file` with its certified ROM read from (or saved to) the folder `cache`.
+fn run(file: &Path, cache: &Path) -> (i32, String) {
     let o = command(file, cache).output().unwrap();
     (
         o.status.code().unwrap_or(-1),
@@ -63,13 +62,11 @@ fn run(file: &Path, cache: Option<&Path>) -> (i32, String) {
     )
 }
 
-fn command(file: &Path, cache: Option<&Path>) -> Command {
+fn command(file: &Path, cache: &Path) -> Command {
     let mut c = Command::new(BIN);
-    c.args(["run", file.to_str().unwrap()]).env("CI", "1");
-    match cache {
-        Some(dir) => c.env("RFMLAB_ROM_CACHE", dir),
-        None => c.arg("--no-cache").env_remove("RFMLAB_ROM_CACHE"),
-    };
+    c.args(["run", file.to_str().unwrap()])
+        .env("CI", "1")
+        .env("RFMLAB_ROM_CACHE", cache);
     c
 }
 
@@ -106,8 +103,8 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
     // Uninterrupted reference; its certified ROM is saved for the interrupted run (the ROM
     // build is most of a run's time; the run with one thread builds its own).
     let cache = dir.path().join("rom-cache");
-    let (fa, outa) = write_study(dir.path(), "a", "");
-    let (code, err) = run(&fa, Some(&cache));
+    let (fa, outa) = write_study(dir.path(), "a");
+    let (code, err) = run(&fa, &cache);
     assert_eq!(code, 0, "{err}");
     for t in ["draws", "summary", "starts", "laplace", "sampler_runs"] {
         assert!(
@@ -151,9 +148,9 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
     assert!(n >= 16, "compared {n} values");
 
     // Interrupted run: kill -9 once sampling has checkpointed something, then run again.
-    let (fb, outb) = write_study(dir.path(), "b", "");
+    let (fb, outb) = write_study(dir.path(), "b");
     let ckpt = outb.parent().unwrap().join(".checkpoints");
-    let mut child = command(&fb, Some(&cache))
+    let mut child = command(&fb, &cache)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -178,7 +175,7 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
         !outb.join("draws.parquet").exists(),
         "killed before the results were written"
     );
-    let (code, err) = run(&fb, Some(&cache));
+    let (code, err) = run(&fb, &cache);
     assert_eq!(code, 0, "{err}");
     assert_eq!(rom_builds(&outa), 1, "the reference run builds its ROM");
     assert_eq!(rom_builds(&outb), 0, "the resumed run reads the cached ROM");
@@ -223,7 +220,7 @@ fn walk(dir: &Path) -> usize {
 #[test]
 fn bad_inference_input_exits_2_naming_the_key() {
     let dir = tempfile::tempdir().unwrap();
-    let (f, _) = write_study(dir.path(), "bad", "");
+    let (f, _) = write_study(dir.path(), "bad");
     let good = std::fs::read_to_string(&f).unwrap();
     let cases: [(&str, &str, &str); 9] = [
         (
