@@ -39,9 +39,9 @@ pub struct PosteriorResult {
     pub samplers: Vec<SamplerResult>,
     /// Unconstrained coordinates of the study's initial values (start 0 of the search).
     pub initial_x: Vec<f64>,
-    /// With the measurement bias linearised at the MAP: (draws checked, sd over them of
-    /// log L exact - log L linearised, log mean exp of that difference), in nats.
-    pub linearisation_check: Option<(usize, f64, f64)>,
+    /// With the measurement bias linearised at the MAP: the exact operator against it on
+    /// posterior draws, and the evidence correction it gives.
+    pub linearisation_check: Option<super::linearisation::LinearisationCheck>,
     /// Sentences for the report about the noise model as fitted (e.g. the channels'
     /// estimated correlation).
     pub notes: Vec<String>,
@@ -240,7 +240,7 @@ pub fn infer_level(
         let linearisation_check = super::linearisation::to_exact(&mut post, &mut samplers, nl);
         step_seconds.push(("linearisation check".into(), t_step.elapsed().as_secs_f64()));
         let t_step = Instant::now();
-        let lin_shift = linearisation_check.map_or(0.0, |r| r.2);
+        let lin_shift = linearisation_check.map_or((0.0, 0.0), |r| (r.shift, r.shift_se));
         let compare = super::compare::compare(
             &run.checkpoints,
             inf,

@@ -1,65 +1,83 @@
 //! Small dense Cholesky helpers on row-major `d x d` slices, for the few-parameter matrices
-//! of the inference (Hessians, covariances, Levenberg-Marquardt normal equations).
-//!
-//! These stay hand-written loops while the other dense factorisations of the crate are faer's:
-//! faer's blocked Cholesky rounds differently in the last bits, and on `studies/bayes.toml` that
-//! moved Model 5's three evidence estimates together by +0.66 nats at L1 and -1.88 nats at L2
-//! (Models 3 and 4 by less than 1e-7 nats; Model 5's fit is 5e5 nats short of Model 4's), a
-//! sensitivity to rounding of that model's evidence, not a better value.
+//! of the inference (Hessians, covariances, Levenberg-Marquardt normal equations). The
+//! factorisation and the triangular solves are faer's, run sequentially (`Par::Seq`) so that
+//! results are bit-identical whatever the thread count; the slices keep the callers' layout.
 
-/// Cholesky of a symmetric d x d matrix (row-major); None when not positive definite (or not
-/// finite).
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::{factor, solve};
+use faer::{Conj, Mat, MatRef, Par};
+
+/// Cholesky factor `L` (row-major, zero above the diagonal) of a symmetric d x d matrix
+/// (row-major; only its lower triangle is read); None when not positive definite or not
+/// finite.
 pub fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; d * d];
-    for i in 0..d {
-        for j in 0..=i {
-            let mut s = a[i * d + j];
-            for k in 0..j {
-                s -= l[i * d + k] * l[j * d + k];
-            }
-            if i == j {
-                if !(s > 0.0) || !s.is_finite() {
-                    return None;
-                }
-                l[i * d + i] = s.sqrt();
-            } else {
-                l[i * d + j] = s / l[j * d + j];
-            }
-        }
+    debug_assert_eq!(a.len(), d * d);
+    let lower_finite = (0..d).all(|i| (0..=i).all(|j| a[i * d + j].is_finite()));
+    if !lower_finite {
+        return None;
     }
-    Some(l)
+    let mut l = Mat::from_fn(d, d, |i, j| if j <= i { a[i * d + j] } else { 0.0 });
+    let mut mem = MemBuffer::new(factor::cholesky_in_place_scratch::<f64>(
+        d,
+        Par::Seq,
+        Default::default(),
+    ));
+    factor::cholesky_in_place(
+        l.as_mut(),
+        Default::default(),
+        Par::Seq,
+        MemStack::new(&mut mem),
+        Default::default(),
+    )
+    .ok()?;
+    // A pivot of zero, or one that overflowed, is not a factor to solve with.
+    if !(0..d).all(|i| l[(i, i)] > 0.0 && l[(i, i)].is_finite()) {
+        return None;
+    }
+    Some(
+        (0..d * d)
+            .map(|ij| {
+                let (i, j) = (ij / d, ij % d);
+                if j <= i {
+                    l[(i, j)]
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+    )
+}
+
+/// Solve `L L^T X = B` in place for the columns of `b` (d x k).
+fn solve_columns(l: &[f64], d: usize, b: &mut Mat<f64>) {
+    let l = MatRef::from_row_major_slice(l, d, d);
+    let k = b.ncols();
+    let mut mem = MemBuffer::new(solve::solve_in_place_scratch::<f64>(d, k, Par::Seq));
+    solve::solve_in_place_with_conj(l, Conj::No, b.as_mut(), Par::Seq, MemStack::new(&mut mem));
 }
 
 /// Solve `L L^T x = b`.
 pub fn chol_solve(l: &[f64], d: usize, b: &[f64]) -> Vec<f64> {
-    let mut y = b.to_vec();
-    for i in 0..d {
-        for k in 0..i {
-            y[i] -= l[i * d + k] * y[k];
-        }
-        y[i] /= l[i * d + i];
-    }
-    for i in (0..d).rev() {
-        for k in i + 1..d {
-            y[i] -= l[k * d + i] * y[k];
-        }
-        y[i] /= l[i * d + i];
-    }
-    y
+    let mut x = Mat::from_fn(d, 1, |i, _| b[i]);
+    solve_columns(l, d, &mut x);
+    (0..d).map(|i| x[(i, 0)]).collect()
 }
 
-/// Inverse of a positive definite matrix from its Cholesky factor.
+/// Inverse (row-major) of a positive definite matrix from its Cholesky factor.
 pub fn chol_inverse(l: &[f64], d: usize) -> Vec<f64> {
-    let mut inv = vec![0.0; d * d];
-    for j in 0..d {
-        let mut e = vec![0.0; d];
-        e[j] = 1.0;
-        let c = chol_solve(l, d, &e);
-        for i in 0..d {
-            inv[i * d + j] = c[i];
-        }
-    }
-    inv
+    let mut x = Mat::<f64>::identity(d, d);
+    solve_columns(l, d, &mut x);
+    // The inverse is symmetric; its lower triangle is mirrored so that it is exactly so.
+    (0..d * d)
+        .map(|ij| {
+            let (i, j) = (ij / d, ij % d);
+            if j <= i {
+                x[(i, j)]
+            } else {
+                x[(j, i)]
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -113,7 +131,7 @@ mod tests {
                 let e: f64 = (0..d).map(|k| a[i * d + k] * inv[k * d + j]).sum();
                 let want = if i == j { 1.0 } else { 0.0 };
                 assert!((e - want).abs() < 1e-10, "({i}, {j}) {e}");
-                assert!((inv[i * d + j] - inv[j * d + i]).abs() < 1e-12 * inv[i * d + i].abs());
+                assert_eq!(inv[i * d + j], inv[j * d + i]);
             }
         }
     }

@@ -94,8 +94,8 @@ pub struct Comparison {
 }
 
 /// Comparison of one model at one level: see the module documentation. `samplers` carry the
-/// evidence already corrected to the exact measurement model by `lin_shift` (nats), which is
-/// added to the stepping-stone and Laplace estimates here too. The stepping-stone replicas are
+/// evidence already corrected to the exact measurement model by `lin_shift` (nats, with its
+/// standard error), which is added to the stepping-stone and Laplace estimates here too. The stepping-stone replicas are
 /// checkpointed in `checkpoints`; `at` names the stage and gives its seed.
 #[allow(clippy::too_many_arguments)]
 pub fn compare(
@@ -104,7 +104,7 @@ pub fn compare(
     post: &FrfPosterior<'_>,
     map: &MapResult,
     samplers: &[SamplerResult],
-    lin_shift: f64,
+    lin_shift: (f64, f64),
     at: &At<'_>,
     progress: &(dyn Fn(Event) + Sync),
 ) -> Result<Comparison, RunError> {
@@ -117,7 +117,7 @@ pub fn compare(
     c.evidence.push(EvidenceRow {
         estimator: "laplace".into(),
         prior: "declared".into(),
-        log_evidence: map.laplace.log_evidence + lin_shift,
+        log_evidence: map.laplace.log_evidence + lin_shift.0,
         se: f64::NAN,
         n_loglik: map.evaluations as u64,
         seconds: f64::NAN,
@@ -137,7 +137,8 @@ pub fn compare(
     if let Some(ss) = &inf.stepping_stone {
         let (mut row, notes) =
             stepping_stone::run(checkpoints, ss, post, map, samplers, at, progress)?;
-        row.log_evidence += lin_shift;
+        row.log_evidence += lin_shift.0;
+        row.se = row.se.hypot(lin_shift.1);
         c.evidence.push(row);
         c.notes.extend(notes);
     }
@@ -151,8 +152,8 @@ pub fn compare(
                     c.evidence.push(EvidenceRow {
                         estimator: est,
                         prior: "declared".into(),
-                        log_evidence: r.log_evidence + lin_shift,
-                        se: r.se,
+                        log_evidence: r.log_evidence + lin_shift.0,
+                        se: r.se.hypot(lin_shift.1),
                         n_loglik: r.n_loglik,
                         seconds: r.seconds,
                     });

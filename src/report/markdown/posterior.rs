@@ -84,13 +84,19 @@ pub(super) fn section(
         for note in &p.notes {
             rep.paragraph(note);
         }
-        if let Some((n, sd, lme)) = p.linearisation_check {
+        if let Some(c) = p.linearisation_check {
+            let (n, sd, lme, se, k) = (c.draws, c.sd, c.shift, c.shift_se, c.pareto_k);
             rep.paragraph(&format!(
-                "The samplers saw the H1 measurement model's bias linearised at the MAP (`[inference] measurement = \"linearised\"`). On {n} posterior draws the exact operator's log likelihood minus the linearised one has sd {sd:.2e} nats and log mean exp {lme:+.3e} nats; the latter is added to the evidence estimates (importance sampling from the linearised posterior). {}",
+                "The samplers saw the H1 measurement model's bias linearised at the MAP (`[inference] measurement = \"linearised\"`). On {n} posterior draws the exact operator's log likelihood minus the linearised one has sd {sd:.2e} nats and log mean exp {lme:+.3e} +- {se:.1e} nats (Pareto k {k:.2}); the latter is added to the evidence estimates (importance sampling from the linearised posterior) and its standard error joins theirs. {}{}",
                 if sd > 0.3 {
                     "WARNING: the sd exceeds 0.3 nats, so this posterior's shape is not the exact one's. It happens when the model misfits the data by far more than the noise (the residual multiplies the linearisation's second-order error); for such a model the comparison is decided by the evidence gap, but for its exact posterior rerun with `measurement = \"exact\"`."
                 } else {
                     "The posterior's shape is the exact operator's."
+                },
+                if c.reliable() {
+                    ""
+                } else {
+                    " WARNING: the importance weights' Pareto k exceeds 0.7, so the correction (and every evidence of this model) is uncertain by more than its standard error says."
                 }
             ));
         }
