@@ -876,7 +876,8 @@ impl LinearBias {
 
 /// Step in `ln p` of the central differences of the measurement bias in the law's parameters
 /// (a posterior sd of `ln p` is a few 1e-4 on the default data: the slope is the one across
-/// the posterior; the differencing error is second order in the step, 1e-8 of the slope).
+/// the posterior; the differencing error is second order in the step: 4e-8 of the slope on
+/// the suite's test chain).
 const BIAS_STEP_LN: f64 = 1e-4;
 
 impl ForwardModel<'_> {

@@ -95,8 +95,9 @@ pub struct Comparison {
 
 /// Comparison of one model at one level: see the module documentation. `samplers` carry the
 /// evidence already corrected to the exact measurement model by `lin_shift` (nats, with its
-/// standard error), which is added to the stepping-stone and Laplace estimates here too. The stepping-stone replicas are
-/// checkpointed in `checkpoints`; `at` names the stage and gives its seed.
+/// standard error), which is added to the stepping-stone and Laplace estimates here too. The
+/// stepping-stone replicas are checkpointed in `checkpoints`; `at` names the stage and gives
+/// its seed.
 #[allow(clippy::too_many_arguments)]
 pub fn compare(
     checkpoints: &Checkpoints<'_>,
