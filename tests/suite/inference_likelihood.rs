@@ -428,6 +428,26 @@ fn measurement_prediction_is_linear_in_the_frf_and_reaches_the_mirror() {
     }
 }
 
+/// The linearisation tests' lines (2-240 Hz, every 2 Hz, in rad/s) and their H1 measurement
+/// model: Hann, 0.5 s blocks at 1024 Hz, a baseband force, with or without a shaker.
+fn hann_lines(shaker: Option<rfmlab::experiment::Shaker>) -> (Vec<f64>, MeasurementModel) {
+    let lines: Vec<f64> = (1..=120).map(|k| k as f64 * 2.0).collect();
+    let omega = lines.iter().map(|f| TAU * f).collect();
+    let mm = MeasurementModel::new(
+        EstimatorSpec {
+            window: Window::Hann,
+            block_s: 0.5,
+            fs_hz: 1024.0,
+            force_band_hz: (0.0, 240.0),
+            shaker,
+        },
+        &lines,
+        &MeasurementParams::default(),
+    )
+    .unwrap();
+    (omega, mm)
+}
+
 /// The measurement bias linearised at p0 (`ForwardModel::linearise_measurement`): equal to the
 /// exact operator at p0, and its error shrinks as the square of the distance from p0 (half the
 /// step, a quarter of the error): 2.7e-4 of |H| at the worst line and channel 1 % from p0
@@ -435,20 +455,7 @@ fn measurement_prediction_is_linear_in_the_frf_and_reaches_the_mirror() {
 #[test]
 fn linearised_measurement_bias_is_exact_at_p0_and_second_order_around_it() {
     let eng = engine();
-    let lines: Vec<f64> = (1..=120).map(|k| k as f64 * 2.0).collect();
-    let omega: Vec<f64> = lines.iter().map(|f| TAU * f).collect();
-    let mm = MeasurementModel::new(
-        EstimatorSpec {
-            window: Window::Hann,
-            block_s: 0.5,
-            fs_hz: 1024.0,
-            force_band_hz: (0.0, 240.0),
-            shaker: None,
-        },
-        &lines,
-        &MeasurementParams::default(),
-    )
-    .unwrap();
+    let (omega, mm) = hann_lines(None);
     let exact =
         ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(mm.clone())).unwrap();
     let mut lin = ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(mm)).unwrap();
@@ -850,23 +857,10 @@ fn gauss_newton_curvature_is_the_hessian_at_the_map_and_its_search_ends_at_the_l
 #[test]
 fn linearised_bias_with_a_shaker_keeps_the_exact_slope_at_p0() {
     let eng = engine();
-    let lines: Vec<f64> = (1..=120).map(|k| k as f64 * 2.0).collect();
-    let omega: Vec<f64> = lines.iter().map(|f| TAU * f).collect();
-    let mm = MeasurementModel::new(
-        EstimatorSpec {
-            window: Window::Hann,
-            block_s: 0.5,
-            fs_hz: 1024.0,
-            force_band_hz: (0.0, 240.0),
-            shaker: Some(rfmlab::experiment::Shaker {
-                armature_mass_kg: 0.02,
-                stinger_stiffness_n_m: 5.0e5,
-            }),
-        },
-        &lines,
-        &MeasurementParams::default(),
-    )
-    .unwrap();
+    let (omega, mm) = hann_lines(Some(rfmlab::experiment::Shaker {
+        armature_mass_kg: 0.02,
+        stinger_stiffness_n_m: 5.0e5,
+    }));
     let exact =
         ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(mm.clone())).unwrap();
     let mut lin = ForwardModel::new(&eng, &Model3, &omega, 1, &[0, 1, 2, 3], Some(mm)).unwrap();
