@@ -11,7 +11,7 @@ use faer::{Conj, Mat, MatRef, Par};
 /// (row-major; only its lower triangle is read); None when not positive definite or not
 /// finite.
 pub fn cholesky(a: &[f64], d: usize) -> Option<Vec<f64>> {
-    debug_assert_eq!(a.len(), d * d);
+    assert_eq!(a.len(), d * d);
     let lower_finite = (0..d).all(|i| (0..=i).all(|j| a[i * d + j].is_finite()));
     if !lower_finite {
         return None;

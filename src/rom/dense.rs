@@ -17,7 +17,7 @@ pub(crate) struct DenseLu {
 impl DenseLu {
     /// Factor a row-major n x n matrix; None when a pivot is zero or not finite.
     pub fn factor(n: usize, a: Vec<C64>) -> Option<DenseLu> {
-        debug_assert_eq!(a.len(), n * n);
+        assert_eq!(a.len(), n * n);
         DenseLu::from_mat(Mat::from_fn(n, n, |i, j| a[i * n + j]))
     }
 
@@ -25,7 +25,7 @@ impl DenseLu {
     /// storage is its column-major storage (read contiguously); None when a pivot is zero or
     /// not finite.
     pub fn factor_symmetric(n: usize, a: Vec<C64>) -> Option<DenseLu> {
-        debug_assert_eq!(a.len(), n * n);
+        assert_eq!(a.len(), n * n);
         DenseLu::from_mat(Mat::from_fn(n, n, |i, j| a[j * n + i]))
     }
 

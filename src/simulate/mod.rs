@@ -238,7 +238,7 @@ pub fn simulate(ex: &Experiment, progress: &dyn Fn()) -> Result<Simulated, Simul
         let t = std::time::Instant::now();
         let sim = simulate_level(plant, &chain).map_err(|e| at(&e))?;
         let level = sim.to_frf_level(&lv.name, &labels).map_err(|e| at(&e))?;
-        debug_assert_eq!(level.quantity, Quantity::Accelerance);
+        assert_eq!(level.quantity, Quantity::Accelerance);
         let mut tj = sim.truth.to_json();
         if let Some(o) = tj.as_object_mut() {
             o.insert("level".into(), json!(lv.name));
