@@ -268,6 +268,18 @@ fn validate(spec: &LapSpec) -> Result<(), FeError> {
     Ok(())
 }
 
+/// Most elements of a lap joint's mesh.
+const MAX_ELEMENTS: f64 = 2.0e6;
+
+fn too_many_elements(n_el: f64) -> FeError {
+    FeError::InvalidMesh {
+        key: format!("{KEY}.mesh.element_size"),
+        detail: format!(
+            "about {n_el:.0} elements is beyond what this program can assemble: use a coarser mesh"
+        ),
+    }
+}
+
 fn lap_grid(spec: &LapSpec) -> Result<LapGrid, FeError> {
     validate(spec)?;
     let g = &spec.geometry;
@@ -277,6 +289,16 @@ fn lap_grid(spec: &LapSpec) -> Result<LapGrid, FeError> {
     let h_end = (p.end_aspect * ta / p.y_adhesive as f64).min(h);
     let r = p.grading_ratio;
     let (x0, x1, x2) = (l - lo, l, 2.0 * l - lo);
+    let (t1, t2) = (g.lower_thickness_m, g.upper_thickness_m);
+    // the count before any coordinate is made: no element is longer than h, so the strips'
+    // length gives at least (2 l - lo) / h of them along x, and the other axes' counts are exact
+    let across = |t: f64| (p.y_strip as f64).max((t / h).ceil());
+    let ny_at_least = across(t1) + p.y_adhesive as f64 + across(t2);
+    let nz_at_least = p.z.map_or((g.width_m / h).ceil(), |z| z as f64);
+    let n_el_at_least = (x2 / h).ceil() * ny_at_least * nz_at_least;
+    if n_el_at_least > MAX_ELEMENTS {
+        return Err(too_many_elements(n_el_at_least));
+    }
     let mut xs = graded_partition(0.0, x0, None, Some(h_end), h, r);
     let nov0 = xs.len() - 1;
     let h_ov = (p.max_aspect * ta / p.y_adhesive as f64).min(h);
@@ -296,7 +318,6 @@ fn lap_grid(spec: &LapSpec) -> Result<LapGrid, FeError> {
             })
             .collect()
     };
-    let (t1, t2) = (g.lower_thickness_m, g.upper_thickness_m);
     let ns1 = p.y_strip.max(segment_divisions(t1, h));
     let ns2 = p.y_strip.max(segment_divisions(t2, h));
     let mut ys = uniform(0.0, t1, ns1);
@@ -307,13 +328,8 @@ fn lap_grid(spec: &LapSpec) -> Result<LapGrid, FeError> {
     let nz = p.z.unwrap_or_else(|| segment_divisions(g.width_m, h));
     let zs = uniform(0.0, g.width_m, nz);
     let n_el = (xs.len() - 1) as f64 * (ys.len() - 1) as f64 * nz as f64;
-    if n_el > 2.0e6 {
-        return Err(FeError::InvalidMesh {
-            key: format!("{KEY}.mesh.element_size"),
-            detail: format!(
-                "about {n_el:.0} elements is beyond what this program can assemble: use a coarser mesh"
-            ),
-        });
+    if n_el > MAX_ELEMENTS {
+        return Err(too_many_elements(n_el));
     }
     Ok(LapGrid {
         xs,
@@ -554,6 +570,24 @@ mod tests {
         let y = graded_partition(0.0, 0.025, Some(0.001), Some(0.001), 0.005, 1.5);
         let s: Vec<f64> = y.windows(2).map(|w| w[1] - w[0]).collect();
         assert!(s[0] < 0.0012 && s[s.len() - 1] < 0.0012, "{s:?}");
+    }
+
+    /// A mesh far beyond the element limit is refused from its counts, before any of its
+    /// coordinates are made (1e-9 m elements would need about 1e8 x coordinates).
+    #[test]
+    fn a_nanometre_element_size_is_refused_from_the_counts() {
+        let mut spec = LapSpec::reference();
+        spec.mesh.element_size_m = 1e-9;
+        let e = lap_mesh(&spec).unwrap_err();
+        assert_eq!(e.key(), "structure.lap.mesh.element_size", "{e}");
+        assert!(
+            e.detail().contains("beyond what this program can assemble"),
+            "{e}"
+        );
+        // the same limit on the counts made: many bond-line layers at a normal element size
+        let mut spec = LapSpec::reference();
+        spec.mesh.y_adhesive = 1 << 40;
+        assert!(lap_mesh(&spec).is_err());
     }
 
     #[test]

@@ -163,7 +163,7 @@ fn declared_adherend_damping_is_inferred_by_the_run() {
     study.output_dir = dir.path().join("declared_damping_out");
     let plan = study.plan().unwrap();
     assert!(plan.declared_terms.is_some());
-    let results = rfmlab::pipeline::run(&plan, &mut rfmlab::pipeline::Executor::new()).unwrap();
+    let results = rfmlab::pipeline::run(&plan, &mut crate::shared_rom_cache::executor()).unwrap();
     let post = &results.level("L1").unwrap().posteriors[0];
     let k = post
         .names

@@ -173,7 +173,7 @@ fn declared_mass_brings_the_deterministic_rfm_back_to_the_truth() {
         let opts = RunOptions {
             no_figures: true,
             output_dir: Some(dir.path().join(format!("out_{declare}"))),
-            rom_cache: None,
+            rom_cache: Some(crate::shared_rom_cache::runs_folder()),
         };
         let s = run_study(&study, &opts, &|_| {}).unwrap();
         let m4 = s

@@ -267,7 +267,7 @@ fn run(dir: &Path, name: &str, text: &str) -> rfmlab::report::RunSummary {
     let opts = RunOptions {
         no_figures: true,
         output_dir: Some(dir.join(name)),
-        rom_cache: None,
+        rom_cache: Some(crate::shared_rom_cache::runs_folder()),
     };
     run_study(&study, &opts, &|_| {}).unwrap_or_else(|e| panic!("{e}"))
 }

@@ -87,7 +87,7 @@ fn independent_time_domain_joint_posterior_holds_the_truth() {
     // in memory: Study::load -> plan -> pipeline::run
     let mut plan = study.plan().unwrap();
     plan.figures = false;
-    let mut ex = rfmlab::pipeline::Executor::new();
+    let mut ex = crate::shared_rom_cache::executor();
     let results = rfmlab::pipeline::run(&plan, &mut ex).unwrap_or_else(|e| panic!("{e}"));
     // the mesh's own error, which these data cannot show (they share the discretisation): the
     // first y mode (mode 2) of the default mesh is 1.8 % above the script's converged graded

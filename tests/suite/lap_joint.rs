@@ -306,7 +306,7 @@ figures = false
     let opts = RunOptions {
         no_figures: true,
         output_dir: Some(dir.join(format!("lap{k}_out"))),
-        rom_cache: None,
+        rom_cache: Some(crate::shared_rom_cache::runs_folder()),
     };
     let s = run_study(&study, &opts, &|_| {})
         .unwrap_or_else(|e| panic!("geometry {k} {g:?}: run: {e}"));

@@ -145,7 +145,7 @@ fn z_scores(dir: &Path, mesh: &str) -> Vec<(String, f64)> {
     let study = rfmlab::Study::load(&file).unwrap_or_else(|e| panic!("{e}"));
     let mut plan = study.plan().unwrap();
     plan.figures = false;
-    let results = rfmlab::pipeline::run(&plan, &mut rfmlab::pipeline::Executor::new())
+    let results = rfmlab::pipeline::run(&plan, &mut crate::shared_rom_cache::executor())
         .unwrap_or_else(|e| panic!("{e}"));
     let truth = json(&root().join("studies/data/virtual/converged/block5_off_end/truth.json"));
     let mut out = Vec::new();

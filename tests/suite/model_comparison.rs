@@ -74,11 +74,11 @@ fn loo_and_waic_equal_arviz_and_evidence_estimators_agree() {
     let out = dir.path().join("results").join("compare_test");
     let file = dir.path().join("compare.toml");
     std::fs::write(&file, study_text(&out)).unwrap();
-    // In memory (no ROM cache, as `rfmlab run --no-cache`); the parquet files are written only
-    // for ArviZ, which reads them as a user's notebook would.
+    // In memory (the ROM from the suite's cache); the parquet files are written only for
+    // ArviZ, which reads them as a user's notebook would.
     let study = rfmlab::Study::load(&file).unwrap_or_else(|e| panic!("{e}"));
     let plan = study.plan().unwrap_or_else(|e| panic!("{e}"));
-    let mut ex = rfmlab::pipeline::Executor::new();
+    let mut ex = crate::shared_rom_cache::executor();
     let results = rfmlab::pipeline::run(&plan, &mut ex).unwrap_or_else(|e| panic!("{e}"));
     rfmlab::report::write(&results, &out).unwrap_or_else(|e| panic!("{e}"));
 

@@ -313,7 +313,7 @@ fn replicates(correlation: &str, n_rep: usize) {
         &RunOptions {
             no_figures: true,
             output_dir: Some(out.clone()),
-            rom_cache: None,
+            rom_cache: Some(crate::shared_rom_cache::runs_folder()),
         },
         &|_| {},
     )

@@ -33,7 +33,7 @@ fn fit(dir: &Path, name: &str, text: &str) -> Vec<(String, [f64; 4])> {
     let opts = RunOptions {
         no_figures: true,
         output_dir: Some(dir.join(name)),
-        rom_cache: None,
+        rom_cache: Some(crate::shared_rom_cache::runs_folder()),
     };
     let summary = run_study(&study, &opts, &|_| {}).unwrap();
     summary

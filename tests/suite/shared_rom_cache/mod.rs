@@ -1,13 +1,16 @@
 //! One folder of certified ROMs and term ROMs for the suite's process, shared by the tests that
-//! diagnose the paper's joint (the closed loop on time-domain data, on the independent data):
+//! diagnose the paper's joint (the closed loop on time-domain data, on the independent data)
+//! and by the in-process runs whose ROM is a fixture rather than what the test measures:
 //! building and certifying them is most of a diagnosis, and a cached ROM is exact (its
 //! matrices are stored bit for bit, keyed by everything it depends on), so each is built once
-//! per run of the suite instead of once per test.
+//! per run of the suite instead of once per test. Tests that count the run's ROM builds (the
+//! default study, the loop inside the run) keep an executor without a cache.
 //!
 //! The folder is `<CARGO_TARGET_TMPDIR>/suite-rom-cache`, emptied at its first use in a process
 //! (no ROM of an earlier build of the code is read). A test's results folder `<dir>/<name>` has
 //! its cache at `<dir>/.rom-cache` (`rfmlab::stage::rom_cache_dir`); [`share`] makes that a
-//! link to the shared folder, and [`lock`] makes the tests' diagnoses take turns.
+//! link to the shared folder, and [`lock`] makes the tests' diagnoses take turns. Under cargo,
+//! `RFMLAB_ROM_CACHE` (`target/rom-cache`, .cargo/config.toml) takes the place of both.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -22,6 +25,23 @@ fn folder() -> &'static Path {
         std::fs::create_dir_all(&dir).unwrap();
         dir
     })
+}
+
+/// The ROM cache of the suite's in-process runs whose ROM is a fixture (not what the test
+/// measures): the folder `RFMLAB_ROM_CACHE` names (under cargo, `target/rom-cache`, which the
+/// `rfmlab` processes the tests start use as well), else the shared folder. A run that loads
+/// its ROM from it gives the results of the run that built it: the entry is that ROM, bit for
+/// bit, under a key of everything it depends on.
+pub fn runs_folder() -> PathBuf {
+    match std::env::var_os(rfmlab::stage::ROM_CACHE_ENV).filter(|d| !d.is_empty()) {
+        Some(d) => PathBuf::from(d),
+        None => folder().to_path_buf(),
+    }
+}
+
+/// An executor whose ROMs go through [`runs_folder`].
+pub fn executor() -> rfmlab::pipeline::Executor {
+    rfmlab::pipeline::Executor::new().rom_cache(runs_folder())
 }
 
 /// Make `<dir>/.rom-cache` (the ROM cache of results folders in `dir`) the shared folder.
