@@ -291,11 +291,16 @@ fn lap_grid(spec: &LapSpec) -> Result<LapGrid, FeError> {
     let (x0, x1, x2) = (l - lo, l, 2.0 * l - lo);
     let (t1, t2) = (g.lower_thickness_m, g.upper_thickness_m);
     // the count before any coordinate is made: no element is longer than h, so the strips'
-    // length gives at least (2 l - lo) / h of them along x, and the other axes' counts are exact
-    let across = |t: f64| (p.y_strip as f64).max((t / h).ceil());
+    // length gives at least (2 l - lo) / h of them along x, and the other axes' counts are
+    // exact ([`segment_divisions`] in floating point, so that no count overflows)
+    let divisions = |len: f64| {
+        let r = len / h;
+        (r - 1e-9 * r.max(1.0)).ceil().max(1.0)
+    };
+    let across = |t: f64| (p.y_strip as f64).max(divisions(t));
     let ny_at_least = across(t1) + p.y_adhesive as f64 + across(t2);
-    let nz_at_least = p.z.map_or((g.width_m / h).ceil(), |z| z as f64);
-    let n_el_at_least = (x2 / h).ceil() * ny_at_least * nz_at_least;
+    let nz_at_least = p.z.map_or_else(|| divisions(g.width_m), |z| z as f64);
+    let n_el_at_least = divisions(x2) * ny_at_least * nz_at_least;
     if n_el_at_least > MAX_ELEMENTS {
         return Err(too_many_elements(n_el_at_least));
     }
