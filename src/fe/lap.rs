@@ -578,7 +578,9 @@ mod tests {
     }
 
     /// A mesh far beyond the element limit is refused from its counts, before any of its
-    /// coordinates are made (1e-9 m elements would need about 1e8 x coordinates).
+    /// coordinates are made: 1e-9 m elements would need about 1e8 x coordinates (800 MB made,
+    /// then refused, before the count came first), and 2^40 bond-line layers 8 TB of y
+    /// coordinates, an allocation that aborts the process rather than return an error.
     #[test]
     fn a_nanometre_element_size_is_refused_from_the_counts() {
         let mut spec = LapSpec::reference();
@@ -589,7 +591,7 @@ mod tests {
             e.detail().contains("beyond what this program can assemble"),
             "{e}"
         );
-        // the same limit on the counts made: many bond-line layers at a normal element size
+        // many bond-line layers at a normal element size
         let mut spec = LapSpec::reference();
         spec.mesh.y_adhesive = 1 << 40;
         assert!(lap_mesh(&spec).is_err());
