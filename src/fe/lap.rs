@@ -31,7 +31,7 @@ use super::error::FeError;
 use super::joint::{
     assemble_joint_matrices, AdherendDamping, IsoMaterial, JointMatrices, MeshInfo, PointSpec,
 };
-use super::mesh::{segment_divisions, structured_mesh, HexMesh, Region};
+use super::mesh::{segment_divisions, segment_divisions_f64, structured_mesh, HexMesh, Region};
 use super::model::StructuralModel;
 use super::points::{map_point, PointMapping, SURFACE_TOL_M};
 use std::time::Instant;
@@ -291,12 +291,8 @@ fn lap_grid(spec: &LapSpec) -> Result<LapGrid, FeError> {
     let (x0, x1, x2) = (l - lo, l, 2.0 * l - lo);
     let (t1, t2) = (g.lower_thickness_m, g.upper_thickness_m);
     // the count before any coordinate is made: no element is longer than h, so the strips'
-    // length gives at least (2 l - lo) / h of them along x, and the other axes' counts are
-    // exact ([`segment_divisions`] in floating point, so that no count overflows)
-    let divisions = |len: f64| {
-        let r = len / h;
-        (r - 1e-9 * r.max(1.0)).ceil().max(1.0)
-    };
+    // length gives at least (2 l - lo) / h of them along x, and the other axes' counts are exact
+    let divisions = |len: f64| segment_divisions_f64(len, h);
     let across = |t: f64| (p.y_strip as f64).max(divisions(t));
     let ny_at_least = across(t1) + p.y_adhesive as f64 + across(t2);
     let nz_at_least = p.z.map_or_else(|| divisions(g.width_m), |z| z as f64);

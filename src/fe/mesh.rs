@@ -104,8 +104,14 @@ impl HexMesh {
 /// Number of equal parts for a segment of length `len` with target element size `h`:
 /// ceil(len / h) (with a 1e-9 relative slack so that 0.3 / 0.01 gives 30), at least 1.
 pub fn segment_divisions(len: f64, h: f64) -> usize {
+    segment_divisions_f64(len, h) as usize
+}
+
+/// [`segment_divisions`] as a float, for counting a mesh before making it: a count far beyond
+/// what can be allocated does not saturate.
+pub fn segment_divisions_f64(len: f64, h: f64) -> f64 {
     let r = len / h;
-    ((r - 1e-9 * r.max(1.0)).ceil() as usize).max(1)
+    (r - 1e-9 * r.max(1.0)).ceil().max(1.0)
 }
 
 /// Partition of [a, b] graded towards its ends: from a graded end the element sizes are
