@@ -42,8 +42,8 @@ pub struct Manifest {
     /// Start of the run, UTC, RFC 3339 (`2025-01-31T12:00:00Z`).
     pub started_utc: String,
     pub timings: Vec<StepTiming>,
-    /// Counts of costly steps beside the timings (e.g. `rom builds`: ROMs built and
-    /// certified by the run, 0 when loaded from the cache).
+    /// Counts of costly steps beside the timings (`rom builds`: ROMs built and certified by
+    /// the run; `rom cache loads`: ROMs read from the cache instead).
     #[serde(default)]
     pub counters: std::collections::BTreeMap<String, u64>,
     pub files: Vec<FileEntry>,

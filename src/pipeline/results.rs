@@ -353,8 +353,8 @@ impl Results {
     pub fn timings(&self) -> &[(String, f64)] {
         &self.timings
     }
-    /// Counters of the run (e.g. `rom builds`: ROMs built and certified, 0 when loaded from
-    /// the cache).
+    /// Counters of the run: `rom builds` (ROMs built and certified) and `rom cache loads` (ROMs
+    /// read from the cache instead).
     pub fn counters(&self) -> &[(String, u64)] {
         &self.counters
     }

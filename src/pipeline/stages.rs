@@ -154,6 +154,7 @@ pub(super) fn prepare(
     )?;
     progress(Event::Finish);
     ex.count("rom builds", engines.rom_builds);
+    ex.count("rom cache loads", engines.rom_cache_loads);
     ex.lap("engine")?;
     Ok(Prepared {
         laws,

@@ -102,6 +102,8 @@ pub struct Engines {
     pub likelihood: Option<Box<dyn FrfEngine>>,
     /// ROMs built and certified (0: full model, or loaded from the cache).
     pub rom_builds: u64,
+    /// ROMs read from the ROM cache instead (0: full model, or built).
+    pub rom_cache_loads: u64,
     /// The modulus box the deterministic engine is certified over (the ROM's); `None` for the
     /// full model, valid at every modulus.
     pub certified: Option<crate::rom::ModulusRange>,
@@ -158,6 +160,7 @@ pub fn build_engine(
             note: format!("engine: full model, {} DOFs", built.model.n_dof()),
             likelihood: None,
             rom_builds: 0,
+            rom_cache_loads: 0,
             certified: None,
         }),
         Engine::Rom => {
@@ -314,6 +317,7 @@ pub fn build_engine(
                 note,
                 likelihood: lik_engine,
                 rom_builds: u64::from(!from_cache),
+                rom_cache_loads: u64::from(from_cache),
                 certified: Some(params.range),
             })
         }

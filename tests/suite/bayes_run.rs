@@ -101,8 +101,9 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
     let Some(py) = python() else { return };
     let dir = tempfile::tempdir().unwrap();
     // Uninterrupted reference; its certified ROM is saved for the interrupted run (the ROM
-    // build is most of a run's time; the run with one thread builds its own).
-    let cache = dir.path().join("rom-cache");
+    // build is most of a run's time) in the suite's cache, where the seed test's runs of the
+    // same cut study find it as well.
+    let cache = crate::shared_rom_cache::runs_folder();
     let (fa, outa) = write_study(dir.path(), "a");
     let (code, err) = run(&fa, &cache);
     assert_eq!(code, 0, "{err}");
@@ -177,7 +178,11 @@ fn draws_read_by_arviz_give_rfmlab_s_diagnostics_and_a_killed_run_resumes_to_the
     );
     let (code, err) = run(&fb, &cache);
     assert_eq!(code, 0, "{err}");
-    assert_eq!(rom_builds(&outa), 1, "the reference run builds its ROM");
+    // The reference run builds the ROM or finds it built by the seed test's runs.
+    assert!(
+        rom_builds(&outa) <= 1,
+        "the reference run builds one ROM at most"
+    );
     assert_eq!(rom_builds(&outb), 0, "the resumed run reads the cached ROM");
     assert!(
         same_table(

@@ -50,6 +50,19 @@ fn run_case_with(
     candidates: Option<&str>,
 ) -> DiagnoseLevel {
     let (tag, study_text) = simulate_case(dir, name, seed, |e| e);
+    diagnose_case(dir, &tag, &study_text, name, seed, candidates)
+}
+
+/// The first level of the diagnosis of `study_text` (the case `name` simulated under `tag`) with
+/// `[closed_loop] candidates` replaced by `candidates` (TOML; `None`: the study's).
+fn diagnose_case(
+    dir: &Path,
+    tag: &str,
+    study_text: &str,
+    name: &str,
+    seed: Option<u64>,
+    candidates: Option<&str>,
+) -> DiagnoseLevel {
     let study_text = match candidates {
         Some(c) => {
             let line = study_text
@@ -59,7 +72,7 @@ fn run_case_with(
                 .to_string();
             study_text.replacen(&line, &format!("candidates = {c}"), 1)
         }
-        None => study_text,
+        None => study_text.to_string(),
     };
     let study_path = dir.join(format!("{tag}_study.toml"));
     std::fs::write(&study_path, &study_text).unwrap();
@@ -303,24 +316,76 @@ fn time_domain_resonator_at_the_drive_point_is_named() {
     assert_eq!(l.status, "explained", "{}", l.conclusion);
 }
 
-/// The FE model's own discretisation error: data simulated on a 2.5 mm mesh, identified on the
-/// study's 5 mm mesh (whose modes sit about 1.6 % high). No effect of the library takes that
-/// shape: the first pass ends `unexplained`, then the discretisation candidate re-evaluates the
-/// model on the mesh refined twice per direction. The level must end `explained` with
-/// `discretisation` the only accepted effect (sized by the refined element size), the
-/// adhesive's parameters within 3 sd of the truth, and the comparison in `mesh.parquet`. Here
-/// the first pass offers only the gains (the refined mesh is tried the same way after any
-/// unexplained end; about a minute); the ignored
+/// The meshes of a discretisation case: the study's element size and the data's, which is
+/// the study's refined twice per direction (the discretisation candidate's refined mesh).
+#[derive(Clone, Copy)]
+struct Meshes {
+    study_m: f64,
+    data_m: f64,
+}
+
+/// The acceptance case: the study's 5 mm mesh, data from 2.5 mm (`mesh_2p5mm`).
+const MESHES_5_MM: Meshes = Meshes {
+    study_m: 0.005,
+    data_m: 0.0025,
+};
+/// The same case one refinement coarser: a 10 mm study, data from 5 mm.
+const MESHES_10_MM: Meshes = Meshes {
+    study_m: 0.010,
+    data_m: 0.005,
+};
+
+/// `text` with its `element_size = ` line set to `h` (m).
+fn with_element_size(text: &str, h: f64) -> String {
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("element_size = "))
+        .expect("an element_size line")
+        .to_string();
+    text.replacen(&line, &format!("element_size = {h}"), 1)
+}
+
+/// The FE model's own discretisation error: data simulated on a mesh refined twice per
+/// direction, identified on the study's coarser mesh (on 5 mm against 2.5 mm the modes sit
+/// about 1.6 % high). No effect of the library takes that shape: the first pass ends
+/// `unexplained`, then the discretisation candidate re-evaluates the model on the mesh refined
+/// twice per direction. The level must end `explained` with `discretisation` the only accepted
+/// effect (sized by the refined element size), the adhesive's parameters within 3 sd of the
+/// truth, and the comparison in `mesh.parquet`. Here the first pass offers only the gains (the
+/// refined mesh is tried the same way after any unexplained end); the ignored
 /// `time_domain_mesh_error_is_explained_with_every_default_candidate` offers every default
 /// candidate.
 ///
 /// The mesh allowance runs after it in the same folder, so that the two meshes' reduced bases
-/// are built once.
+/// are built once. The suite runs both on a 10 mm study against 5 mm data (the refined mesh's
+/// ROM is the 5 mm joint's, 10 248 DOFs); the ignored `..._on_the_5_mm_study` runs the
+/// acceptance case itself, a 5 mm study against 2.5 mm data (67 224 DOFs: its two ROMs take
+/// about 2 minutes).
 #[test]
 fn time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds() {
     let dir = tempfile::tempdir().unwrap();
-    mesh_error_is_explained_by_the_refined_mesh(dir.path(), Some("[\"gain\", \"discretisation\"]"));
-    mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir.path());
+    let m = MESHES_10_MM;
+    mesh_error_is_explained_by_the_refined_mesh(
+        dir.path(),
+        m,
+        Some("[\"gain\", \"discretisation\"]"),
+    );
+    mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir.path(), m);
+}
+
+/// [`time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds`] on the study's
+/// own 5 mm mesh, against data from 2.5 mm.
+#[test]
+#[ignore = "slow: the 5 mm study against 2.5 mm data, 160-188 s alone in the test profile (two ROMs of the 67 224-DOF mesh); the suite runs the case one refinement coarser; run with --ignored"]
+fn time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds_on_the_5_mm_study() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = MESHES_5_MM;
+    mesh_error_is_explained_by_the_refined_mesh(
+        dir.path(),
+        m,
+        Some("[\"gain\", \"discretisation\"]"),
+    );
+    mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir.path(), m);
 }
 
 /// The mesh error with every default candidate in the first pass (the study's `"all"`; about 4
@@ -329,32 +394,43 @@ fn time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds() {
 #[ignore = "slow: the mesh-error case with every default candidate, 135 s in release; run with --ignored"]
 fn time_domain_mesh_error_is_explained_with_every_default_candidate() {
     let dir = tempfile::tempdir().unwrap();
-    mesh_error_is_explained_by_the_refined_mesh(dir.path(), None);
+    mesh_error_is_explained_by_the_refined_mesh(dir.path(), MESHES_5_MM, None);
 }
 
-/// The `mesh_2p5mm` case with `[closed_loop] candidates` replaced by `candidates` (TOML; `None`:
-/// the study's, every default candidate).
-fn mesh_error_is_explained_by_the_refined_mesh(dir: &Path, candidates: Option<&str>) {
-    let l = run_case_with(dir, "mesh_2p5mm", None, candidates);
+/// The `mesh_2p5mm` case with its data mesh and the study's from `meshes` and
+/// `[closed_loop] candidates` replaced by `candidates` (TOML; `None`: the study's, every
+/// default candidate).
+fn mesh_error_is_explained_by_the_refined_mesh(
+    dir: &Path,
+    meshes: Meshes,
+    candidates: Option<&str>,
+) {
+    let (tag, text) = simulate_case(dir, "mesh_2p5mm", None, |e| {
+        with_element_size(&e, meshes.data_m)
+    });
+    let text = with_element_size(&text, meshes.study_m);
+    let l = diagnose_case(dir, &tag, &text, "mesh_2p5mm", None, candidates);
     eprintln!("status {}: {}", l.status, l.verdict.sentence);
     assert_eq!(l.status, "explained", "{}", l.conclusion);
     let names: Vec<&str> = l.accepted.iter().map(|a| a.0.as_str()).collect();
     assert_eq!(names, ["discretisation"], "{}", l.conclusion);
-    let failures = judge(&l, "discretisation", false, Some(0.0025), 1.2);
+    let failures = judge(&l, "discretisation", false, Some(meshes.data_m), 1.2);
     assert!(failures.is_empty(), "failures:\n{}", failures.join("\n"));
-    let mesh = dir.join("td_mesh_2p5mm_0_out.diagnose/mesh.parquet");
+    let mesh = dir.join(format!("{tag}_out.diagnose/mesh.parquet"));
     assert!(mesh.is_file(), "{} missing", mesh.display());
 }
 
 /// `[closed_loop] mesh_allowance = true` on null data: the level stays `nothing_missing`, the
 /// refined mesh is compared but not taken (nothing to explain), and every Model 4 parameter's
 /// reported sd is its posterior sd widened by the Richardson estimate of its discretisation
-/// error on the 5 mm mesh, `sqrt(sd^2 + b^2)` with `b = |d| 4/3` (`d` the change between the two
+/// error on the study's mesh, `sqrt(sd^2 + b^2)` with `b = |d| 4/3` (`d` the change between the two
 /// meshes' starting fits, read from `mesh.parquet`), which covers the truth of a model that
 /// converges with the mesh.
-fn mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir: &Path) {
-    let (tag, text) = simulate_case(dir, "clean", None, |e| e);
-    let text = text.replace(
+fn mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir: &Path, meshes: Meshes) {
+    let (tag, text) = simulate_case(dir, "clean", None, |e| {
+        with_element_size(&e, meshes.study_m)
+    });
+    let text = with_element_size(&text, meshes.study_m).replace(
         "candidates = \"all\"",
         "candidates = [\"gain\"]\nmesh_allowance = true",
     );

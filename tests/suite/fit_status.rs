@@ -66,10 +66,14 @@ fn run(dir: &Path, name: &str, text: &str, json: bool) -> Run {
     std::fs::write(&file, text).unwrap();
     let out = dir.join(format!("out_{name}"));
     let mut c = Command::new(BIN);
-    // From `dir`: the ROM cache (beside the results, or RFMLAB_ROM_CACHE) stays in it.
+    // The ROMs through the suite's cache: the default study's is a fixture here, not what
+    // the test measures.
     c.args(["run", file.to_str().unwrap(), "-o", out.to_str().unwrap()])
         .current_dir(dir)
-        .env("RFMLAB_ROM_CACHE", dir.join("rom-cache"));
+        .env(
+            rfmlab::stage::ROM_CACHE_ENV,
+            crate::shared_rom_cache::runs_folder(),
+        );
     if json {
         c.arg("--json").env("CI", "1");
     } else {

@@ -334,8 +334,8 @@ engine = "full"
 
 {}
 [chain]
-band_hz = [10.0, 60.0]
-lines_hz = [10.0, 60.0, 2.0]
+band_hz = [10.0, 20.0]
+lines_hz = [10.0, 20.0, 2.0]
 fs_hz = 256.0
 block_s = 1.0
 overlap = 0.5

@@ -122,7 +122,7 @@ fn the_samplers_follow_the_plan_s_seed_not_the_thread_count() {
         plan.figures = false;
         plan.engine.threads = Some(threads);
         plan.output_dir = dir.path().join(format!("out_{seed}_{threads}"));
-        let mut ex = rfmlab::pipeline::Executor::new().rom_cache(dir.path().join("rom-cache"));
+        let mut ex = crate::shared_rom_cache::executor();
         let r = rfmlab::pipeline::run(&plan, &mut ex).unwrap();
         let (_, draws) = r.draws("L1", "model4", Some("nuts")).expect("NUTS draws");
         let bits: Vec<Vec<u64>> = draws

@@ -3,8 +3,8 @@
 //! and by the in-process runs whose ROM is a fixture rather than what the test measures:
 //! building and certifying them is most of a diagnosis, and a cached ROM is exact (its
 //! matrices are stored bit for bit, keyed by everything it depends on), so each is built once
-//! per run of the suite instead of once per test. Tests that count the run's ROM builds (the
-//! default study, the loop inside the run) keep an executor without a cache.
+//! per run of the suite instead of once per test. Tests that count the run's ROMs (the default
+//! study, the loop inside the run) count those built and those read from the cache.
 //!
 //! The folder is `<CARGO_TARGET_TMPDIR>/suite-rom-cache`, emptied at its first use in a process
 //! (no ROM of an earlier build of the code is read). A test's results folder `<dir>/<name>` has
