@@ -242,9 +242,12 @@ struct LuStorage {
     work: MemBuffer,
 }
 
-/// The most factors' storage a [`FullSolver`] keeps for reuse (one per thread that factors at
-/// the same time; more are freed).
-const SPARE_FACTORS: usize = 4;
+/// The most factors' storage a [`FullSolver`] keeps for reuse: one per thread of the pool that
+/// factors at the same time (no more memory than the factors in use at once held); more are
+/// freed.
+fn spare_factors() -> usize {
+    rayon::current_num_threads().max(1)
+}
 
 /// A symbolic LU analysis with the union pattern it was made for, shared by the models of
 /// that pattern (a term ROM's cases: the springs, a strip and the beam's damping keep the
@@ -404,7 +407,7 @@ impl Drop for FullLu<'_> {
                 .spare
                 .lock()
                 .unwrap_or_else(|poisoned| poisoned.into_inner());
-            if spare.len() < SPARE_FACTORS {
+            if spare.len() < spare_factors() {
                 spare.push(s);
             }
         }
