@@ -363,14 +363,7 @@ fn with_element_size(text: &str, h: f64) -> String {
 /// about 2 minutes).
 #[test]
 fn time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds() {
-    let dir = tempfile::tempdir().unwrap();
-    let m = MESHES_10_MM;
-    mesh_error_is_explained_by_the_refined_mesh(
-        dir.path(),
-        m,
-        Some("[\"gain\", \"discretisation\"]"),
-    );
-    mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir.path(), m);
+    mesh_error_then_allowance(MESHES_10_MM);
 }
 
 /// [`time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds`] on the study's
@@ -378,14 +371,19 @@ fn time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds() {
 #[test]
 #[ignore = "slow: the 5 mm study against 2.5 mm data, 160-188 s alone in the test profile (two ROMs of the 67 224-DOF mesh); the suite runs the case one refinement coarser; run with --ignored"]
 fn time_domain_mesh_error_is_explained_and_the_mesh_allowance_widens_the_sds_on_the_5_mm_study() {
+    mesh_error_then_allowance(MESHES_5_MM);
+}
+
+/// The mesh-error case on `meshes` with the gains and the refined mesh as candidates, then the
+/// mesh allowance on null data in the same folder (its reduced bases built once).
+fn mesh_error_then_allowance(meshes: Meshes) {
     let dir = tempfile::tempdir().unwrap();
-    let m = MESHES_5_MM;
     mesh_error_is_explained_by_the_refined_mesh(
         dir.path(),
-        m,
+        meshes,
         Some("[\"gain\", \"discretisation\"]"),
     );
-    mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir.path(), m);
+    mesh_allowance_widens_the_adhesive_sds_by_the_mesh_change(dir.path(), meshes);
 }
 
 /// The mesh error with every default candidate in the first pass (the study's `"all"`; about 4

@@ -34,22 +34,7 @@ fn default_study_in_memory_meets_the_truth() {
     let mut ex = crate::shared_rom_cache::executor();
     let results = rfmlab::pipeline::run(&plan, &mut ex).unwrap();
     let model4 = rfmlab::material::model_from_name("model4", None).unwrap();
-    let count = |name: &str| {
-        results
-            .counters()
-            .iter()
-            .find(|c| c.0 == name)
-            .map_or(0, |c| c.1)
-    };
-    assert_eq!(
-        (
-            count("rom builds") + count("rom cache loads"),
-            results.counters().len()
-        ),
-        (1, 2),
-        "one ROM: {:?}",
-        results.counters()
-    );
+    crate::shared_rom_cache::assert_one_rom(&results, "one ROM");
 
     // Global RFM.
     for level in ["L1", "L2"] {

@@ -39,21 +39,9 @@ fn the_closed_loop_runs_inside_the_run_and_is_written_in_the_same_swap() {
     // The suite's ROM cache: the ROM is a fixture here; the counters say the loop adds none.
     let mut ex = crate::shared_rom_cache::executor();
     let results = rfmlab::pipeline::run(&plan, &mut ex).unwrap();
-    let count = |name: &str| {
-        results
-            .counters()
-            .iter()
-            .find(|c| c.0 == name)
-            .map_or(0, |c| c.1)
-    };
-    assert_eq!(
-        (
-            count("rom builds") + count("rom cache loads"),
-            results.counters().len()
-        ),
-        (1, 2),
-        "the loop runs on the run's ROM, built or read from the cache: {:?}",
-        results.counters()
+    crate::shared_rom_cache::assert_one_rom(
+        &results,
+        "the loop runs on the run's ROM, built or read from the cache",
     );
     let outcome = results.closed_loop().expect("the loop ran");
     let l = &outcome.summary.levels[0];

@@ -44,6 +44,19 @@ pub fn executor() -> rfmlab::pipeline::Executor {
     rfmlab::pipeline::Executor::new().rom_cache(runs_folder())
 }
 
+/// Assert that the run of `results` used one certified ROM, built or read from the cache: its
+/// counters are `rom builds` and `rom cache loads` and nothing else, and they sum to one
+/// (`what` says why, in the message).
+pub fn assert_one_rom(results: &rfmlab::pipeline::Results, what: &str) {
+    let c = results.counters();
+    let count = |name: &str| c.iter().find(|x| x.0 == name).map_or(0, |x| x.1);
+    assert_eq!(
+        (count("rom builds") + count("rom cache loads"), c.len()),
+        (1, 2),
+        "{what}: {c:?}"
+    );
+}
+
 /// Make `<dir>/.rom-cache` (the ROM cache of results folders in `dir`) the shared folder.
 pub fn share(dir: &Path) {
     let link = dir.join(".rom-cache");
