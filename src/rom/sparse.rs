@@ -361,19 +361,31 @@ impl<'a> FullSolver<'a> {
         let mut x = faer::Mat::<C64>::from_fn(rhs.nrows(), k, |i, j| C64::new(rhs[(i, j)], 0.0));
         lu.solve_in_place(x.as_mut());
         let sym = self.pat.pat.sym.as_ref();
+        let (n, rows) = (rhs.nrows(), sym.row_idx());
         let mut floor = 0.0;
+        // x and r row-major (one row's k values side by side), so that the pass over Z's
+        // pattern updates a row's k residuals at once
+        let mut xr = vec![C64::new(0.0, 0.0); n * k];
+        let mut rr = vec![C64::new(0.0, 0.0); n * k];
         for _ in 0..2 {
             // r = rhs - Z x, then x += Z^-1 r
-            let mut r =
-                faer::Mat::<C64>::from_fn(rhs.nrows(), k, |i, j| C64::new(rhs[(i, j)], 0.0));
-            for jc in 0..k {
-                for col in 0..rhs.nrows() {
-                    let xv = x[(col, jc)];
-                    for p in sym.col_range(col) {
-                        r[(sym.row_idx()[p], jc)] -= vals[p] * xv;
+            for i in 0..n {
+                for jc in 0..k {
+                    xr[i * k + jc] = x[(i, jc)];
+                    rr[i * k + jc] = C64::new(rhs[(i, jc)], 0.0);
+                }
+            }
+            for col in 0..n {
+                let xv = &xr[col * k..(col + 1) * k];
+                for p in sym.col_range(col) {
+                    let v = vals[p];
+                    let row = &mut rr[rows[p] * k..(rows[p] + 1) * k];
+                    for (ri, &xi) in row.iter_mut().zip(xv) {
+                        *ri -= v * xi;
                     }
                 }
             }
+            let mut r = faer::Mat::<C64>::from_fn(n, k, |i, j| rr[i * k + j]);
             lu.solve_in_place(r.as_mut());
             let (mut dn, mut xn) = (0.0f64, 0.0f64);
             for jc in 0..k {
