@@ -52,6 +52,13 @@ impl Ordinate {
     pub fn is_complex(&self) -> bool {
         matches!(self, Ordinate::Complex(_))
     }
+    /// The values as complex numbers (a real ordinate with zero imaginary parts).
+    pub fn to_complex(&self) -> Vec<C64> {
+        match self {
+            Ordinate::Real(v) => v.iter().map(|&x| C64::new(x, 0.0)).collect(),
+            Ordinate::Complex(v) => v.clone(),
+        }
+    }
 }
 
 /// One of the axis records 8-11: specific data type, unit exponents, labels.

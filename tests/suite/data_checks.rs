@@ -160,7 +160,6 @@ fn mixed_grids_within_a_uff_level_are_an_error() {
 #[test]
 fn dataset_164_unit_factors_convert_frfs_to_si() {
     use rfmlab::data::read_uff;
-    use rfmlab::data::uff58::Ordinate;
     use rfmlab::data::uff_frf::{frf_set_from_uff_files, UffImportOptions};
     let f = read_uff(crate::common_data::data(
         "uff/ufffiles_jl/dataset151_164_58_55.unv",
@@ -170,10 +169,7 @@ fn dataset_164_unit_factors_convert_frfs_to_si() {
     assert!(
         (u.length - 39.37007874015748).abs() < 1e-9 && (u.force - 0.2248089430997105).abs() < 1e-12
     );
-    let raw: Vec<C64> = match &f.datasets[0].values {
-        Ordinate::Complex(v) => v.clone(),
-        Ordinate::Real(v) => v.iter().map(|&x| C64::new(x, 0.0)).collect(),
-    };
+    let raw = f.datasets[0].values.to_complex();
     let set = frf_set_from_uff_files(&[(f, String::new())], &UffImportOptions::default()).unwrap();
     let ch = &set.levels[0].channels[0];
     assert_eq!(ch.values.len(), raw.len());

@@ -55,13 +55,14 @@ fn generate(dir: &Path, seed: u64, test: &str) -> Option<()> {
     Some(())
 }
 
-/// The bundled study, written into `dir`, with its data path pointed at `data/level1.uff`.
-fn study_file(dir: &Path, data: &Path) -> std::path::PathBuf {
+/// The bundled study, written into `dir`, with its data path pointed at the bundled
+/// `level1.uff`.
+fn study_file(dir: &Path) -> std::path::PathBuf {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(root.join("studies/independent_td_joint.toml")).unwrap();
     let from = r#"files = ["data/independent_td/level1.uff"]"#;
     assert!(text.contains(from), "the study's files line changed");
-    let uff = data.join("level1.uff");
+    let uff = bundled().join("level1.uff");
     let text = text.replace(from, &format!("files = [{:?}]", uff.display().to_string()));
     let path = dir.join("study.toml");
     std::fs::write(&path, text).unwrap();
@@ -72,8 +73,7 @@ fn study_file(dir: &Path, data: &Path) -> std::path::PathBuf {
 fn independent_time_domain_joint_posterior_holds_the_truth() {
     let dir = tempfile::tempdir().unwrap();
     let truth = truth_of(&bundled());
-    let study =
-        rfmlab::Study::load(study_file(dir.path(), &bundled())).unwrap_or_else(|e| panic!("{e}"));
+    let study = rfmlab::Study::load(study_file(dir.path())).unwrap_or_else(|e| panic!("{e}"));
 
     // the same discretisation built by two codes: the whole joint's modes at 7.2 MPa (real)
     let built = rfmlab::study::build::build_model(&study.structure, "study.toml").unwrap();
@@ -173,7 +173,7 @@ fn the_generator_remakes_the_bundled_data() {
     assert_eq!(ours.datasets.len(), again.datasets.len());
     for (a, b) in ours.datasets.iter().zip(&again.datasets) {
         assert_eq!(a.ids, b.ids);
-        let (va, vb) = (values(&a.values), values(&b.values));
+        let (va, vb) = (a.values.to_complex(), b.values.to_complex());
         assert_eq!(va.len(), vb.len(), "{:?}", a.ids);
         let peak = va.iter().fold(0.0f64, |m, v| m.max(v.norm()));
         let worst = va
@@ -209,17 +209,5 @@ fn the_generator_remakes_the_bundled_data() {
     assert_eq!(m0.len(), m1.len());
     for (a, b) in m0.iter().zip(&m1) {
         assert!(((a - b) / a).abs() < 1e-9, "mode {a} Hz against {b} Hz");
-    }
-}
-
-/// A dataset's ordinate as complex values.
-fn values(o: &rfmlab::data::uff58::Ordinate) -> Vec<rfmlab::common::C64> {
-    use rfmlab::data::uff58::Ordinate;
-    match o {
-        Ordinate::Real(v) => v
-            .iter()
-            .map(|&x| rfmlab::common::C64::new(x, 0.0))
-            .collect(),
-        Ordinate::Complex(v) => v.clone(),
     }
 }
