@@ -89,6 +89,8 @@ pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
         tolerance: a.tolerance,
         n_cert_moduli_per_axis: a.cert_moduli,
         n_cert_lines: a.cert_lines,
+        // the reference `rfmlab run` and `diagnose` choose for this model and these inputs
+        reference: rfmlab::rom::Reference::suited(b.model.n_dof(), inputs.len()),
         ..RomParams::default()
     };
     let sp = spinner(g, "building and certifying the ROM");
@@ -131,8 +133,8 @@ pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
         );
     }
     println!(
-        "basis {:.2} s, certificate {:.2} s, total {secs:.2} s, {} enrichment level(s)",
-        cert.seconds_basis, cert.seconds_certify, cert.levels
+        "basis {:.2} s, certificate {:.2} s ({} reference), total {secs:.2} s, {} enrichment level(s)",
+        cert.seconds_basis, cert.seconds_certify, cert.reference, cert.levels
     );
     Ok(())
 }

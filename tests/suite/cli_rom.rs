@@ -65,3 +65,32 @@ fn rom_certifies_all_inputs_or_the_excitation_point() {
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--inputs"));
 }
+
+/// With eight inputs or more the certificate's reference is the sparse LU per validation point,
+/// as `rfmlab run` and `rfmlab diagnose` choose for the same structure and inputs
+/// (`rfmlab::rom::Reference::suited`): GMRES costs one Krylov solve per input, the LU one
+/// factorisation for all of them (on the 5 mm joint with x, y and z at four points, 45 s
+/// against 231 s).
+#[test]
+fn rom_of_many_inputs_uses_the_reference_run_chooses() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = study_10mm(dir.path());
+    let mut text = std::fs::read_to_string(&file).unwrap();
+    // the x direction at each of the four points: eight inputs
+    for (id, x) in [(11, 0.100), (12, 0.150), (13, 0.200), (14, 0.250)] {
+        text.push_str(&format!(
+            "\n[[structure.points]]\nid = {id}\nposition = [{x}, 0.010, 0.010]\ndirection = \"+x\"\n"
+        ));
+    }
+    std::fs::write(&file, text).unwrap();
+    let eight = json(&rom(&[file.to_str().unwrap(), "--json"]));
+    assert_eq!(
+        eight["inputs"],
+        serde_json::json!([1, 2, 3, 4, 11, 12, 13, 14])
+    );
+    const { assert!(rfmlab::rom::LU_REFERENCE_MIN_INPUTS <= 8) };
+    let c = &eight["certificate"];
+    assert_eq!(c["reference"], "sparse LU");
+    assert_eq!(c["passed"], true);
+    assert!(c["max_rel_error"].as_f64().unwrap() <= 1e-6);
+}
