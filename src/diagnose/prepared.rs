@@ -219,6 +219,14 @@ mod tests {
         crate::study::load(&path).unwrap()
     }
 
+    /// The ROM cache a run with results in `dir` uses: under cargo the one folder every test
+    /// shares (`RFMLAB_ROM_CACHE`), so that both tests here, which prepare the same study's
+    /// engine, build its certified ROM once (the second waits for the first's entry) and the
+    /// integration tests' runs of that study read it.
+    fn shared_cache(dir: &Path) -> std::path::PathBuf {
+        crate::stage::rom_cache_dir(&dir.join("results"))
+    }
+
     /// The prepared posterior of the default data is the run's: its log likelihood at the
     /// truth beats the one at a parameter set 10 % off, and its gradient matches central
     /// differences (the binding relies on both).
@@ -226,7 +234,7 @@ mod tests {
     fn prepared_posterior_prefers_the_truth_and_has_a_consistent_gradient() {
         let dir = tempfile::tempdir().unwrap();
         let study = bayes_model4(dir.path(), "");
-        let prep = Prepared::new(&study, None).unwrap();
+        let prep = Prepared::new(&study, Some(&shared_cache(dir.path()))).unwrap();
         let post = prep.posterior("model4", "L1", None).unwrap();
         assert_eq!(post.n_law(), 4);
         let truth = prep.levels()[0].truth.as_ref().unwrap().params.clone();
@@ -286,7 +294,7 @@ mod tests {
             dir.path(),
             "[[structure.effects]]\ntype = \"adherend_damping\"\nvalue = 0.001\nfree = true\n\n",
         );
-        let prep = Prepared::new(&study, Some(dir.path())).unwrap();
+        let prep = Prepared::new(&study, Some(&shared_cache(dir.path()))).unwrap();
         assert!(
             prep.engine_note.contains("term ROM"),
             "{}",
