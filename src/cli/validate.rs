@@ -59,18 +59,20 @@ impl Log {
     }
 }
 
-/// Run this process's shard into `dir`; returns the number of units and the seconds.
+/// Run this process's shard into `dir`, its certified ROM read from or saved to the folder
+/// `rom_cache`; returns the number of units and the seconds.
 fn run_shard_into(
     spec: &ValidationSpec,
     shard: Shard,
     dir: &Path,
+    rom_cache: &Path,
     g: &Global,
     log: &Log,
 ) -> anyhow::Result<(usize, f64)> {
     let t0 = Instant::now();
     log.say("setting up the structure and its reduced model");
     let sp = spinner(g, "structure and ROM");
-    let setup = Setup::new(spec)?;
+    let setup = Setup::with_rom_cache(spec, Some(rom_cache))?;
     sp.finish_and_clear();
     let setup_s = t0.elapsed().as_secs_f64();
     let n = units(spec)
@@ -79,8 +81,15 @@ fn run_shard_into(
         .filter(|(k, _)| shard.owns(*k))
         .count();
     log.say(&format!(
-        "setup done in {setup_s:.1} s (ROM {} vectors); shard {}/{}: {n} units",
-        setup.rom_basis, shard.index, shard.count
+        "setup done in {setup_s:.1} s (ROM {} vectors, {}); shard {}/{}: {n} units",
+        setup.rom_basis,
+        if setup.rom_from_cache {
+            format!("read from {}", rom_cache.display())
+        } else {
+            "built".into()
+        },
+        shard.index,
+        shard.count
     ));
     let pb = progress(
         g,
@@ -148,13 +157,16 @@ pub fn run(a: &ValidateArgs, g: &Global) -> anyhow::Result<()> {
         super::common::claim_folder(&out, a.force)?
     };
     let log = Log::new(g);
+    // `.rom-cache/` beside the results (or RFMLAB_ROM_CACHE), as `rfmlab run` keeps its ROMs:
+    // the shards share it
+    let rom_cache = rfmlab::stage::rom_cache_dir(&out);
     let cmd = std::env::args().collect::<Vec<_>>().join(" ");
     let mut units_run = None;
     let verdict = if !a.merge && shard.count == 1 {
         // One process: everything is written into a temporary sibling that is swapped in at
         // the end (an interrupted run leaves the earlier folder, or none).
         Some(replace_dir_as(&out, replace, |tmp| -> anyhow::Result<_> {
-            units_run = Some(run_shard_into(&spec, shard, tmp, g, &log)?);
+            units_run = Some(run_shard_into(&spec, shard, tmp, &rom_cache, g, &log)?);
             log.say("merging and summarising");
             let v = merge_and_summarise(&spec, tmp, !a.no_figures, &cmd)?;
             write_manifest(&spec, tmp, "statistical validation, one process")?;
@@ -173,7 +185,7 @@ pub fn run(a: &ValidateArgs, g: &Global) -> anyhow::Result<()> {
             )?;
         }
         if !a.merge {
-            units_run = Some(run_shard_into(&spec, shard, &out, g, &log)?);
+            units_run = Some(run_shard_into(&spec, shard, &out, &rom_cache, g, &log)?);
         }
         if a.merge || shard.count == 1 {
             log.say("merging and summarising");

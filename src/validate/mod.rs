@@ -110,6 +110,9 @@ pub struct Setup {
     /// ROM basis size and certified error.
     pub rom_basis: usize,
     pub rom_error: f64,
+    /// Whether the ROM was read from the ROM cache ([`Setup::with_rom_cache`]) rather than
+    /// built.
+    pub rom_from_cache: bool,
     /// Where the data come from.
     pub data: DataSource,
 }
@@ -147,6 +150,17 @@ impl Setup {
     /// Build the structure, the ROM over the moduli of every truth (and Model 4's SBC prior
     /// to 3 sd) and the estimator's measurement model.
     pub fn new(spec: &ValidationSpec) -> Result<Setup, ValidateError> {
+        Setup::with_rom_cache(spec, None)
+    }
+
+    /// [`Setup::new`] with the certified ROM read from the cache folder `rom_cache` when it
+    /// holds it, else built and saved there ([`crate::rom::cache::load_or_build`]): the
+    /// processes of a sharded validation, started together, build it once (the others wait for
+    /// the entry and read it), and a run again after an interruption reads it.
+    pub fn with_rom_cache(
+        spec: &ValidationSpec,
+        rom_cache: Option<&std::path::Path>,
+    ) -> Result<Setup, ValidateError> {
         let ex = &spec.experiment;
         let file = ex.file.display().to_string();
         let built = crate::study::build::build_model(&ex.structure, &file)?;
@@ -212,17 +226,33 @@ impl Setup {
                 range.e_loss_pa.1 = range.e_loss_pa.1.max((e.im * 1.5).max(1e3));
             }
         }
-        let (rom, cert) = build_rom(
-            &model,
-            &[built.excitation],
-            &RomParams {
-                band_hz: (lo, hi),
-                range,
-                tolerance: 1e-5,
-                ..RomParams::default()
-            },
-        )
-        .map_err(|e| ValidateError::Setup(format!("ROM: {e}")))?;
+        let inputs = [built.excitation];
+        let params = RomParams {
+            band_hz: (lo, hi),
+            range,
+            tolerance: 1e-5,
+            ..RomParams::default()
+        };
+        let build = || {
+            build_rom(&model, &inputs, &params)
+                .map_err(|e| ValidateError::Setup(format!("ROM: {e}")))
+        };
+        let ((rom, cert), rom_from_cache) = match rom_cache {
+            Some(dir) => {
+                let key = crate::rom::cache::key(&model, &inputs, &params);
+                let file = dir.join(format!("rom-{}.json", &key[..16]));
+                crate::rom::cache::load_or_build(
+                    &file,
+                    |f| crate::rom::cache::load(f, &key),
+                    build,
+                    // A cache that cannot be written costs time next run, nothing else.
+                    |f, rc| {
+                        let _ = crate::rom::cache::save(f, &key, &rc.0, &rc.1);
+                    },
+                )?
+            }
+            None => (build()?, false),
+        };
         let freq_hz = chain.lines_hz.clone();
         let measurement = MeasurementModel::new(
             EstimatorSpec {
@@ -247,6 +277,7 @@ impl Setup {
             truth4: lv.params.clone(),
             rom_basis: cert.basis_size,
             rom_error: cert.max_rel_error,
+            rom_from_cache,
             data: spec.data,
         })
     }

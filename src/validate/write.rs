@@ -40,6 +40,7 @@ pub fn run_and_write(
         "threads": rayon::current_num_threads(),
         "rom_basis": setup.rom_basis,
         "rom_certified_error": setup.rom_error,
+        "rom_from_cache": setup.rom_from_cache,
     });
     let p = runs.join(format!("shard={}.json", shard.index));
     write_atomic_bytes(&p, &serde_json::to_vec_pretty(&rec).unwrap_or_default())?;

@@ -315,6 +315,12 @@ fn validate_refuses_a_user_s_folder_or_file_and_replaces_its_own() {
     refuses_what_it_did_not_write(&cmd, dir.path());
     force_and_rerun_replace_the_folder_whole(&cmd, dir.path());
     assert!(dir.path().join("forced/summary.md").is_file());
+    // The rerun read the reduced model its first run saved in the ROM cache.
+    let run: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(dir.path().join("forced/runs/shard=0.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(run["rom_from_cache"], true, "{run}");
     // A shard accepts the folder of the run (it holds rfmlab's manifest) and refuses a user's.
     let (code, err) = cmd.run(dir.path(), &dir.path().join("victim"), &["--shard", "0/2"]);
     assert_eq!(code, 2, "{err}");

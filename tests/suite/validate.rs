@@ -370,6 +370,42 @@ half_width_sd = 7.0
     );
 }
 
+/// The reduced model through the ROM cache, as the processes of a sharded `rfmlab validate`
+/// use it: the first setup builds and saves it, the second reads it (one entry in the folder),
+/// and both simulate the same data bit for bit.
+#[test]
+fn a_second_setup_reads_the_reduced_model_the_first_saved() {
+    let dir = tempfile::tempdir().unwrap();
+    let exp = EXPERIMENT.replace(
+        "lines_hz = [1.0, 500.0, 1.0]",
+        "lines_hz = [20.0, 400.0, 4.0]",
+    );
+    std::fs::write(dir.path().join("experiment.toml"), exp).unwrap();
+    let file = dir.path().join("validation.toml");
+    std::fs::write(&file, VALIDATION).unwrap();
+    let spec = load_validation(&file).unwrap();
+    let cache = dir.path().join("cache");
+    let first = Setup::with_rom_cache(&spec, Some(&cache)).unwrap();
+    let second = Setup::with_rom_cache(&spec, Some(&cache)).unwrap();
+    assert!(!first.rom_from_cache, "the first setup builds the ROM");
+    assert!(second.rom_from_cache, "the second reads it");
+    let entries: Vec<String> = std::fs::read_dir(&cache)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("rom-") && n.ends_with(".json"))
+        .collect();
+    assert_eq!(entries.len(), 1, "{entries:?}");
+    assert_eq!(
+        (first.rom_basis, first.rom_error.to_bits()),
+        (second.rom_basis, second.rom_error.to_bits())
+    );
+    let (law, truth) = rfmlab::validate::law_and_truth(&first, "model4").unwrap();
+    let a = first.simulate(law.as_ref(), &truth, 77).unwrap();
+    let b = second.simulate(law.as_ref(), &truth, 77).unwrap();
+    // Debug prints every f64 so that it reads back to the same bits
+    assert_eq!(format!("{:?}", a.data), format!("{:?}", b.data));
+}
+
 #[test]
 fn chi_square_tail_and_binomial_band_equal_scipy() {
     use rfmlab::validate::stats::{binom_band, chi2_sf};
