@@ -83,7 +83,11 @@ fn model4_data_band_iem_tables_and_report() {
     );
     let file = write(&dir.path().join("m4.toml"), &text);
     let study = rfmlab::study::load(&file).unwrap();
-    let summary = run_study(&study, &RunOptions::default(), &no_progress).unwrap();
+    let opts = RunOptions {
+        rom_cache: Some(crate::shared_rom_cache::runs_folder()),
+        ..RunOptions::default()
+    };
+    let summary = run_study(&study, &opts, &no_progress).unwrap();
     for name in [
         "frf",
         "parameters",
@@ -245,7 +249,12 @@ shaker = { armature_mass = 0.02, stinger_stiffness = 5.0e5 }\nforce_band_hz = [1
         }
         let file = write(&dir.path().join(format!("leak{with_model}.toml")), &text);
         let study = rfmlab::study::load(&file).unwrap();
-        let summary = run_study(&study, &RunOptions::default(), &no_progress).unwrap();
+        // the two runs (and the data-band test's) share the certified ROM of the structure
+        let opts = RunOptions {
+            rom_cache: Some(crate::shared_rom_cache::runs_folder()),
+            ..RunOptions::default()
+        };
+        let summary = run_study(&study, &opts, &no_progress).unwrap();
         let modal = Table::read_parquet(out.join("modal.parquet")).unwrap();
         let col = |n: &str| modal.column(n).and_then(|c| c.as_f64()).unwrap().to_vec();
         let (st, lo, f) = (col("storage_modulus"), col("loss_modulus"), col("freq_hz"));
