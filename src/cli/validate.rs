@@ -33,6 +33,11 @@ pub struct ValidateArgs {
     /// Do not draw the figure.
     #[arg(long)]
     pub no_figures: bool,
+    /// Build and certify the reduced model even if a certified one of the same structure,
+    /// point, band, range and tolerance is in the ROM cache (`.rom-cache/` beside the output
+    /// folder, or the folder RFMLAB_ROM_CACHE names), which the shards share otherwise.
+    #[arg(long)]
+    pub no_cache: bool,
     /// Print a JSON summary (folder, shard, units, checks) on stdout.
     #[arg(long)]
     pub json: bool,
@@ -60,19 +65,19 @@ impl Log {
 }
 
 /// Run this process's shard into `dir`, its certified ROM read from or saved to the folder
-/// `rom_cache`; returns the number of units and the seconds.
+/// `rom_cache` (None: built); returns the number of units and the seconds.
 fn run_shard_into(
     spec: &ValidationSpec,
     shard: Shard,
     dir: &Path,
-    rom_cache: &Path,
+    rom_cache: Option<&Path>,
     g: &Global,
     log: &Log,
 ) -> anyhow::Result<(usize, f64)> {
     let t0 = Instant::now();
     log.say("setting up the structure and its reduced model");
     let sp = spinner(g, "structure and ROM");
-    let setup = Setup::with_rom_cache(spec, Some(rom_cache))?;
+    let setup = Setup::with_rom_cache(spec, rom_cache)?;
     sp.finish_and_clear();
     let setup_s = t0.elapsed().as_secs_f64();
     let n = units(spec)
@@ -83,10 +88,9 @@ fn run_shard_into(
     log.say(&format!(
         "setup done in {setup_s:.1} s (ROM {} vectors, {}); shard {}/{}: {n} units",
         setup.rom_basis,
-        if setup.rom_from_cache {
-            format!("read from {}", rom_cache.display())
-        } else {
-            "built".into()
+        match rom_cache.filter(|_| setup.rom_from_cache) {
+            Some(dir) => format!("read from {}", dir.display()),
+            None => "built".into(),
         },
         shard.index,
         shard.count
@@ -159,14 +163,21 @@ pub fn run(a: &ValidateArgs, g: &Global) -> anyhow::Result<()> {
     let log = Log::new(g);
     // `.rom-cache/` beside the results (or RFMLAB_ROM_CACHE), as `rfmlab run` keeps its ROMs:
     // the shards share it
-    let rom_cache = rfmlab::stage::rom_cache_dir(&out);
+    let rom_cache = (!a.no_cache).then(|| rfmlab::stage::rom_cache_dir(&out));
     let cmd = std::env::args().collect::<Vec<_>>().join(" ");
     let mut units_run = None;
     let verdict = if !a.merge && shard.count == 1 {
         // One process: everything is written into a temporary sibling that is swapped in at
         // the end (an interrupted run leaves the earlier folder, or none).
         Some(replace_dir_as(&out, replace, |tmp| -> anyhow::Result<_> {
-            units_run = Some(run_shard_into(&spec, shard, tmp, &rom_cache, g, &log)?);
+            units_run = Some(run_shard_into(
+                &spec,
+                shard,
+                tmp,
+                rom_cache.as_deref(),
+                g,
+                &log,
+            )?);
             log.say("merging and summarising");
             let v = merge_and_summarise(&spec, tmp, !a.no_figures, &cmd)?;
             write_manifest(&spec, tmp, "statistical validation, one process")?;
@@ -185,7 +196,14 @@ pub fn run(a: &ValidateArgs, g: &Global) -> anyhow::Result<()> {
             )?;
         }
         if !a.merge {
-            units_run = Some(run_shard_into(&spec, shard, &out, &rom_cache, g, &log)?);
+            units_run = Some(run_shard_into(
+                &spec,
+                shard,
+                &out,
+                rom_cache.as_deref(),
+                g,
+                &log,
+            )?);
         }
         if a.merge || shard.count == 1 {
             log.say("merging and summarising");

@@ -145,7 +145,7 @@ fn flags_mean_the_same_on_every_command() {
         "validate",
     ];
     let draws = ["run", "diagnose", "material", "validate"];
-    let caches = ["run", "diagnose"];
+    let caches = ["run", "diagnose", "validate"];
     let mut problems = Vec::new();
     for cmd in COMMANDS {
         let (help, short_o) = help_flags(cmd);

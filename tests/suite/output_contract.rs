@@ -321,6 +321,13 @@ fn validate_refuses_a_user_s_folder_or_file_and_replaces_its_own() {
     )
     .unwrap();
     assert_eq!(run["rom_from_cache"], true, "{run}");
+    // --no-cache builds it again.
+    let fresh = dir.path().join("fresh");
+    let (code, err) = cmd.run(dir.path(), &fresh, &["--no-cache"]);
+    assert_eq!(code, 0, "{err}");
+    let run: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(fresh.join("runs/shard=0.json")).unwrap()).unwrap();
+    assert_eq!(run["rom_from_cache"], false, "{run}");
     // A shard accepts the folder of the run (it holds rfmlab's manifest) and refuses a user's.
     let (code, err) = cmd.run(dir.path(), &dir.path().join("victim"), &["--shard", "0/2"]);
     assert_eq!(code, 2, "{err}");
