@@ -273,6 +273,31 @@ pub fn load(path: &Path, key: &str) -> Option<(ReducedModel, Certificate)> {
     Some((j.model.to_model()?, j.certificate))
 }
 
+/// The certified ROM of `model` for `inputs` built with `params`, from the cache folder `dir`
+/// (its entry `rom-<key>.json`) when it holds it, else the one `build` makes, saved there
+/// ([`load_or_build`]: runs that want it at the same time build it once); and the entry it
+/// was read from (None: built). A cache that cannot be written costs time next run, nothing
+/// else.
+pub fn certified_rom<E>(
+    dir: &Path,
+    model: &StructuralModel,
+    inputs: &[usize],
+    params: &RomParams,
+    build: impl FnOnce() -> Result<(ReducedModel, Certificate), E>,
+) -> Result<((ReducedModel, Certificate), Option<std::path::PathBuf>), E> {
+    let key = key(model, inputs, params);
+    let file = dir.join(format!("rom-{}.json", &key[..16]));
+    let (rc, hit) = load_or_build(
+        &file,
+        |f| load(f, &key),
+        build,
+        |f, rc| {
+            let _ = save(f, &key, &rc.0, &rc.1);
+        },
+    )?;
+    Ok((rc, hit.then_some(file)))
+}
+
 /// The cache key of a ROM with terms ([`crate::rom::term_build::build_term_rom`]): the plain ROM's
 /// [`key`] plus every term (name, matrix, coefficient, map, enrichment and certificate values)
 /// and the settings the plain key leaves out (the certificate's reference solver, the

@@ -175,23 +175,16 @@ pub fn build_engine(
                 reference: crate::rom::Reference::suited(built.model.n_dof(), inputs.len()),
                 ..Default::default()
             };
-            let key = crate::rom::cache::key(&built.model, &inputs, &params);
-            let cache_file = rom_cache.map(|d| d.join(format!("rom-{}.json", &key[..16])));
             let build = || {
                 crate::rom::build_rom(&built.model, &inputs, &params)
                     .map_err(|e| RunError::Engine(e.to_string()))
             };
-            let ((rom, cert), from_cache) = match &cache_file {
-                Some(f) => crate::rom::cache::load_or_build(
-                    f,
-                    |f| crate::rom::cache::load(f, &key),
-                    build,
-                    // A cache that cannot be written costs time next run, nothing else.
-                    |f, rc| {
-                        let _ = crate::rom::cache::save(f, &key, &rc.0, &rc.1);
-                    },
-                )?,
-                None => (build()?, false),
+            // the cache entry the ROM was read from, if any
+            let ((rom, cert), cache_entry) = match rom_cache {
+                Some(d) => {
+                    crate::rom::cache::certified_rom(d, &built.model, &inputs, &params, build)?
+                }
+                None => (build()?, None),
             };
             let mut grid_note = String::new();
             // The measurement model's grid, chosen per level by convergence at the first
@@ -301,9 +294,9 @@ pub fn build_engine(
                 cert.max_rel_error,
                 params.tolerance,
                 if cert.passed { "" } else { ": WARNING, NOT CERTIFIED" }
-            ) + &match (&cache_file, from_cache) {
-                (Some(f), true) => format!(" (loaded from the ROM cache {})", f.display()),
-                _ => String::new(),
+            ) + &match &cache_entry {
+                Some(f) => format!(" (loaded from the ROM cache {})", f.display()),
+                None => String::new(),
             } + &grid_note
                 + &match pencils[0].n_fallback_lines() {
                     0 => String::new(),
@@ -316,8 +309,8 @@ pub fn build_engine(
                 engine: Box::new(RomEngine { rom, pencils }),
                 note,
                 likelihood: lik_engine,
-                rom_builds: u64::from(!from_cache),
-                rom_cache_loads: u64::from(from_cache),
+                rom_builds: u64::from(cache_entry.is_none()),
+                rom_cache_loads: u64::from(cache_entry.is_some()),
                 certified: Some(params.range),
             })
         }

@@ -154,7 +154,7 @@ impl Setup {
     }
 
     /// [`Setup::new`] with the certified ROM read from the cache folder `rom_cache` when it
-    /// holds it, else built and saved there ([`crate::rom::cache::load_or_build`]): the
+    /// holds it, else built and saved there ([`crate::rom::cache::certified_rom`]): the
     /// processes of a sharded validation, started together, build it once (the others wait for
     /// the entry and read it), and a run again after an interruption reads it.
     pub fn with_rom_cache(
@@ -239,17 +239,9 @@ impl Setup {
         };
         let ((rom, cert), rom_from_cache) = match rom_cache {
             Some(dir) => {
-                let key = crate::rom::cache::key(&model, &inputs, &params);
-                let file = dir.join(format!("rom-{}.json", &key[..16]));
-                crate::rom::cache::load_or_build(
-                    &file,
-                    |f| crate::rom::cache::load(f, &key),
-                    build,
-                    // A cache that cannot be written costs time next run, nothing else.
-                    |f, rc| {
-                        let _ = crate::rom::cache::save(f, &key, &rc.0, &rc.1);
-                    },
-                )?
+                let (rc, entry) =
+                    crate::rom::cache::certified_rom(dir, &model, &inputs, &params, build)?;
+                (rc, entry.is_some())
             }
             None => (build()?, false),
         };
