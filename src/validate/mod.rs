@@ -49,7 +49,8 @@ use crate::linalg::dense::cholesky;
 use crate::material::ConstitutiveModel;
 use crate::output::shards::Shard;
 use crate::output::Table;
-use crate::rom::{build_rom, ModulusRange, ReducedModel, RomParams};
+use crate::rom::{build_rom, ModulusRange, RomParams};
+use crate::stage::rom_engine::RomEngine;
 use rand::RngExt;
 use rayon::prelude::*;
 pub use spec::{load_validation, DataSource, ValidationSpec};
@@ -97,7 +98,10 @@ pub const LEVELS: [f64; 3] = [0.5, 0.9, 0.95];
 
 /// The structure, the ROM and the measurement chain shared by every unit.
 pub struct Setup {
-    pub rom: ReducedModel,
+    /// The certified ROM with its pencil prepared on the lines and on the measurement model's
+    /// fine grid, the grids every unit's likelihood evaluates (a dense LU of the reduced
+    /// system per line per evaluation otherwise).
+    pub rom: RomEngine,
     pub excitation: usize,
     pub point_ids: Vec<u32>,
     /// The chain of the default data (frequency-domain mode; seed set per unit).
@@ -258,11 +262,14 @@ impl Setup {
             &MeasurementParams::default(),
         )
         .map_err(|e| ValidateError::Setup(format!("measurement model: {e}")))?;
+        let omega_rad_s: Vec<f64> = freq_hz.iter().map(|f| std::f64::consts::TAU * f).collect();
+        let rom = RomEngine::prepared(rom, &[omega_rad_s.clone(), measurement.fine_omega()])
+            .map_err(|e| ValidateError::Setup(format!("the ROM's pencil: {e}")))?;
         Ok(Setup {
             rom,
             excitation: built.excitation,
             point_ids: model.points.iter().map(|p| p.id).collect(),
-            omega_rad_s: freq_hz.iter().map(|f| std::f64::consts::TAU * f).collect(),
+            omega_rad_s,
             freq_hz,
             chain,
             measurement,

@@ -126,7 +126,6 @@ fn strs<'t>(t: &'t Table, c: &str) -> &'t [String] {
 }
 
 #[test]
-#[ignore = "slow: about 6-12 min on 2 busy cores; run with --ignored"]
 fn smoke_run_is_sane_and_three_shards_merge_to_the_single_run_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("experiment.toml"), EXPERIMENT).unwrap();
