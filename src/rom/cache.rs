@@ -276,15 +276,18 @@ pub fn load(path: &Path, key: &str) -> Option<(ReducedModel, Certificate)> {
 /// The certified ROM of `model` for `inputs` built with `params`, from the cache folder `dir`
 /// (its entry `rom-<key>.json`) when it holds it, else the one `build` makes, saved there
 /// ([`load_or_build`]: runs that want it at the same time build it once); and the entry it
-/// was read from (None: built). A cache that cannot be written costs time next run, nothing
-/// else.
+/// was read from (None: built). Without a folder the ROM is built. A cache that cannot be
+/// written costs time next run, nothing else.
 pub fn certified_rom<E>(
-    dir: &Path,
+    dir: Option<&Path>,
     model: &StructuralModel,
     inputs: &[usize],
     params: &RomParams,
     build: impl FnOnce() -> Result<(ReducedModel, Certificate), E>,
 ) -> Result<((ReducedModel, Certificate), Option<std::path::PathBuf>), E> {
+    let Some(dir) = dir else {
+        return Ok((build()?, None));
+    };
     let key = key(model, inputs, params);
     let file = dir.join(format!("rom-{}.json", &key[..16]));
     let (rc, hit) = load_or_build(

@@ -180,12 +180,8 @@ pub fn build_engine(
                     .map_err(|e| RunError::Engine(e.to_string()))
             };
             // the cache entry the ROM was read from, if any
-            let ((rom, cert), cache_entry) = match rom_cache {
-                Some(d) => {
-                    crate::rom::cache::certified_rom(d, &built.model, &inputs, &params, build)?
-                }
-                None => (build()?, None),
-            };
+            let ((rom, cert), cache_entry) =
+                crate::rom::cache::certified_rom(rom_cache, &built.model, &inputs, &params, build)?;
             let mut grid_note = String::new();
             // The measurement model's grid, chosen per level by convergence at the first
             // model's initial values (on the unprepared ROM: a one-off cost), unless the

@@ -241,14 +241,9 @@ impl Setup {
             build_rom(&model, &inputs, &params)
                 .map_err(|e| ValidateError::Setup(format!("ROM: {e}")))
         };
-        let ((rom, cert), rom_from_cache) = match rom_cache {
-            Some(dir) => {
-                let (rc, entry) =
-                    crate::rom::cache::certified_rom(dir, &model, &inputs, &params, build)?;
-                (rc, entry.is_some())
-            }
-            None => (build()?, false),
-        };
+        let ((rom, cert), entry) =
+            crate::rom::cache::certified_rom(rom_cache, &model, &inputs, &params, build)?;
+        let rom_from_cache = entry.is_some();
         let freq_hz = chain.lines_hz.clone();
         let measurement = MeasurementModel::new(
             EstimatorSpec {
