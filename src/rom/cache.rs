@@ -84,6 +84,7 @@ pub fn key(model: &StructuralModel, inputs: &[usize], params: &RomParams) -> Str
     }
     match params.reference {
         crate::rom::Reference::SparseLu => h.update(b"reference LU"),
+        crate::rom::Reference::Shifted => h.update(b"reference shifted Krylov"),
         crate::rom::Reference::Iterative {
             residual_tol,
             max_iter,

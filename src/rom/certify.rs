@@ -11,6 +11,9 @@
 use super::basis::BasisBuilder;
 use super::reduced::{check_inputs, ReducedModel};
 use super::sparse::{FullSolver, ModelPattern, SharedLuSymbolic};
+use super::term_reference::{
+    shifted_lines, ShiftedLines, ShiftedStats, SHIFTED_MAX_VECTORS, SHIFTED_RESIDUAL_TOL,
+};
 use super::{Certificate, Reference, RomError, RomParams};
 use crate::common::C64;
 use crate::fe::model::StructuralModel;
@@ -202,6 +205,56 @@ pub(crate) fn reference_points_with(
         jobs,
         &symbolic.solver_for(&pat)?,
     )
+}
+
+/// [`shifted_reference`]'s receptances, the points it did not resolve and its statistics.
+type ShiftedReference = (Receptances, Vec<(usize, usize)>, ShiftedStats);
+
+/// Full-model receptances on the validation set by the shifted Krylov solver
+/// ([`super::term_reference::shifted_lines`]; the model has no C_b): per modulus one sparse LU
+/// and the Krylov space that serves its lines. Returns them with the points it did not
+/// resolve (left empty, for the sparse LU) and the solves' statistics.
+fn shifted_reference(
+    model: &StructuralModel,
+    inputs: &[usize],
+    moduli: &[C64],
+    lines: &[f64],
+) -> Result<ShiftedReference, RomError> {
+    let pat = ModelPattern::new(model)?;
+    let solver = FullSolver::new(&pat)?;
+    let per_modulus: Vec<ShiftedLines> = moduli
+        .par_iter()
+        .map(|&e| {
+            shifted_lines(
+                &solver,
+                model,
+                inputs,
+                e,
+                lines,
+                SHIFTED_RESIDUAL_TOL,
+                SHIFTED_MAX_VECTORS,
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    let mut st = ShiftedStats::default();
+    let mut h = Vec::with_capacity(moduli.len());
+    let mut missing = Vec::new();
+    for (m, r) in per_modulus.into_iter().enumerate() {
+        st.max_residual = st.max_residual.max(r.max_residual);
+        st.max_vectors = st.max_vectors.max(r.vectors);
+        h.push(
+            r.h.into_iter()
+                .enumerate()
+                .map(|(l, x)| {
+                    x.unwrap_or_else(|| {
+                        missing.push((m, l));
+                        Vec::new()
+                    })
+                })
+                .collect(),
+        );
+    }
+    Ok((h, missing, st))
 }
 
 fn points_with(
@@ -444,20 +497,11 @@ pub fn build_rom(
 
     let mut seconds_certify = 0.0;
     let n_points = moduli.len() * lines.len();
-    // the sparse LU's attainable accuracy per point (0 where GMRES is the reference)
+    // the sparse LU's attainable accuracy per point (0 where an iterative solve is the reference)
     let mut floor = vec![vec![0.0; lines.len()]; moduli.len()];
-    let mut refh = match params.reference {
-        Reference::SparseLu => {
-            let t0 = Instant::now();
-            let (r, f) = reference_with_floor(model, inputs, &moduli, &lines)?;
-            floor = f;
-            seconds_certify += t0.elapsed().as_secs_f64();
-            Some(r)
-        }
-        Reference::Iterative { .. } => None,
-    };
     let mut gmres_stats = None;
-    // validation points whose reference is a sparse-LU solve (GMRES reference only)
+    let mut shifted_stats = None;
+    // validation points whose reference is a sparse-LU solve (iterative references only)
     let mut direct: Vec<(usize, usize)> = Vec::new();
     let mut seconds_basis = 0.0;
 
@@ -477,6 +521,33 @@ pub fn build_rom(
         }
         direct.extend_from_slice(points);
         Ok(())
+    };
+    let mut refh = match params.reference {
+        Reference::SparseLu => {
+            let t0 = Instant::now();
+            let (r, f) = reference_with_floor(model, inputs, &moduli, &lines)?;
+            floor = f;
+            seconds_certify += t0.elapsed().as_secs_f64();
+            Some(r)
+        }
+        Reference::Shifted if model.c_b.is_none() => {
+            let t0 = Instant::now();
+            let (mut h, missing, st) = shifted_reference(model, inputs, &moduli, &lines)?;
+            // the lines the Krylov space did not resolve are solved directly instead
+            solve_directly(&missing, &mut h, &mut floor, &mut direct)?;
+            shifted_stats = Some(st);
+            seconds_certify += t0.elapsed().as_secs_f64();
+            Some(h)
+        }
+        // (Z quadratic in w: no shifted systems of one operator)
+        Reference::Shifted => {
+            let t0 = Instant::now();
+            let (r, f) = reference_with_floor(model, inputs, &moduli, &lines)?;
+            floor = f;
+            seconds_certify += t0.elapsed().as_secs_f64();
+            Some(r)
+        }
+        Reference::Iterative { .. } => None,
     };
     let pat = ModelPattern::new(model)?;
     let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
@@ -522,10 +593,11 @@ pub fn build_rom(
         }
         let h = refh.as_mut().expect("reference");
         let mut judged = judge(&rom, &moduli, &lines, h, &floor, params)?;
-        if judged.score > params.tolerance && gmres_stats.is_some() {
-            // near a lightly damped resonance a GMRES reference converged to its residual
-            // tolerance can itself be off by more than the certificate's tolerance: the few
-            // points where the ROM misses it are solved directly before more basis is added
+        if judged.score > params.tolerance && (gmres_stats.is_some() || shifted_stats.is_some()) {
+            // near a lightly damped resonance an iterative reference converged to its residual
+            // tolerance can itself be off by more than the certificate's tolerance, and it has
+            // no floor (the sparse LU's attainable accuracy): the few points where the ROM
+            // misses it are solved directly before more basis is added
             let suspect: Vec<(usize, usize)> = judged
                 .over
                 .iter()
@@ -572,11 +644,19 @@ pub fn build_rom(
         error_history: history,
         reference: if gmres_stats.is_some() {
             "GMRES".into()
+        } else if shifted_stats.is_some() {
+            "shifted Krylov".into()
         } else {
             "sparse LU".into()
         },
-        reference_residual: gmres_stats.as_ref().map(|s| s.max_residual),
-        reference_iterations: gmres_stats.as_ref().map(|s| s.max_iterations),
+        reference_residual: gmres_stats
+            .as_ref()
+            .map(|s| s.max_residual)
+            .or(shifted_stats.as_ref().map(|s| s.max_residual)),
+        reference_iterations: gmres_stats
+            .as_ref()
+            .map(|s| s.max_iterations)
+            .or(shifted_stats.as_ref().map(|s| s.max_vectors)),
         reference_direct_points: direct.len(),
         floor_points: judged.floor_points,
         floor_max: floor.iter().flatten().copied().fold(0.0, f64::max),

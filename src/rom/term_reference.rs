@@ -1,7 +1,8 @@
 //! The full-model FRFs a term ROM's certificate compares with ([`super::term_build`]): at
 //! every (term, value) case the modified full model ([`super::term_build::model_with_term`]) on
 //! the validation grid of moduli x lines, by sparse LU at every point
-//! ([`Reference::SparseLu`]) or by the shifted Krylov solver below ([`Reference::Iterative`]).
+//! ([`Reference::SparseLu`]) or by the shifted Krylov solver below ([`Reference::Shifted`], or
+//! [`Reference::Iterative`]: a term ROM's cases have no GMRES reference of their own).
 //!
 //! Shifted Krylov: for a model without viscous damping (C_b absent) the dynamic stiffness of a
 //! case at one modulus is Z(w) = A - w^2 M with A = K_b + E* S + j D_b the same at every line,
@@ -84,7 +85,8 @@ pub(crate) struct Grid<'g> {
 impl CaseRefs {
     /// The reference of every case (`cases` = (term index, value)) of `model` with `terms`:
     /// the shifted Krylov solver with the LU where it does not resolve a line
-    /// ([`Reference::Iterative`], a model without C_b), else the sparse LU at every point.
+    /// ([`Reference::Shifted`] or [`Reference::Iterative`], a model without C_b), else the sparse
+    /// LU at every point.
     pub fn new(
         model: &StructuralModel,
         terms: &[TermSpec],
@@ -98,7 +100,8 @@ impl CaseRefs {
             shifted: None,
             symbolic: SharedLuSymbolic::new(&ModelPattern::new(model)?)?,
         };
-        let shifted = matches!(reference, Reference::Iterative { .. }) && model.c_b.is_none();
+        let shifted = matches!(reference, Reference::Iterative { .. } | Reference::Shifted)
+            && model.c_b.is_none();
         if shifted {
             out.shifted = Some(ShiftedStats::default());
         }
