@@ -7,7 +7,8 @@
 //! rebuilt from them on the Python side); nothing is read back from disk.
 
 use super::{error, run_error};
-use polars::prelude::{DataFrame, ParquetWriter};
+use polars_core::prelude::DataFrame;
+use polars_io::parquet::write::ParquetWriter;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyTuple};
 use rfmlab::stage::RunError;

@@ -26,7 +26,7 @@ pub enum OutputError {
         table: String,
         path: PathBuf,
         #[source]
-        source: polars::error::PolarsError,
+        source: polars_core::error::PolarsError,
     },
     /// A table column was rejected when it was added.
     #[error("table '{table}', column '{column}': {reason}")]

@@ -4,9 +4,10 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::path::Path;
 
-use polars::prelude::{
-    Column, DataFrame, DataType, KeyValueMetadata, ParquetReader, ParquetWriter, SerReader,
-};
+use polars_core::prelude::{Column, DataFrame, DataType};
+use polars_io::parquet::read::ParquetReader;
+use polars_io::parquet::write::{KeyValueMetadata, ParquetWriter};
+use polars_io::SerReader;
 
 use super::atomic::write_atomic;
 use super::OutputError;
@@ -252,7 +253,7 @@ impl Table {
         self.push_f64(im_name, unit, values.iter().map(|z| z.im).collect())
     }
 
-    fn polars_err(&self, path: &Path, source: polars::error::PolarsError) -> OutputError {
+    fn polars_err(&self, path: &Path, source: polars_core::error::PolarsError) -> OutputError {
         OutputError::Polars {
             table: self.name.clone(),
             path: path.to_path_buf(),

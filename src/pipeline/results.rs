@@ -13,7 +13,7 @@ use crate::inference::diagnostics::Summary;
 use crate::output::Table;
 use crate::stage::{LevelData, RunError};
 use crate::study::Study;
-use polars::prelude::DataFrame;
+use polars_core::prelude::DataFrame;
 use std::sync::Arc;
 
 /// The models' probabilities at one level ([`Results::model_probabilities`]).
