@@ -90,7 +90,7 @@ pub fn run(a: &RomArgs, g: &Global) -> anyhow::Result<()> {
         n_cert_moduli_per_axis: a.cert_moduli,
         n_cert_lines: a.cert_lines,
         // the reference `rfmlab run` and `diagnose` choose for this model and these inputs
-        reference: rfmlab::rom::Reference::suited(b.model.n_dof(), inputs.len()),
+        reference: rfmlab::rom::Reference::suited(b.model.n_dof()),
         ..RomParams::default()
     };
     let sp = spinner(g, "building and certifying the ROM");

@@ -478,7 +478,7 @@ pub fn design(study: &Study, progress: &dyn Fn(&str)) -> Result<DesignResult, De
         range,
         tolerance: study.solver.rom_tolerance.max(ROM_TOLERANCE),
         allow_uncertified: true,
-        reference: crate::rom::Reference::suited(built.model.n_dof(), rom_inputs.len()),
+        reference: crate::rom::Reference::suited(built.model.n_dof()),
         // The certificate judges the study's points and the drives, as a run's does; the
         // candidates ride on the same basis and are spot-checked below.
         certified_outputs: Some(

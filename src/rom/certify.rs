@@ -215,13 +215,13 @@ type ShiftedReference = (Receptances, Vec<(usize, usize)>, ShiftedStats);
 /// and the Krylov space that serves its lines. Returns them with the points it did not
 /// resolve (left empty, for the sparse LU) and the solves' statistics.
 fn shifted_reference(
+    pat: &ModelPattern,
     model: &StructuralModel,
     inputs: &[usize],
     moduli: &[C64],
     lines: &[f64],
 ) -> Result<ShiftedReference, RomError> {
-    let pat = ModelPattern::new(model)?;
-    let solver = FullSolver::new(&pat)?;
+    let solver = FullSolver::new(pat)?;
     let per_modulus: Vec<ShiftedLines> = moduli
         .par_iter()
         .map(|&e| {
@@ -522,25 +522,20 @@ pub fn build_rom(
         direct.extend_from_slice(points);
         Ok(())
     };
+    let pat = ModelPattern::new(model)?;
     let mut refh = match params.reference {
-        Reference::SparseLu => {
-            let t0 = Instant::now();
-            let (r, f) = reference_with_floor(model, inputs, &moduli, &lines)?;
-            floor = f;
-            seconds_certify += t0.elapsed().as_secs_f64();
-            Some(r)
-        }
         Reference::Shifted if model.c_b.is_none() => {
             let t0 = Instant::now();
-            let (mut h, missing, st) = shifted_reference(model, inputs, &moduli, &lines)?;
+            let (mut h, missing, st) = shifted_reference(&pat, model, inputs, &moduli, &lines)?;
             // the lines the Krylov space did not resolve are solved directly instead
             solve_directly(&missing, &mut h, &mut floor, &mut direct)?;
             shifted_stats = Some(st);
             seconds_certify += t0.elapsed().as_secs_f64();
             Some(h)
         }
-        // (Z quadratic in w: no shifted systems of one operator)
-        Reference::Shifted => {
+        // the shifted solver with C_b present (Z quadratic in w: no shifted systems of one
+        // operator) falls back to the sparse LU at every point
+        Reference::SparseLu | Reference::Shifted => {
             let t0 = Instant::now();
             let (r, f) = reference_with_floor(model, inputs, &moduli, &lines)?;
             floor = f;
@@ -549,7 +544,6 @@ pub fn build_rom(
         }
         Reference::Iterative { .. } => None,
     };
-    let pat = ModelPattern::new(model)?;
     let mut basis = BasisBuilder::new(&pat, params.deflation_tol)?;
     if let Some(o) = &params.certified_outputs {
         let mut starts = o.clone();

@@ -139,7 +139,7 @@ pub enum Reference {
 }
 
 impl Reference {
-    /// The cheaper reference for a model of `n_dof` DOFs and `n_inputs` inputs: the shifted
+    /// The cheaper reference for a model of `n_dof` DOFs, whatever its inputs: the shifted
     /// Krylov solver ([`Reference::Shifted`]) up to `SHIFTED_REFERENCE_MAX_DOF` DOFs, GMRES
     /// above. The shifted solver factors once per validation modulus (9 sparse LUs for 225
     /// points, every input at once), GMRES needs no complex factorisation but one Krylov solve
@@ -156,10 +156,7 @@ impl Reference {
     /// Above some 40,000 DOFs the LU's fill grows faster than the mesh (44 million entries of
     /// the Cholesky factor for the last row, 21 million for the lap joint) and each of the
     /// shifted solver's factorisations costs more than GMRES's whole sweep.
-    pub fn suited(n_dof: usize, n_inputs: usize) -> Reference {
-        // (every input is solved from the same factorisations: the choice does not depend on
-        // their number)
-        let _ = n_inputs;
+    pub fn suited(n_dof: usize) -> Reference {
         if n_dof <= SHIFTED_REFERENCE_MAX_DOF {
             Reference::Shifted
         } else {

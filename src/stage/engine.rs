@@ -172,7 +172,7 @@ pub fn build_engine(
                 // An uncertified ROM is used with a warning in the manifest and report (its
                 // measured error is stated) rather than failing the run.
                 allow_uncertified: true,
-                reference: crate::rom::Reference::suited(built.model.n_dof(), inputs.len()),
+                reference: crate::rom::Reference::suited(built.model.n_dof()),
                 ..Default::default()
             };
             let build = || {

@@ -145,7 +145,7 @@ fn run_geometry(seed: u64) -> Result<Outcome, String> {
             e_loss_pa: (1e5, 1e7),
         },
         // the reference `rfmlab run` chooses for this model
-        reference: rfmlab::rom::Reference::suited(model.n_dof(), outputs.len()),
+        reference: rfmlab::rom::Reference::suited(model.n_dof()),
         ..RomParams::default()
     };
     // every point an input: the RFM needs S H_A,i for every response i
